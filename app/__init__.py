@@ -1,0 +1,1 @@
+"""PointsPro's window (PySide6 + pyvistaqt). Imports the core; the core never imports this."""

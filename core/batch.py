@@ -1,0 +1,93 @@
+"""`pointspro --batch RECIPE INPUT… --out DIR`: the recipe on each input, one output folder each.
+
+For each input: ``DIR/<stem>/cloud.csv`` (with the `index` column), ``report.json``, ``report.html``
+and the steps' artifacts, written into a temporary folder that replaces ``DIR/<stem>`` only when
+complete. Inputs are never modified. Never starts Qt.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from .errors import PointsProError, RecipeError
+from .io import atomic_dir, read_cloud, write_csv
+from .pipeline import run_pipeline
+from .progress import CancelToken, Progress
+from .recipe import Recipe
+from .report import build_report, dumps, render_html
+
+
+@dataclass
+class InputOutcome:
+    input: str
+    ok: bool
+    error: str | None = None
+    seconds: float = 0.0
+    out_dir: str | None = None
+    summary: dict | None = None
+
+
+def check_output_folder(out: Path) -> None:
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise RecipeError(f"{out}: cannot create the output folder ({e.strerror or e})") from None
+    if not out.is_dir():
+        raise RecipeError(f"{out}: the output path exists and is not a folder")
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise RecipeError(f"{out}: output folder is not writable")
+
+
+def output_stems(inputs: list[Path]) -> list[str]:
+    stems = [p.stem for p in inputs]
+    seen: dict[str, Path] = {}
+    for p, s in zip(inputs, stems):
+        if s in seen:
+            raise RecipeError(f"{seen[s]} and {p} would both write {s}/ in the output folder; "
+                              "rename one or run them separately")
+        seen[s] = p
+    return stems
+
+
+def write_artifact(folder: Path, name: str, art) -> None:
+    target = folder / name
+    if Path(name).name != name:
+        raise ValueError(f"artifact name {name!r} must be a plain file name")
+    if callable(art):
+        art(target)
+    elif isinstance(art, bytes):
+        target.write_bytes(art)
+    else:
+        target.write_text(str(art), encoding="utf-8")
+
+
+def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
+                  sink: Callable[[float, str], None] | None = None, token: CancelToken | None = None,
+                  surface=None, log: logging.Logger | None = None) -> InputOutcome:
+    """Read, run, write one input. PointsProError → a failed outcome; Cancelled propagates."""
+    t0 = time.perf_counter()
+    try:
+        progress = Progress(sink, token)
+        cloud = read_cloud(path)
+        progress.update(0.05, "read")
+        result = run_pipeline(cloud, recipe, progress=progress.sub(0.05, 0.9), surface=surface,
+                              log=log)
+        report = build_report(str(path), recipe, result)
+        with atomic_dir(out_dir / stem) as tmp:
+            write_csv(result.cloud, tmp / "cloud.csv")
+            for name, art in result.artifacts.items():
+                write_artifact(tmp, name, art)
+            (tmp / "report.json").write_text(dumps(report), encoding="utf-8")
+            (tmp / "report.html").write_text(render_html(report), encoding="utf-8")
+        progress.update(1.0, "written")
+        return InputOutcome(str(path), True, None, time.perf_counter() - t0, str(out_dir / stem),
+                            report["summary"])
+    except PointsProError as e:
+        msg = str(e)
+        if not msg.startswith(str(path)):
+            msg = f"{path}: {msg}"
+        return InputOutcome(str(path), False, msg, time.perf_counter() - t0)

@@ -1,0 +1,169 @@
+"""The one entry point `pointspro` (DESIGN "Command line").
+
+    pointspro [FILE…]                                   open the window with the files
+    pointspro --screenshot PNG [FILE…]                  render the window to PNG and exit
+    pointspro --batch RECIPE INPUT… --out DIR           run a recipe on each input
+    pointspro steps                                     list the installed steps
+
+Exit codes: 0 all done; 1 some inputs failed (the others are complete); 2 usage, recipe or input
+error — one line on stderr naming what is wrong, no traceback unless --debug.
+Only the window path imports Qt; the batch and `steps` paths never do.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from .errors import Cancelled, PointsProError
+
+EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2 (argparse's own convention too)
+        self.exit(EXIT_USAGE, f"pointspro: {message} (see pointspro --help)\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="pointspro", description="Form-error maps of aspheric and freeform optics.",
+                epilog="Subcommands: `pointspro steps` lists the installed steps.")
+    p.add_argument("files", nargs="*", metavar="FILE", help="measurement files (window), or with "
+                   "--batch: RECIPE INPUT…")
+    p.add_argument("--batch", action="store_true", help="run RECIPE on each INPUT without a window")
+    p.add_argument("--out", metavar="DIR", help="output folder of --batch")
+    p.add_argument("--workers", type=int, default=1, metavar="N", help="parallel inputs (default 1)")
+    p.add_argument("--screenshot", metavar="PNG", help="open the window, render, save PNG, exit")
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--version", action="store_true", help="print the version and exit")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["steps"]:
+        return _guard(lambda: cmd_steps(argv[1:]), "--debug" in argv)
+    args = _parser().parse_args(argv)
+    if args.version:
+        from . import __version__
+
+        print(f"pointspro {__version__}")
+        return EXIT_OK
+    if args.batch:
+        return _guard(lambda: cmd_batch(args), args.debug)
+    if args.out or args.workers != 1:
+        _parser().error("--out and --workers go with --batch")
+    return _guard(lambda: cmd_window(args), args.debug)
+
+
+def _guard(fn, debug: bool) -> int:
+    try:
+        code = fn()
+        return code
+    except PointsProError as e:
+        if debug:
+            raise
+        print(f"pointspro: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except (Cancelled, KeyboardInterrupt):
+        print("pointspro: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # a bug, not the user's fault: still one line unless --debug
+        if debug:
+            raise
+        print(f"pointspro: internal error: {type(e).__name__}: {e} (run again with --debug for the "
+              "traceback and please report it)", file=sys.stderr)
+        return EXIT_USAGE
+
+
+def cmd_batch(args) -> int:
+    from .batch import check_output_folder, output_stems, process_input
+    from .errors import RecipeError
+    from .recipe import load_recipe
+    from .terminal import TerminalProgress
+
+    if len(args.files) < 2:
+        raise RecipeError("--batch needs RECIPE and at least one INPUT (pointspro --batch RECIPE "
+                          "INPUT… --out DIR)")
+    if not args.out:
+        raise RecipeError("--batch needs --out DIR")
+    if args.workers < 1:
+        raise RecipeError("--workers must be ≥ 1")
+    recipe = load_recipe(args.files[0])
+    surface = recipe.build_surface()  # a missing mesh file is a recipe error: fail before any input
+    inputs = [Path(f) for f in args.files[1:]]
+    out = Path(args.out)
+    check_output_folder(out)
+    stems = output_stems(inputs)
+    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+    outcomes = []
+    for k, (path, stem) in enumerate(zip(inputs, stems), 1):
+        bar = None if args.quiet else TerminalProgress(label=f"[{k}/{len(inputs)}] {path.name}")
+        oc = process_input(path, recipe, out, stem, sink=bar, surface=surface)
+        if bar:
+            bar.done()
+        outcomes.append(oc)
+        if oc.ok:
+            s = oc.summary or {}
+            extra = (f", residual RMS {s['rms_um']:.4g} µm, PV {s['pv_um']:.4g} µm"
+                     if s.get("rms_um") is not None else "")
+            if not args.quiet:
+                print(f"{path}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} points"
+                      f"{extra}, {oc.seconds:.2f} s)")
+        else:
+            print(f"pointspro: {oc.error}", file=sys.stderr)
+    failed = [o for o in outcomes if not o.ok]
+    if not failed:
+        return EXIT_OK
+    if len(inputs) == 1:
+        return EXIT_USAGE
+    print(f"pointspro: {len(failed)} of {len(inputs)} inputs failed; the others are complete",
+          file=sys.stderr)
+    return EXIT_SOME_FAILED
+
+
+def cmd_steps(argv) -> int:
+    from .forms import form_fields
+    from .registry import Registry
+
+    reg = Registry()
+    wanted = [a for a in argv if not a.startswith("-")]
+    for step_id in reg.ids():
+        if wanted and step_id not in wanted:
+            continue
+        cls = reg.load(step_id)
+        print(f"{step_id} — {cls.title}")
+        if cls.summary:
+            print(f"    {cls.summary}")
+        for f in form_fields(cls.Params):
+            default = "required" if f.required else f"default {f.default!r}"
+            unit = f" [{f.unit}]" if f.unit else ""
+            bounds = f.bounds_text()
+            choices = f" one of {f.choices}" if f.choices else ""
+            print(f"    {f.key}{unit}: {f.widget}, {default}{', ' + bounds if bounds else ''}{choices}")
+            if f.help:
+                print(f"        {f.help}")
+        print()
+    unknown = [w for w in wanted if w not in reg]
+    if unknown:
+        from .errors import RecipeError
+
+        raise RecipeError(f"unknown step(s) {', '.join(unknown)}; installed: {', '.join(reg.ids())}")
+    return EXIT_OK
+
+
+def cmd_window(args) -> int:
+    from .errors import InputError
+
+    for f in args.files:
+        if not Path(f).exists():
+            raise InputError(f"{f}: file not found")
+    from pointspro.app.main import run_window  # the only path that imports Qt
+
+    return run_window([Path(f) for f in args.files], screenshot=args.screenshot)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

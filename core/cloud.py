@@ -1,0 +1,165 @@
+"""The point cloud: float64 xyz (mm) plus named per-point channels, metadata and provenance.
+
+DESIGN "Data model": clouds are never mutated in place. Every array a cloud holds is made
+read-only, so a step that tries to write into its input fails loudly instead of corrupting it;
+a step returns a new cloud (sharing unchanged arrays is fine and cheap).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+_CHANNEL_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+# Channels that hold integers (labels, ids, rows); everything else is float64.
+INTEGER_CHANNELS = frozenset({"index", "line", "fiducial", "sensor"})
+FRAMES = ("measuring", "part")
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class PointCloud:
+    """Points of a measured surface.
+
+    xyz:        (N, 3) float64, mm.
+    channels:   name -> (N,) array; ``index`` (int64 row of the original input) is always present.
+    meta:       units ("mm"), frame ("measuring" or "part"), source (file), anything JSON-able.
+    provenance: the steps applied so far, oldest first (each a small dict: id, params).
+    """
+
+    xyz: np.ndarray
+    channels: Mapping[str, np.ndarray] = field(default_factory=dict)
+    meta: Mapping[str, Any] = field(default_factory=dict)
+    provenance: tuple = ()
+
+    def __post_init__(self):
+        xyz = np.asarray(self.xyz)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise ValueError(f"xyz must have shape (N, 3), got {xyz.shape}")
+        xyz = _frozen(np.ascontiguousarray(xyz, dtype=np.float64))
+        n = xyz.shape[0]
+        chans = {}
+        for name, arr in dict(self.channels).items():
+            if not _CHANNEL_NAME.match(name):
+                raise ValueError(f"channel name {name!r} is not an identifier")
+            if name in ("x", "y", "z"):
+                raise ValueError("x, y, z live in xyz, not in channels")
+            a = np.asarray(arr)
+            if a.shape != (n,):
+                raise ValueError(f"channel {name!r} has shape {a.shape}, expected ({n},)")
+            if name in INTEGER_CHANNELS:
+                if a.dtype.kind == "f":
+                    if not np.all(np.isfinite(a)) or np.any(a != np.round(a)):
+                        raise ValueError(f"channel {name!r} must hold integers")
+                a = a.astype(np.int64, copy=False)
+            elif a.dtype.kind in "iub":
+                a = a.astype(np.float64) if a.dtype.kind == "b" else a.astype(np.int64, copy=False)
+            else:
+                a = a.astype(np.float64, copy=False)
+            chans[name] = _frozen(a)
+        if "index" not in chans:
+            chans["index"] = _frozen(np.arange(n, dtype=np.int64))
+        meta = {"units": "mm", "frame": "measuring"}
+        meta.update(dict(self.meta))
+        if meta["frame"] not in FRAMES:
+            raise ValueError(f"frame must be one of {FRAMES}, got {meta['frame']!r}")
+        object.__setattr__(self, "xyz", xyz)
+        object.__setattr__(self, "channels", chans)
+        object.__setattr__(self, "meta", meta)
+        object.__setattr__(self, "provenance", tuple(self.provenance))
+
+    # -- construction ---------------------------------------------------------------------------
+    @classmethod
+    def from_xyz(cls, x, y, z, **channels) -> "PointCloud":
+        return cls(np.column_stack([np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)]),
+                   channels)
+
+    # -- access ---------------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return self.xyz.shape[0]
+
+    @property
+    def n(self) -> int:
+        return self.xyz.shape[0]
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.xyz[:, 0]
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.xyz[:, 1]
+
+    @property
+    def z(self) -> np.ndarray:
+        return self.xyz[:, 2]
+
+    @property
+    def index(self) -> np.ndarray:
+        return self.channels["index"]
+
+    @property
+    def frame(self) -> str:
+        return self.meta["frame"]
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name in ("x", "y", "z"):
+            return self.xyz[:, "xyz".index(name)]
+        return self.channels[name]
+
+    def __contains__(self, name: str) -> bool:
+        return name in ("x", "y", "z") or name in self.channels
+
+    @property
+    def column_names(self) -> list[str]:
+        """x, y, z then the channels, ``index`` first."""
+        rest = [c for c in self.channels if c != "index"]
+        return ["x", "y", "z", "index", *rest]
+
+    # -- derivation (never in place) ------------------------------------------------------------
+    def replace(self, *, xyz=None, channels=None, meta=None, drop: Iterable[str] = ()) -> "PointCloud":
+        """A new cloud with some parts replaced; channels/meta given here are merged over the old."""
+        ch = dict(self.channels)
+        for d in drop:
+            ch.pop(d, None)
+        if channels:
+            ch.update(channels)
+        m = dict(self.meta)
+        if meta:
+            m.update(meta)
+        return PointCloud(self.xyz if xyz is None else xyz, ch, m, self.provenance)
+
+    def select(self, keep) -> "PointCloud":
+        """Rows kept by a boolean mask or integer positions (order of the input is preserved)."""
+        keep = np.asarray(keep)
+        if keep.dtype == bool:
+            if keep.shape != (self.n,):
+                raise ValueError("mask length does not match the cloud")
+        else:
+            keep = np.sort(keep.astype(np.int64))
+        return PointCloud(self.xyz[keep], {k: v[keep] for k, v in self.channels.items()},
+                          self.meta, self.provenance)
+
+    def with_provenance(self, entry: Mapping[str, Any]) -> "PointCloud":
+        return PointCloud(self.xyz, self.channels, self.meta, self.provenance + (dict(entry),))
+
+    def equals(self, other: "PointCloud") -> bool:
+        """Bit-for-bit equality of coordinates and channels (NaN equal to NaN)."""
+        if set(self.channels) != set(other.channels) or self.n != other.n:
+            return False
+        if not np.array_equal(self.xyz, other.xyz, equal_nan=True):
+            return False
+        return all(np.array_equal(v, other.channels[k], equal_nan=v.dtype.kind == "f")
+                   for k, v in self.channels.items())
+
+    def __repr__(self) -> str:
+        return (f"PointCloud(n={self.n}, channels={sorted(self.channels)}, frame={self.frame!r}, "
+                f"steps={[p.get('id') for p in self.provenance]})")

@@ -1,0 +1,6 @@
+"""Reading and writing point clouds and atomic output."""
+from .atomic import atomic_dir, atomic_path
+from .formats import READ_SUFFIXES, WRITE_SUFFIXES, read_cloud, write_cloud, write_csv
+
+__all__ = ["read_cloud", "write_cloud", "write_csv", "atomic_path", "atomic_dir", "READ_SUFFIXES",
+           "WRITE_SUFFIXES"]

@@ -1,0 +1,249 @@
+"""Recipes: the YAML that names a nominal surface and the steps to run (DESIGN "Recipe").
+
+    pointspro: 1
+    surface: {type: even_asphere, c: 3.3333333e-4, k: -0.98, A: {4: 7.0e-13}, aperture: 1300}
+    steps:
+      - aperture: {diameter: 1290}
+      - manual_edit: {remove: [17, 4212]}
+      - misalignment            # a step with all defaults may be written bare
+
+A recipe is parsed with a safe loader that remembers line numbers, and *all* of it is validated
+before anything runs: unknown keys, unknown steps, mistyped or out-of-range values are errors naming
+the file, line, step and key. Duplicate keys (which YAML would silently collapse) are errors too.
+A step entry may carry ``schema_version: N`` (written by the GUI when it saves) so that the step's
+``Params.migrate`` can rewrite parameters saved by an older version.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from .errors import RecipeError
+from .registry import Registry
+from .surfaces import parse_surface_spec
+
+RECIPE_VERSION = 1
+TOP_KEYS = ("pointspro", "surface", "inputs", "steps")
+
+
+class LineDict(dict):
+    """A mapping that remembers the YAML line of itself and of each key (1-based)."""
+
+    line: int | None = None
+    key_lines: dict
+
+
+class _LineLoader(yaml.SafeLoader):
+    pass
+
+
+def _construct_mapping(loader: _LineLoader, node):
+    loader.flatten_mapping(node)
+    d = LineDict()
+    d.line = node.start_mark.line + 1
+    d.key_lines = {}
+    for knode, vnode in node.value:
+        key = loader.construct_object(knode, deep=True)
+        if key in d:
+            raise RecipeError(f"line {knode.start_mark.line + 1}: duplicate key {key!r}")
+        d[key] = loader.construct_object(vnode, deep=True)
+        d.key_lines[key] = knode.start_mark.line + 1
+    return d
+
+
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+def load_yaml(text: str, where: str) -> Any:
+    try:
+        loader = _LineLoader(text)  # a SafeLoader: plain data only, never objects or code
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
+    except RecipeError as e:
+        raise RecipeError(f"{where}, {e}") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        pos = f", line {mark.line + 1}" if mark else ""
+        problem = getattr(e, "problem", None) or str(e)
+        raise RecipeError(f"{where}{pos}: not valid YAML ({problem})") from None
+
+
+def format_validation_error(e: ValidationError, prefix: str = "") -> str:
+    """One line naming each offending key: "key 'diameter': Input should be greater than 0 (got -5)"."""
+    parts = []
+    for err in e.errors():
+        loc = ".".join(str(x) for x in err["loc"] if not str(x).startswith("function-"))
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown key"
+        elif err["type"] == "missing":
+            msg = "required key is missing"
+        got = err.get("input")
+        shown = "" if err["type"] in ("extra_forbidden", "missing") or isinstance(got, dict) \
+            else f" (got {got!r})"
+        parts.append(f"key '{loc}': {msg}{shown}" if loc else f"{msg}{shown}")
+    return prefix + "; ".join(parts)
+
+
+@dataclass
+class RecipeStep:
+    id: str
+    params: Any  # the step's validated Params instance
+    step_cls: type
+    line: int | None = None
+    enabled: bool = True
+
+    def to_yaml_entry(self) -> dict:
+        data = self.params.model_dump(mode="json", exclude_defaults=True)
+        entry = {self.id: data}
+        if not self.enabled:
+            entry["enabled"] = False
+        return entry
+
+
+@dataclass
+class Recipe:
+    steps: list[RecipeStep]
+    surface_spec: dict | None = None
+    inputs: dict[str, Path] = field(default_factory=dict)
+    path: Path | None = None
+
+    @property
+    def base_dir(self) -> Path | None:
+        return self.path.parent if self.path else None
+
+    def build_surface(self):
+        """The nominal surface (None when the recipe names none)."""
+        if self.surface_spec is None:
+            return None
+        return parse_surface_spec(self.surface_spec).build(self.base_dir)
+
+    def to_dict(self) -> dict:
+        d: dict = {"pointspro": RECIPE_VERSION}
+        if self.surface_spec is not None:
+            d["surface"] = _plain(self.surface_spec)
+        if self.inputs:
+            d["inputs"] = {k: str(v) for k, v in self.inputs.items()}
+        d["steps"] = [s.to_yaml_entry() for s in self.steps]
+        return d
+
+    def to_yaml(self) -> str:
+        return yaml.safe_dump(self.to_dict(), sort_keys=False)
+
+
+def _plain(o):
+    if isinstance(o, dict):
+        return {k: _plain(v) for k, v in o.items()}
+    if isinstance(o, list):
+        return [_plain(v) for v in o]
+    return o
+
+
+def load_recipe(path, registry: Registry | None = None) -> Recipe:
+    path = Path(path)
+    if not path.is_file():
+        raise RecipeError(f"{path}: recipe file not found")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise RecipeError(f"{path}: cannot read the recipe ({e})") from None
+    return parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
+
+
+def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
+                 base: Path | None = None) -> Recipe:
+    registry = registry or Registry()
+    if not isinstance(data, dict):
+        raise RecipeError(f"{where}: a recipe is a mapping with `pointspro: 1` and `steps:`")
+    lines = getattr(data, "key_lines", {})
+
+    def at(key=None, node=None) -> str:
+        ln = (lines.get(key) if key is not None else None) or getattr(node, "line", None)
+        return f"{where}, line {ln}" if ln else where
+
+    for key in data:
+        if key not in TOP_KEYS:
+            raise RecipeError(f"{at(key)}: unknown key '{key}' (a recipe has {', '.join(TOP_KEYS)})")
+    if "pointspro" not in data:
+        raise RecipeError(f"{where}: missing `pointspro: {RECIPE_VERSION}` (the recipe format version)")
+    if data["pointspro"] != RECIPE_VERSION:
+        raise RecipeError(f"{at('pointspro')}: recipe format {data['pointspro']!r} is not supported "
+                          f"(this PointsPro reads {RECIPE_VERSION})")
+
+    surface = data.get("surface")
+    if surface is not None:
+        if not isinstance(surface, dict):
+            raise RecipeError(f"{at('surface')}: surface: must be a mapping with a `type`")
+        try:
+            parse_surface_spec(surface)
+        except ValidationError as e:
+            raise RecipeError(format_validation_error(e, f"{at('surface')}: surface: ")) from None
+
+    inputs = data.get("inputs") or {}
+    if not isinstance(inputs, dict):
+        raise RecipeError(f"{at('inputs')}: inputs: must map names to file paths")
+    resolved_inputs = {}
+    for name, p in inputs.items():
+        p = Path(str(p))
+        if not p.is_absolute() and base is not None:
+            p = base.parent / p
+        resolved_inputs[str(name)] = p
+
+    raw_steps = data.get("steps")
+    if raw_steps is None:
+        raw_steps = []
+    if not isinstance(raw_steps, list):
+        raise RecipeError(f"{at('steps')}: steps: must be a list of `- step_id: {{params}}`")
+    steps = []
+    for i, entry in enumerate(raw_steps, start=1):
+        steps.append(_parse_step(entry, i, at("steps"), where, registry))
+    return Recipe(steps, surface, resolved_inputs, base)
+
+
+def _parse_step(entry, i: int, steps_at: str, where: str, registry: Registry) -> RecipeStep:
+    line = getattr(entry, "line", None)
+    loc = f"{where}, line {line}" if line else steps_at
+    enabled = True
+    if isinstance(entry, str):
+        step_id, raw = entry, {}
+    elif isinstance(entry, dict):
+        entry = dict(entry) if not isinstance(entry, LineDict) else entry
+        keys = [k for k in entry if k != "enabled"]
+        if len(keys) != 1:
+            raise RecipeError(f"{loc}: step {i}: write one step per list item as `- step_id: {{params}}` "
+                              f"(found keys {keys})")
+        step_id, raw = keys[0], entry[keys[0]]
+        if "enabled" in entry:
+            if not isinstance(entry["enabled"], bool):
+                raise RecipeError(f"{loc}: step {i} '{step_id}': key 'enabled' must be true or false")
+            enabled = entry["enabled"]
+        raw = {} if raw is None else raw
+    else:
+        raise RecipeError(f"{loc}: step {i}: expected `- step_id: {{params}}`, got {entry!r}")
+    if not isinstance(step_id, str) or step_id not in registry:
+        raise RecipeError(f"{loc}: step {i}: unknown step '{step_id}'; installed steps: "
+                          f"{', '.join(registry.ids())}")
+    if not isinstance(raw, dict):
+        raise RecipeError(f"{loc}: step {i} '{step_id}': parameters must be a mapping, got {raw!r}")
+    cls = registry.load(step_id)
+    raw = dict(raw)
+    version = raw.pop("schema_version", cls.Params.schema_version)
+    try:
+        raw = cls.Params.migrate(raw, int(version))
+        params = cls.Params.model_validate(raw)
+    except ValidationError as e:
+        # name the line of the first offending key when we know it
+        bad = e.errors()[0]["loc"][:1]
+        kl = getattr(entry[step_id] if isinstance(entry, dict) else None, "key_lines", {})
+        ln = kl.get(bad[0]) if bad else None
+        loc2 = f"{where}, line {ln}" if ln else loc
+        raise RecipeError(format_validation_error(e, f"{loc2}: step {i} '{step_id}': ")) from None
+    except (ValueError, TypeError) as e:
+        raise RecipeError(f"{loc}: step {i} '{step_id}': {e}") from None
+    return RecipeStep(step_id, params, cls, line, enabled)

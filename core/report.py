@@ -1,0 +1,111 @@
+"""report.json (DESIGN "report.json") and a readable report.html of one processed input."""
+from __future__ import annotations
+
+import html
+import json
+import math
+from datetime import datetime, timezone
+
+import numpy as np
+
+from . import __version__
+
+
+def jsonable(o):
+    """Plain JSON types from numpy scalars/arrays, paths, sets; non-finite floats become null."""
+    if isinstance(o, dict):
+        return {str(k): jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple, set)):
+        return [jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return jsonable(o.tolist())
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating, float)):
+        f = float(o)
+        return f if math.isfinite(f) else None
+    if isinstance(o, (np.bool_,)):
+        return bool(o)
+    if o is None or isinstance(o, (str, int, bool)):
+        return o
+    return str(o)
+
+
+def build_report(input_path: str, recipe, result) -> dict:
+    return jsonable({
+        "pointspro": __version__,
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "input": str(input_path),
+        "recipe": recipe.to_dict(),
+        "steps": [r.to_json() for r in result.steps],
+        "summary": result.summary(),
+    })
+
+
+def dumps(report: dict) -> str:
+    return json.dumps(jsonable(report), indent=2, allow_nan=False) + "\n"
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,sans-serif;margin:2em auto;max-width:60em;color:#222}
+h1{font-size:1.5em} h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;margin:.5em 0} td,th{padding:.2em .8em;border-bottom:1px solid #eee;
+text-align:left;vertical-align:top} td.num{text-align:right;font-variant-numeric:tabular-nums}
+.warn{color:#a45200} .muted{color:#777} code,pre{background:#f6f6f6;padding:.1em .3em}
+"""
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, list) and len(v) > 12:
+        return html.escape(f"[{len(v)} values: {', '.join(_fmt(x) for x in v[:6])}, …]")
+    if isinstance(v, (list, dict)):
+        return html.escape(json.dumps(v))
+    return html.escape(str(v))
+
+
+def _table(d: dict) -> str:
+    rows = []
+    for k, v in d.items():
+        if k in ("warnings",):
+            continue
+        if isinstance(v, dict) and v and all(not isinstance(x, (dict, list)) for x in v.values()):
+            inner = ", ".join(f"{html.escape(str(a))} = {_fmt(b)}" for a, b in v.items())
+            rows.append(f"<tr><th>{html.escape(k)}</th><td>{inner}</td></tr>")
+        else:
+            cls = ' class="num"' if isinstance(v, (int, float)) else ""
+            rows.append(f"<tr><th>{html.escape(k)}</th><td{cls}>{_fmt(v)}</td></tr>")
+    return "<table>" + "".join(rows) + "</table>"
+
+
+def render_html(report: dict) -> str:
+    s = report.get("summary", {})
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>PointsPro — "
+             f"{html.escape(report['input'])}</title><style>{_CSS}</style></head><body>",
+             f"<h1>PointsPro report</h1><p class='muted'>PointsPro {html.escape(report['pointspro'])}, "
+             f"{html.escape(report.get('created', ''))}</p>",
+             "<h2>Input</h2>", _table({"file": report["input"], "points in": s.get("points_in"),
+                                       "points out": s.get("points_out")})]
+    summary = {"RMS (µm)": s.get("rms_um"), "PV (µm)": s.get("pv_um")}
+    if any(v is not None for v in summary.values()):
+        parts += ["<h2>Form error</h2>", _table(summary)]
+    surf = report.get("recipe", {}).get("surface")
+    if surf:
+        parts += ["<h2>Nominal surface</h2>", _table(surf)]
+    parts.append("<h2>Steps</h2>")
+    if not report["steps"]:
+        parts.append("<p class='muted'>The recipe has no steps: the cloud was read and written.</p>")
+    for i, st in enumerate(report["steps"], 1):
+        parts.append(f"<h3>{i}. {html.escape(st['title'])} <code>{html.escape(st['id'])}</code></h3>"
+                     f"<p class='muted'>{st['seconds']:.3f} s · {st['points_in']} → {st['points_out']} "
+                     "points</p>")
+        for w in st["report"].get("warnings", []) or []:
+            parts.append(f"<p class='warn'>⚠ {html.escape(str(w))}</p>")
+        parts.append(_table(st["report"]))
+        if st.get("artifacts"):
+            links = ", ".join(f"<a href='{html.escape(a)}'>{html.escape(a)}</a>" for a in st["artifacts"])
+            parts.append(f"<p>Files: {links}</p>")
+    parts.append("<h2>Recipe</h2><pre>" + html.escape(json.dumps(report.get("recipe"), indent=2))
+                 + "</pre></body></html>\n")
+    return "".join(parts)

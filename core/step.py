@@ -1,0 +1,93 @@
+"""The step contract (DESIGN "Step contract").
+
+A step is a class with a stable ``id`` (what recipes name; never renamed), a ``title``, a ``Params``
+pydantic model (extra keys forbidden, frozen, typed, with units, bounds and help) and
+``run(cloud, params, ctx) -> StepResult``. It never prints, exits, opens a dialog or imports Qt; it
+reports through ``ctx.log``, ``ctx.progress`` and the returned report.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, ClassVar, Mapping
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .cloud import PointCloud
+from .progress import Progress
+from .surfaces import NominalSurface
+
+
+class Params(BaseModel):
+    """Base of every step's parameters: extra keys forbidden, frozen, versioned.
+
+    Declare fields with `param(...)` so each carries its unit and help. Bump ``schema_version`` when
+    a field changes meaning and teach ``migrate`` to rewrite the old form.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    schema_version: ClassVar[int] = 1
+
+    @classmethod
+    def migrate(cls, data: dict, from_version: int) -> dict:
+        """Rewrite parameters written by ``from_version`` of this step into the current form."""
+        if from_version > cls.schema_version:
+            raise ValueError(f"written by a newer version ({from_version}) of this step "
+                             f"than the installed one ({cls.schema_version})")
+        return data
+
+
+def param(default: Any = ..., *, unit: str | None = None, help: str, **bounds) -> Any:
+    """A step parameter with its unit and help text (shown in the GUI, `pointspro steps`, the CLI)."""
+    extra = {"unit": unit} if unit else {}
+    return Field(default, description=help, json_schema_extra=extra or None, **bounds)
+
+
+# An artifact is written by the runner into the output folder: text, bytes, or a writer callable.
+Artifact = str | bytes | Callable[[Path], None]
+
+
+@dataclass
+class StepResult:
+    cloud: PointCloud
+    report: dict = field(default_factory=dict)
+    artifacts: dict[str, Artifact] = field(default_factory=dict)
+
+
+@dataclass
+class Context:
+    """What a step may use besides its cloud and parameters."""
+
+    progress: Progress = field(default_factory=Progress)
+    log: logging.Logger = field(default_factory=lambda: logging.getLogger("pointspro.step"))
+    surface: NominalSurface | None = None
+    #: named auxiliary inputs (e.g. "fiducials": Path to a calibrated-fiducials file)
+    inputs: Mapping[str, Path] = field(default_factory=dict)
+    #: folder the recipe came from (relative paths in parameters are relative to it)
+    base_dir: Path | None = None
+
+    def require_surface(self, step_id: str) -> NominalSurface:
+        from .errors import StepError
+
+        if self.surface is None:
+            raise StepError(f"step '{step_id}' needs the recipe's nominal `surface:`")
+        return self.surface
+
+
+class Step:
+    """Base class of steps. Subclasses set ``id``, ``title``, ``Params`` and implement ``run``."""
+
+    id: ClassVar[str]
+    title: ClassVar[str]
+    Params: ClassVar[type[Params]] = Params
+    #: one line for lists; the class docstring is the long help
+    summary: ClassVar[str] = ""
+
+    def run(self, cloud: PointCloud, params: Params, ctx: Context) -> StepResult:  # pragma: no cover
+        raise NotImplementedError
+
+    @classmethod
+    def example_params(cls) -> dict:
+        """Valid parameters for the contract test on the generic test cloud (defaults suffice)."""
+        return {}
