@@ -168,7 +168,7 @@ def read_text(path: Path) -> tuple[np.ndarray, dict, dict]:
         row, col = np.argwhere(bad)[0]
         ln = _data_line_number(lines, first_data, int(row))
         raise InputError(f"{path}, line {ln}, column {col + 1} ({names[col]}): "
-                         f"{data[row, col]!r} is not a finite number (NaN/inf is not a measurement)")
+                         f"{float(data[row, col])!r} is not a finite number (NaN/inf is not a measurement)")
     if "index" in cols:
         idx = cols["index"]
         if np.any(idx != np.round(idx)) or np.any(idx < 0):
