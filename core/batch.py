@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -29,9 +29,12 @@ class InputOutcome:
     seconds: float = 0.0
     out_dir: str | None = None
     summary: dict | None = None
+    exception: BaseException | None = field(default=None, repr=False)
 
 
 def check_output_folder(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise RecipeError(f"{out}: the output path exists and is not a folder")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -90,4 +93,4 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
         msg = str(e)
         if not msg.startswith(str(path)):
             msg = f"{path}: {msg}"
-        return InputOutcome(str(path), False, msg, time.perf_counter() - t0)
+        return InputOutcome(str(path), False, msg, time.perf_counter() - t0, exception=e)

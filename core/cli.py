@@ -45,7 +45,10 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["steps"]:
         return _guard(lambda: cmd_steps(argv[1:]), "--debug" in argv)
-    args = _parser().parse_args(argv)
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as e:  # --help (0) or a usage error (2): return, never exit from main()
+        return int(e.code or 0)
     if args.version:
         from . import __version__
 
@@ -54,7 +57,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.batch:
         return _guard(lambda: cmd_batch(args), args.debug)
     if args.out or args.workers != 1:
-        _parser().error("--out and --workers go with --batch")
+        print("pointspro: --out and --workers go with --batch (see pointspro --help)", file=sys.stderr)
+        return EXIT_USAGE
     return _guard(lambda: cmd_window(args), args.debug)
 
 
@@ -113,6 +117,10 @@ def cmd_batch(args) -> int:
                 print(f"{path}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} points"
                       f"{extra}, {oc.seconds:.2f} s)")
         else:
+            if args.debug and oc.exception is not None:
+                import traceback
+
+                traceback.print_exception(oc.exception, file=sys.stderr)
             print(f"pointspro: {oc.error}", file=sys.stderr)
     failed = [o for o in outcomes if not o.ok]
     if not failed:
@@ -165,5 +173,9 @@ def cmd_window(args) -> int:
     return run_window([Path(f) for f in args.files], screenshot=args.screenshot)
 
 
-if __name__ == "__main__":  # pragma: no cover
+def console() -> None:  # pragma: no cover - the console-script wrapper
     sys.exit(main())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    console()

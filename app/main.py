@@ -1,0 +1,113 @@
+"""The window: a 3D view of measurement files coloured by any channel.
+
+This is the first cut of the desktop application (issue "The desktop application" builds the
+pipeline dock, 2D maps, selection and undo on top). It reads files with the core's readers and never
+computes anything itself.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+# Channels that are deviations: shown in µm on a diverging map centred on zero.
+DEVIATION_CHANNELS = ("residual", "omega", "distance", "gap")
+
+
+def _scalars(cloud, name: str) -> tuple[np.ndarray, str, bool]:
+    """(values to colour by, colour-bar title, diverging?) — float32 for display only."""
+    if name in DEVIATION_CHANNELS:
+        return (np.asarray(cloud[name]) * 1e3).astype(np.float32), f"{name} (µm)", True
+    v = np.asarray(cloud[name], dtype=np.float64)
+    if name in ("x", "y", "z"):
+        return (v - v.mean()).astype(np.float32), f"{name} − mean (mm)", False  # display only
+    return v.astype(np.float32), name, False  # display only
+
+
+def build_window(files: list[Path]):
+    from PySide6 import QtCore, QtWidgets
+    from pyvistaqt import QtInteractor
+
+    from pointspro.core.errors import PointsProError
+    from pointspro.core.io import read_cloud
+
+    win = QtWidgets.QMainWindow()
+    win.setWindowTitle("PointsPro" + (f" — {files[0].name}" if files else ""))
+    win.resize(1280, 800)
+    central = QtWidgets.QWidget()
+    layout = QtWidgets.QVBoxLayout(central)
+    bar = QtWidgets.QHBoxLayout()
+    bar.addWidget(QtWidgets.QLabel("Colour by:"))
+    combo = QtWidgets.QComboBox()
+    bar.addWidget(combo)
+    info = QtWidgets.QLabel()
+    bar.addWidget(info, 1)
+    layout.addLayout(bar)
+    plotter = QtInteractor(central)
+    layout.addWidget(plotter.interactor, 1)
+    win.setCentralWidget(central)
+    log = QtWidgets.QPlainTextEdit(readOnly=True)
+    dock = QtWidgets.QDockWidget("Log", win)
+    dock.setWidget(log)
+    dock.setMaximumHeight(120)
+    win.addDockWidget(QtCore.Qt.BottomDockWidgetArea, dock)
+
+    clouds = []
+    for f in files:
+        try:
+            clouds.append(read_cloud(f))
+            log.appendPlainText(f"read {f}: {clouds[-1].n} points, channels {sorted(clouds[-1].channels)}")
+        except PointsProError as e:
+            log.appendPlainText(f"error: {e}")
+
+    def show(name: str):
+        import pyvista as pv
+
+        plotter.clear()
+        for c in clouds:
+            vals, title, diverging = _scalars(c, name)
+            # display only: VTK draws in float32; the exaggerated z makes form error visible
+            pts = np.asarray(c.xyz - c.xyz.mean(axis=0)).astype(np.float32)
+            poly = pv.PolyData(pts)
+            poly[title] = vals
+            clim = None
+            if diverging:
+                m = float(np.max(np.abs(vals))) or 1.0
+                clim = (-m, m)
+            plotter.add_mesh(poly, scalars=title, cmap="RdBu_r" if diverging else "viridis", clim=clim,
+                             point_size=5, render_points_as_spheres=True,
+                             scalar_bar_args={"title": title, "vertical": True})
+        plotter.add_axes()
+        plotter.reset_camera()
+        if clouds:
+            info.setText(f"{sum(c.n for c in clouds)} points")
+
+    if clouds:
+        names = ["z", *[n for n in clouds[0].column_names if n not in ("x", "y", "z", "index")], "x", "y"]
+        combo.addItems(names)
+        combo.currentTextChanged.connect(show)
+        show(names[0])
+    win.plotter = plotter  # keep a reference for tests and screenshots
+    return win
+
+
+def run_window(files: list[Path], screenshot: str | None = None) -> int:
+    from PySide6 import QtWidgets
+
+    app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    win = build_window(files)
+    win.show()
+    if screenshot:
+        for _ in range(5):
+            app.processEvents()
+        win.plotter.render()
+        app.processEvents()
+        screen = win.screen() or app.primaryScreen()
+        img = screen.grabWindow(win.winId())
+        if img.isNull() or not img.save(str(screenshot)):
+            win.grab().save(str(screenshot))
+        win.plotter.close()
+        win.close()
+        return 0
+    return app.exec()

@@ -1,0 +1,186 @@
+"""`pointspro --batch` end to end: outputs, exit codes, one-line errors, atomicity, no Qt."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pointspro.core.io import read_cloud
+
+from .conftest import EXAMPLE, write
+
+RECIPE = EXAMPLE / "recipe.yaml"
+DATA = EXAMPLE / "asphere_cmm.csv"
+
+
+def _sha(p: Path) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
+    before = _sha(DATA)
+    code, out, err = run_cli("--batch", RECIPE, DATA, "--out", tmp_path / "out")
+    assert code == 0, err
+    folder = tmp_path / "out" / "asphere_cmm"
+    assert {p.name for p in folder.iterdir()} == {"cloud.csv", "report.json", "report.html"}
+    rep = json.loads((folder / "report.json").read_text())
+    assert set(rep) >= {"pointspro", "input", "recipe", "steps", "summary"}
+    assert [s["id"] for s in rep["steps"]] == ["aperture", "manual_edit"]
+    assert rep["steps"][1]["report"]["removed"] == 2
+    assert rep["summary"]["points_in"] == 4680
+    assert rep["summary"]["points_out"] == rep["steps"][-1]["points_out"]
+    cloud = read_cloud(folder / "cloud.csv")
+    assert cloud.n == rep["summary"]["points_out"]
+    assert 520 not in cloud.index and 3640 not in cloud.index
+    assert np.all(np.diff(cloud.index) > 0)  # input order kept
+    src = read_cloud(DATA)
+    pos = np.searchsorted(src.index, cloud.index)
+    assert np.array_equal(src.xyz[pos], cloud.xyz)
+    html = (folder / "report.html").read_text()
+    assert "Clear aperture" in html and "asphere_cmm.csv" in html
+    assert _sha(DATA) == before
+    assert "asphere_cmm.csv: ok" in out
+    assert not list((tmp_path / "out").glob(".*"))  # no temporary leftovers
+
+
+def _two_inputs(tmp_path):
+    good = write(tmp_path / "good.csv", "x,y,z\n0,0,0\n1,0,0\n0,1,0\n")
+    bad = write(tmp_path / "bad.csv", "x,y,z\n0,0,0\n1,zz,0\n")
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - manual_edit: {remove: [1]}\n")
+    return good, bad, recipe
+
+
+def test_one_bad_input_among_several_fails_alone(run_cli, tmp_path):
+    good, bad, recipe = _two_inputs(tmp_path)
+    code, out, err = run_cli("--batch", recipe, bad, good, "--out", tmp_path / "o")
+    assert code == 1
+    assert "bad.csv, line 3, column 2: 'zz' is not a number" in err
+    assert "Traceback" not in err
+    assert (tmp_path / "o" / "good" / "report.json").is_file()
+    assert not (tmp_path / "o" / "bad").exists()
+
+
+@pytest.mark.parametrize("make,pattern", [
+    (lambda t: ("--batch", t / "r.yaml", t / "missing.csv"), r"missing.csv: file not found"),
+    (lambda t: ("--batch", t / "r.yaml", write(t / "e.csv", "")), r"e.csv: empty file"),
+    (lambda t: ("--batch", t / "r.yaml", write(t / "n.csv", "x,y,z\n1,2,nan\n")),
+     r"n.csv, line 2, column 3 \(z\)"),
+    (lambda t: ("--batch", t / "r.yaml", write(t / "w.csv", "x,y,z\n1,2,3\n1,2\n")),
+     r"w.csv, line 3: 2 column"),
+    (lambda t: ("--batch", t / "r.yaml", write(t / "a.csv", "a,b,c\n1,2,3\n")), r"no x/y/z column"),
+    (lambda t: ("--batch", write(t / "u.yaml", "pointspro: 1\nsteps:\n  - knn_magic: {}\n"),
+                write(t / "g.csv", "1 2 3\n")), r"u.yaml, line 3: step 1: unknown step 'knn_magic'"),
+    (lambda t: ("--batch", write(t / "k.yaml", "pointspro: 1\nsteps:\n  - aperture: {diametr: 3}\n"),
+                write(t / "g.csv", "1 2 3\n")), r"k.yaml, line 3: step 1 'aperture': key 'diametr': unknown key"),
+    (lambda t: ("--batch", write(t / "v.yaml", "pointspro: 1\nsteps:\n  - aperture: {diameter: 0}\n"),
+                write(t / "g.csv", "1 2 3\n")), r"key 'diameter': Input should be greater than 0"),
+    (lambda t: ("--batch", t / "r.yaml"), r"--batch needs RECIPE and at least one INPUT"),
+    (lambda t: ("--batch", t / "nope.yaml", write(t / "g.csv", "1 2 3\n")), r"nope.yaml: recipe file not found"),
+])
+def test_bad_input_exit_2_one_line_no_output(run_cli, tmp_path, make, pattern):
+    import re
+
+    write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - manual_edit: {}\n")
+    args = make(tmp_path)
+    code, out, err = run_cli(*args, "--out", tmp_path / "o")
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("pointspro: "), err
+    assert re.search(pattern, err), err
+    assert "Traceback" not in err
+    outdir = tmp_path / "o"
+    assert not outdir.exists() or not any(outdir.iterdir())
+
+
+def test_unwritable_output_folder(run_cli, tmp_path):
+    good, _, recipe = _two_inputs(tmp_path)
+    blocker = write(tmp_path / "file_not_dir", "x")
+    code, _, err = run_cli("--batch", recipe, good, "--out", blocker / "sub")
+    assert code == 2 and "cannot create the output folder" in err and "file_not_dir" in err
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        if os.access(ro, os.W_OK):  # root ignores permissions: make the check meaningful anyway
+            ro.chmod(0o700)
+            code, _, err = run_cli("--batch", recipe, good, "--out", write(tmp_path / "f", "x"))
+            assert code == 2 and "not a folder" in err
+        else:
+            code, _, err = run_cli("--batch", recipe, good, "--out", ro)
+            assert code == 2 and "not writable" in err
+    finally:
+        ro.chmod(0o700)
+
+
+def test_duplicate_output_stems_rejected(run_cli, tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    x1 = write(tmp_path / "a" / "m.csv", "1 2 3\n")
+    x2 = write(tmp_path / "b" / "m.csv", "1 2 3\n")
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps: []\n")
+    code, _, err = run_cli("--batch", recipe, x1, x2, "--out", tmp_path / "o")
+    assert code == 2 and "would both write m/" in err
+
+
+def test_rerun_replaces_a_complete_folder_atomically(run_cli, tmp_path):
+    good, _, recipe = _two_inputs(tmp_path)
+    assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
+    first = (tmp_path / "o" / "good" / "cloud.csv").read_text()
+    assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
+    assert (tmp_path / "o" / "good" / "cloud.csv").read_text() == first
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["good"]
+
+
+def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch):
+    from pointspro.core import batch
+    from pointspro.core.recipe import parse_recipe
+
+    good, _, _ = _two_inputs(tmp_path)
+    r = parse_recipe({"pointspro": 1, "steps": []})
+
+    def boom(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(batch, "render_html", boom)
+    out = tmp_path / "o"
+    out.mkdir()
+    with pytest.raises(OSError):
+        batch.process_input(good, r, out, "good")
+    assert list(out.iterdir()) == []
+
+
+def test_steps_command_lists_parameters_with_units(run_cli):
+    code, out, _ = run_cli("steps")
+    assert code == 0
+    assert "aperture — Clear aperture" in out and "diameter [mm]: float" in out
+    assert "manual_edit" in out and "transform" in out and "alpha" not in out.split("transform")[0][:0]
+    code, _, err = run_cli("steps", "nope")
+    assert code == 2 and "unknown step(s) nope" in err
+
+
+def test_usage_errors(run_cli):
+    code, _, err = run_cli("--batch", "--frobnicate")
+    assert code == 2 and "unrecognized arguments" in err
+
+
+def test_batch_never_starts_qt_and_debug_shows_traceback(tmp_path):
+    """In a fresh interpreter: a whole batch runs and PySide6/pyvistaqt were never imported."""
+    code = (
+        "import sys\n"
+        "from pointspro.core.cli import main\n"
+        f"rc = main(['--batch', {str(RECIPE)!r}, {str(DATA)!r}, '--out', {str(tmp_path / 'o')!r}, '--quiet'])\n"
+        "bad = [m for m in ('PySide6', 'pyvistaqt', 'PyQt5', 'PyQt6', 'open3d', 'pyvista') if m in sys.modules]\n"
+        "print(rc, bad)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.stdout.strip() == "0 []", res.stderr
+    # --debug: the traceback of a user error is shown
+    res = subprocess.run([sys.executable, "-m", "pointspro.core.cli", "--batch", str(RECIPE),
+                          str(tmp_path / "none.csv"), "--out", str(tmp_path / "o"), "--debug"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode != 0 and "Traceback" in res.stderr
