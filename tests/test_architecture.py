@@ -11,7 +11,7 @@ from .conftest import ROOT
 
 def test_import_linter_contracts_hold():
     exe = Path(sys.executable).parent / "lint-imports"
-    res = subprocess.run([str(exe), "--config", str(ROOT / "pyproject.toml")], cwd=ROOT,
+    res = subprocess.run([str(exe), "--no-cache", "--config", str(ROOT / "pyproject.toml")], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout + res.stderr
     assert "broken" in res.stdout and "0 broken" in res.stdout
