@@ -29,7 +29,7 @@ class InputOutcome:
     seconds: float = 0.0
     out_dir: str | None = None
     summary: dict | None = None
-    exception: BaseException | None = field(default=None, repr=False)
+    traceback: str | None = field(default=None, repr=False)
 
 
 def check_output_folder(out: Path) -> None:
@@ -93,4 +93,38 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
         msg = str(e)
         if not msg.startswith(str(path)):
             msg = f"{path}: {msg}"
-        return InputOutcome(str(path), False, msg, time.perf_counter() - t0, exception=e)
+        import traceback
+
+        return InputOutcome(str(path), False, msg, time.perf_counter() - t0,
+                            traceback="".join(traceback.format_exception(e)))
+
+
+def _worker(recipe_path: str, path: str, out_dir: str, stem: str) -> InputOutcome:
+    """One input in a worker process: the recipe is re-read there (plain data crosses processes)."""
+    from .recipe import load_recipe
+
+    recipe = load_recipe(recipe_path)
+    return process_input(Path(path), recipe, Path(out_dir), stem)
+
+
+def run_parallel(recipe_path: Path, inputs: list[Path], stems: list[str], out_dir: Path,
+                 workers: int):
+    """Process inputs in ``workers`` processes; yields outcomes as they complete.
+
+    Each input is independent and every step deterministic, so the outputs are identical to a
+    sequential run. Processes are spawned (not forked) so no thread or lock state is inherited.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(_worker, str(recipe_path), str(p), str(out_dir), s)
+                   for p, s in zip(inputs, stems)]
+        try:
+            for fut in as_completed(futures):
+                yield fut.result()
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise

@@ -103,25 +103,34 @@ def cmd_batch(args) -> int:
     stems = output_stems(inputs)
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
     outcomes = []
-    for k, (path, stem) in enumerate(zip(inputs, stems), 1):
-        bar = None if args.quiet else TerminalProgress(label=f"[{k}/{len(inputs)}] {path.name}")
-        oc = process_input(path, recipe, out, stem, sink=bar, surface=surface)
-        if bar:
-            bar.done()
+
+    def report(oc):
         outcomes.append(oc)
         if oc.ok:
             s = oc.summary or {}
             extra = (f", residual RMS {s['rms_um']:.4g} µm, PV {s['pv_um']:.4g} µm"
                      if s.get("rms_um") is not None else "")
             if not args.quiet:
-                print(f"{path}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} points"
-                      f"{extra}, {oc.seconds:.2f} s)")
+                print(f"{oc.input}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} "
+                      f"points{extra}, {oc.seconds:.2f} s)", flush=True)
         else:
-            if args.debug and oc.exception is not None:
-                import traceback
+            if args.debug and oc.traceback:
+                print(oc.traceback, file=sys.stderr, end="")
+            print(f"pointspro: {oc.error}", file=sys.stderr, flush=True)
 
-                traceback.print_exception(oc.exception, file=sys.stderr)
-            print(f"pointspro: {oc.error}", file=sys.stderr)
+    workers = min(args.workers, len(inputs))
+    if workers == 1:
+        for k, (path, stem) in enumerate(zip(inputs, stems), 1):
+            bar = None if args.quiet else TerminalProgress(label=f"[{k}/{len(inputs)}] {path.name}")
+            oc = process_input(path, recipe, out, stem, sink=bar, surface=surface)
+            if bar:
+                bar.done()
+            report(oc)
+    else:
+        from .batch import run_parallel
+
+        for oc in run_parallel(Path(args.files[0]), inputs, stems, out, workers):
+            report(oc)
     failed = [o for o in outcomes if not o.ok]
     if not failed:
         return EXIT_OK

@@ -99,8 +99,9 @@ class RecipeStep:
     line: int | None = None
     enabled: bool = True
 
-    def to_yaml_entry(self) -> dict:
-        data = self.params.model_dump(mode="json", exclude_defaults=True)
+    def to_yaml_entry(self, full: bool = False) -> dict:
+        """``{id: params}``; only the non-default parameters unless ``full`` (reports record all)."""
+        data = self.params.model_dump(mode="json", exclude_defaults=not full)
         entry = {self.id: data}
         if not self.enabled:
             entry["enabled"] = False
@@ -124,13 +125,13 @@ class Recipe:
             return None
         return parse_surface_spec(self.surface_spec).build(self.base_dir)
 
-    def to_dict(self) -> dict:
+    def to_dict(self, full: bool = False) -> dict:
         d: dict = {"pointspro": RECIPE_VERSION}
         if self.surface_spec is not None:
             d["surface"] = _plain(self.surface_spec)
         if self.inputs:
             d["inputs"] = {k: str(v) for k, v in self.inputs.items()}
-        d["steps"] = [s.to_yaml_entry() for s in self.steps]
+        d["steps"] = [s.to_yaml_entry(full) for s in self.steps]
         return d
 
     def to_yaml(self) -> str:
@@ -193,6 +194,8 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
         p = Path(str(p))
         if not p.is_absolute() and base is not None:
             p = base.parent / p
+        if not p.is_file():
+            raise RecipeError(f"{at('inputs')}: inputs: key '{name}': file {p} not found")
         resolved_inputs[str(name)] = p
 
     raw_steps = data.get("steps")

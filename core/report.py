@@ -36,7 +36,7 @@ def build_report(input_path: str, recipe, result) -> dict:
         "pointspro": __version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "input": str(input_path),
-        "recipe": recipe.to_dict(),
+        "recipe": recipe.to_dict(full=True),
         "steps": [r.to_json() for r in result.steps],
         "summary": result.summary(),
     })
@@ -106,6 +106,9 @@ def render_html(report: dict) -> str:
         if st.get("artifacts"):
             links = ", ".join(f"<a href='{html.escape(a)}'>{html.escape(a)}</a>" for a in st["artifacts"])
             parts.append(f"<p>Files: {links}</p>")
-    parts.append("<h2>Recipe</h2><pre>" + html.escape(json.dumps(report.get("recipe"), indent=2))
+    import yaml
+
+    recipe_text = yaml.safe_dump(report.get("recipe"), sort_keys=False, default_flow_style=None)
+    parts.append("<h2>Recipe (every parameter, defaults included)</h2><pre>" + html.escape(recipe_text)
                  + "</pre></body></html>\n")
     return "".join(parts)

@@ -128,3 +128,33 @@ def test_runner_cancel_and_step_errors(raster_cloud):
     r3 = parse_recipe({"pointspro": 1, "steps": [{"aperture": {"diameter": 1, "center_x": 5000}}]})
     with pytest.raises(StepError, match="no point lies inside the aperture"):
         run_pipeline(raster_cloud, r3)
+
+
+def test_auxiliary_inputs_resolved_relative_to_recipe(tmp_path):
+    write(tmp_path / "fid.csv", "fiducial,x,y,z\n1,0,0,0\n")
+    r = load_recipe(write(tmp_path / "r.yaml", "pointspro: 1\ninputs: {fiducials: fid.csv}\nsteps: []\n"))
+    assert r.inputs["fiducials"] == tmp_path / "fid.csv"
+    with pytest.raises(RecipeError, match=r"r2.yaml, line 2: inputs: key 'ref': file .*nope.csv not found"):
+        load_recipe(write(tmp_path / "r2.yaml", "pointspro: 1\ninputs: {ref: nope.csv}\nsteps: []\n"))
+
+
+def test_terminal_progress_tty_and_plain():
+    import io
+
+    from pointspro.core.terminal import TerminalProgress
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    plain = io.StringIO()
+    p = TerminalProgress(plain, label="[1/1] a.csv")
+    p(0.5, "aperture")
+    p(0.6, "aperture")  # same message: no new line
+    p(1.0, "written")
+    assert plain.getvalue().splitlines() == ["[1/1] a.csv  50.0% aperture", "[1/1] a.csv 100.0% written"]
+    tty = Tty()
+    t = TerminalProgress(tty, label="x")
+    t(1.0, "done")
+    t.done()
+    assert "\r" in tty.getvalue() and "#" * 30 in tty.getvalue() and tty.getvalue().endswith("\n")
