@@ -74,6 +74,8 @@ def form_fields(params_cls) -> list[FormField]:
         kind, s, nullable = _widget(prop, defs)
         field_info = params_cls.model_fields[key]
         default = None if field_info.is_required() else field_info.get_default(call_default_factory=True)
+        if hasattr(default, "model_dump"):  # a nested parameter group: show its set values
+            default = default.model_dump(mode="json", exclude_none=True)
         out.append(FormField(
             key=key, widget=kind, default=default, required=key in required,
             unit=prop.get("unit") or s.get("unit"), help=prop.get("description", ""),

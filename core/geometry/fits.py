@@ -66,12 +66,14 @@ def _covariance(jac: np.ndarray, residuals: np.ndarray, npar: int):
     n = len(residuals)
     dof = n - npar
     s2 = float(residuals @ residuals) / dof if dof > 0 else np.nan
-    scale = np.linalg.norm(jac, axis=0)
+    # the normal matrix of the column-scaled Jacobian: p × p, whatever the number of points
+    a = jac.T @ jac
+    scale = np.sqrt(np.diag(a)).copy()
     scale[scale == 0] = 1.0
-    js = jac / scale
-    sv = np.linalg.svd(js, compute_uv=False)
-    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else np.inf
-    jtj_inv = np.linalg.pinv(js.T @ js) / np.outer(scale, scale)
+    a_s = a / np.outer(scale, scale)
+    ev = np.linalg.eigvalsh(a_s)
+    cond = float(np.sqrt(ev[-1] / ev[0])) if ev[0] > 0 else np.inf  # cond(J_s) = sqrt(cond(J_sᵀJ_s))
+    jtj_inv = np.linalg.pinv(a_s, hermitian=True) / np.outer(scale, scale)
     return s2 * jtj_inv, cond
 
 

@@ -37,29 +37,32 @@ class NominalSurface(ABC):
         xyz = np.asarray(xyz, dtype=np.float64)
         return xyz[:, 2] - self.sag(xyz[:, 0], xyz[:, 1])
 
-    def signed_distance(self, xyz) -> np.ndarray:
-        """Signed orthogonal distance (mm), positive on the +z side of the surface.
+    def foot_point(self, xyz) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(foot points (N,3), unit normals there (N,3), signed orthogonal distances (N,)).
 
-        Generic version: Newton iterations for the foot point (x₀, y₀) that minimises
-        |p − (x₀, y₀, f(x₀, y₀))|, started from the vertical projection; a handful of iterations reach
-        float64 for the slopes of optics (the vertical residual times cos θ is the first iterate).
+        The foot is the surface point nearest to p, so p = foot + d·n̂(foot); d > 0 on the +z side.
+        Generic version: a fixed point on the foot, foot = p − d n̂(foot), d = (p − foot)·n̂(foot),
+        started from the vertical projection; it converges when |d| is well below the radius of
+        curvature (as for probe balls and form errors). Surfaces of revolution override this with an
+        exact 1-D Newton solve.
         """
         p = np.asarray(xyz, dtype=np.float64)
-        d = self.vertical_residual(p)
         n = self.normal(p[:, 0], p[:, 1])
-        # first iterate: orthogonal distance ≈ vertical residual · n_z; then a fixed point on the
-        # foot (foot = p − d n̂(foot), d = (p − foot)·n̂), which converges for |d| ≪ radius of curvature
-        dist = d * n[:, 2]
-        for _ in range(8):
-            foot = p - dist[:, None] * n
-            n = self.normal(foot[:, 0], foot[:, 1])
-            zf = self.sag(foot[:, 0], foot[:, 1])
-            new = np.einsum("ij,ij->i", p - np.column_stack([foot[:, 0], foot[:, 1], zf]), n)
-            if np.max(np.abs(new - dist), initial=0.0) < 1e-13:
-                dist = new
-                break
+        dist = self.vertical_residual(p) * n[:, 2]
+        for _ in range(50):
+            fxy = p[:, :2] - dist[:, None] * n[:, :2]
+            foot = np.column_stack([fxy, self.sag(fxy[:, 0], fxy[:, 1])])
+            n = self.normal(fxy[:, 0], fxy[:, 1])
+            new = np.einsum("ij,ij->i", p - foot, n)
+            done = np.max(np.abs(new - dist), initial=0.0) <= 1e-13 * (1.0 + np.max(np.abs(new)))
             dist = new
-        return dist
+            if done:
+                break
+        return foot, n, dist
+
+    def signed_distance(self, xyz) -> np.ndarray:
+        """Signed orthogonal distance (mm), positive on the +z side of the surface."""
+        return self.foot_point(xyz)[2]
 
     def describe(self) -> dict:
         """JSON-able description for reports."""

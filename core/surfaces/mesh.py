@@ -137,8 +137,8 @@ class MeshSurface(NominalSurface):
         n = self.face_normals[self._triangles_under(x.ravel(), y.ravel())]
         return (-n[:, 0] / n[:, 2]).reshape(x.shape), (-n[:, 1] / n[:, 2]).reshape(x.shape)
 
-    def signed_distance(self, xyz):
-        """Signed distance to the closest point of the mesh (mm), positive on the +z side."""
+    def foot_point(self, xyz):
+        """Closest point of the mesh, the face normal there and the signed distance (+z side +)."""
         p = np.asarray(xyz, dtype=np.float64)
         import open3d as o3d
 
@@ -149,9 +149,10 @@ class MeshSurface(NominalSurface):
                                        self.vertices[tri[:, 2]])
         d = p - q
         dist = np.linalg.norm(d, axis=1)
-        s = np.sign(np.einsum("ij,ij->i", d, self.face_normals[ids]))
+        n = self.face_normals[ids]
+        s = np.sign(np.einsum("ij,ij->i", d, n))
         s[s == 0] = 1.0
-        return dist * s
+        return q, n, dist * s
 
     def describe(self) -> dict:
         d = {"type": self.kind, "path": self.source, "triangles": int(len(self.triangles))}

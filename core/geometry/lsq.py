@@ -1,0 +1,103 @@
+"""Levenberg–Marquardt on the normal equations, for large point clouds and few parameters.
+
+scipy's ``least_squares`` works on the N × p Jacobian (QR/SVD each iteration) and, without an
+analytic Jacobian, spends p extra model evaluations per iteration on finite differences. For a pose
+(5 parameters) on 10⁶ points what matters is evaluating the model and its analytic Jacobian *once*
+per iteration; the p × p normal equations JᵀJ δ = −Jᵀr then cost nothing. Columns are scaled to unit
+norm before solving (Marquardt's scaling), so the conditioning is that of the scaled Jacobian.
+At the solution the residual is re-evaluated in full precision, so solving the normal equations
+(rather than QR) limits only the step, not the accuracy of the converged parameters.
+
+The model is one callable ``model(x, want_jacobian) -> (r, J or None)``; a trial step that leaves the
+model's domain (it raises DomainError) is rejected like a step that increases the cost.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..errors import DomainError
+
+
+@dataclass
+class LMResult:
+    x: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    iterations: int
+    converged: bool
+    message: str
+    cost_history: list = field(default_factory=list)
+
+    def covariance(self) -> tuple[np.ndarray, float]:
+        """(s² (JᵀJ)⁻¹, condition number of the column-scaled J), s² = rᵀr / (n − p)."""
+        from .fits import _covariance
+
+        return _covariance(self.jacobian, self.residuals, len(self.x))
+
+    @property
+    def cost(self) -> float:
+        return float(self.residuals @ self.residuals)
+
+
+def levenberg_marquardt(model: Callable, x0, *, max_iter: int = 100, xtol: float = 1e-12,
+                        ftol: float = 1e-13, check: Callable[[], None] | None = None) -> LMResult:
+    """Minimise |r(x)|². Converged when the step is below ``xtol`` relative to x, or when the linear
+    model predicts a gain below ``ftol``·cost — the floor set by rounding the residuals, where no
+    step can be told from noise (without this test LM would keep damping steps it cannot accept)."""
+    x = np.asarray(x0, dtype=np.float64).copy()
+    r, J = model(x, True)
+    cost = float(r @ r)
+    history = [cost]
+    lam = 0.0  # start as pure Gauss–Newton; damp only when a step fails
+    converged, message = False, "maximum number of iterations reached"
+    it = 0
+    for it in range(1, max_iter + 1):
+        if check is not None:
+            check()
+        A0 = J.T @ J
+        scale = np.sqrt(np.diag(A0)).copy()
+        scale[scale == 0] = 1.0
+        A = A0 / np.outer(scale, scale)  # normal matrix of the column-scaled Jacobian
+        g = (J.T @ r) / scale
+        accepted = False
+        at_floor = False
+        for _ in range(30):
+            try:
+                step_s = np.linalg.solve(A + lam * np.eye(len(x)), -g)
+            except np.linalg.LinAlgError:
+                step_s = np.linalg.lstsq(A + lam * np.eye(len(x)), -g, rcond=None)[0]
+            predicted = -(2.0 * g @ step_s + step_s @ A @ step_s)
+            if predicted <= ftol * cost:
+                at_floor = True
+                break
+            step = step_s / scale
+            x_new = x + step
+            try:  # evaluate with the Jacobian: Gauss–Newton steps are nearly always accepted
+                r_new, J_new = model(x_new, True)
+                cost_new = float(r_new @ r_new)
+            except DomainError:
+                cost_new = np.inf
+            if np.isfinite(cost_new) and cost_new <= cost:
+                accepted = True
+                break
+            lam = max(lam * 10.0, 1e-6)
+        if at_floor:
+            converged, message = True, "converged (no gain left above rounding)"
+            break
+        if not accepted:
+            message = "no step reduces the cost (the model may be far from the data)"
+            break
+        small_step = np.all(np.abs(step) <= xtol * (np.abs(x_new) + xtol))
+        small_gain = (cost - cost_new) <= ftol * cost
+        x, r, J = x_new, r_new, J_new
+        cost = cost_new
+        history.append(cost)
+        lam = lam / 10.0 if lam > 1e-9 else 0.0
+        if small_step or small_gain or cost == 0.0:
+            converged = True
+            message = "converged"
+            break
+    return LMResult(x, r, J, it, converged, message, history)

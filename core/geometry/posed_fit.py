@@ -1,0 +1,247 @@
+"""Fit of a nominal surface posed in the measuring frame to measured points (paper 002 §3–4).
+
+Model (DESIGN "Conventions"): a measured point q and its part-frame coordinates p are related by
+    q = R p + t,  R = Rx(α) Ry(β),  t = (dx, dy, dz)   ⇒   p = Rᵀ (q − t).
+Two residuals:
+  * ``vertical`` (the `misalignment` step):  rᵢ = p_z − f(p_x, p_y), the form error sent to polishing;
+  * ``normal``   (the `probe_radius` step):  rᵢ = dᵢ − s·ρ_ball, dᵢ the signed orthogonal distance of the
+    probe centre from the surface: centres lie at exactly the ball radius from the part along its normal.
+Analytic Jacobian. With u = q − t (rows), ∂p/∂α = u · (dRx Ry), ∂p/∂β = u · (Rx dRy), ∂p/∂t_j = −R[j, :];
+then ∂r/∂θ = g · ∂p/∂θ with g = (−f_x, −f_y, 1) for the vertical residual and g = n̂(foot) for the
+normal one (the foot point is stationary: envelope theorem). Design parameters (vertex radius, conic,
+A_n) enter as ∂r/∂c = −∂f/∂c (vertical) or −n_z ∂f/∂c (normal).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import DomainError, StepError
+from ..surfaces import EvenAsphere, NominalSurface
+from .lsq import levenberg_marquardt
+from .pose import Pose, rot_x, rot_y
+
+POSE_DOF = ("alpha", "beta", "dx", "dy", "dz")
+DEG = np.pi / 180.0
+# correlations beyond this between two free parameters mean the data cannot tell them apart
+DEGENERATE_CORRELATION = 0.999
+
+
+def dof_names_valid(names) -> list[str]:
+    bad = [n for n in names if n not in POSE_DOF and n not in ("radius", "conic")
+           and not (n.startswith("A") and n[1:].isdigit() and int(n[1:]) >= 2)]
+    if bad:
+        raise ValueError(f"unknown degree(s) of freedom {bad}; use alpha, beta, dx, dy, dz, radius, "
+                         "conic, A4, A6, …")
+    if len(set(names)) != len(names):
+        raise ValueError("a degree of freedom is listed twice")
+    return list(names)
+
+
+@dataclass
+class PosedFitResult:
+    pose: Pose
+    surface: NominalSurface
+    names: list[str]
+    values: dict
+    uncertainty: dict
+    correlation: np.ndarray
+    condition_number: float
+    residuals: np.ndarray
+    iterations: int
+    converged: bool
+    part: np.ndarray  # (N, 3) the points in the part frame at the fitted pose
+    warnings: list[str] = field(default_factory=list)
+
+    def report(self) -> dict:
+        rep = {}
+        for n in self.names:
+            key = {"alpha": "alpha_deg", "beta": "beta_deg", "radius": "R", "conic": "k"}.get(n, n)
+            rep[key] = self.values[n]
+        return {**rep,
+                "uncertainty": {({"alpha": "alpha_deg", "beta": "beta_deg", "radius": "R",
+                                  "conic": "k"}.get(n, n)): self.uncertainty[n] for n in self.names},
+                "parameters": list(self.names),
+                "correlation": np.round(self.correlation, 6).tolist(),
+                "condition_number": self.condition_number, "iterations": self.iterations}
+
+
+class PosedSurfaceFit:
+    """One job: fit pose (and chosen design parameters) of ``surface`` to points ``q`` (measuring frame).
+
+    free:    names of the fitted degrees of freedom (alpha, beta, dx, dy, dz, radius, conic, A<n>)
+    initial: starting / fixed values (alpha/beta in degrees, shifts in mm)
+    residual: "vertical" or "normal"; offset: the target of the normal distance (s·ρ_ball)
+    """
+
+    def __init__(self, surface: NominalSurface, q, free, initial=None, residual="vertical",
+                 offset: float = 0.0, max_iter: int = 100, check=None):
+        self.surface0 = surface
+        self.q = np.asarray(q, dtype=np.float64)
+        self._qx, self._qy, self._qz = (np.ascontiguousarray(self.q[:, i]) for i in range(3))
+        self.free = dof_names_valid(free)
+        self.design_free = [n for n in self.free if n not in POSE_DOF]
+        if self.design_free and not isinstance(surface, EvenAsphere):
+            raise StepError(f"fitting {self.design_free} needs an even-asphere nominal "
+                            f"(this recipe's surface is {surface.kind})")
+        self.given = dict(initial or {})  # what the user gave; the rest starts at zero / from data
+        self.initial = {n: 0.0 for n in POSE_DOF} | self.given
+        self.residual = residual
+        self.offset = float(offset)
+        self.max_iter = max_iter
+        self.check = check
+
+    # -- parameter vector <-> pose and surface ------------------------------------------------------
+    def _design_value(self, surf: EvenAsphere, name):
+        if name == "radius":
+            return surf.c
+        if name == "conic":
+            return surf.k
+        return surf.A.get(int(name[1:]), 0.0)
+
+    def _unpack(self, x):
+        vals = dict(self.initial)
+        vals.update({n: v for n, v in zip(self.free, x) if n in POSE_DOF})
+        surf = self.surface0
+        if self.design_free:
+            upd = {}
+            for n, v in zip(self.free, x):
+                if n == "radius":
+                    upd["c"] = v
+                elif n == "conic":
+                    upd["k"] = v
+                elif n not in POSE_DOF:
+                    upd[n] = v
+            surf = self.surface0.with_parameters(**upd)
+        return vals, surf
+
+    # -- the model ----------------------------------------------------------------------------------
+    def _part_coords(self, vals):
+        """Part-frame coordinates as three arrays, p = Rᵀ (q − t), and the pieces the Jacobian reuses."""
+        a, b = vals["alpha"] * DEG, vals["beta"] * DEG
+        R = rot_x(a) @ rot_y(b)
+        ux = self._qx - vals["dx"]
+        uy = self._qy - vals["dy"]
+        uz = self._qz - vals["dz"]
+        px = R[0, 0] * ux + R[1, 0] * uy + R[2, 0] * uz
+        py = R[0, 1] * ux + R[1, 1] * uy + R[2, 1] * uz
+        pz = R[0, 2] * ux + R[1, 2] * uy + R[2, 2] * uz
+        return R, (ux, uy, uz), (px, py, pz)
+
+    def part_points(self, vals) -> np.ndarray:
+        _, _, p = self._part_coords(vals)
+        return np.column_stack(p)
+
+    def model(self, x, want_jac: bool):
+        """Residuals and Jacobian. With w = R g (g rotated to the measuring frame):
+            ∂r/∂t = −w,   ∂r/∂α = −(u × w)_x,   ∂r/∂β = −(p × g)_y      (angles per radian)
+        from ∂Rᵀ/∂α = Rᵀ Kxᵀ and ∂Rᵀ/∂β = Kyᵀ Rᵀ (K the generators of Rx, Ry: dRx = Rx Kx)."""
+        vals, surf = self._unpack(x)
+        R, (ux, uy, uz), (px, py, pz) = self._part_coords(vals)
+        if self.residual == "vertical":
+            r2 = px * px + py * py
+            if isinstance(surf, EvenAsphere):
+                f, gr = surf.sag_and_slope_over_r(r2)
+                r = pz - f
+                if not want_jac:
+                    return r, None
+                gx, gy = -gr * px, -gr * py
+            else:
+                r = pz - surf.sag(px, py)
+                if not want_jac:
+                    return r, None
+                fx, fy = surf.gradient(px, py)
+                gx, gy = -fx, -fy
+            gz = 1.0  # g = (−f_x, −f_y, 1)
+            rho = np.sqrt(r2) if self.design_free else None
+            dz_design = 1.0
+        else:
+            foot, n, dist = surf.foot_point(np.column_stack([px, py, pz]))
+            r = dist - self.offset
+            if not want_jac:
+                return r, None
+            gx, gy, gz = n[:, 0], n[:, 1], n[:, 2]
+            rho = np.sqrt(foot[:, 0] ** 2 + foot[:, 1] ** 2) if self.design_free else None
+            dz_design = gz
+        J = np.empty((len(r), len(self.free)), order="F")  # contiguous columns
+        need_w = any(nm in self.free for nm in ("alpha", "dx", "dy", "dz"))
+        if need_w:
+            wx = R[0, 0] * gx + R[0, 1] * gy + R[0, 2] * gz
+            wy = R[1, 0] * gx + R[1, 1] * gy + R[1, 2] * gz
+            wz = R[2, 0] * gx + R[2, 1] * gy + R[2, 2] * gz
+        design = None
+        if self.design_free:
+            names = ["c" if m == "radius" else "k" if m == "conic" else m for m in self.design_free]
+            design = dict(zip(self.design_free, surf.parameter_derivatives(rho, names).values()))
+        for j, name in enumerate(self.free):
+            if name == "alpha":
+                J[:, j] = -(uy * wz - uz * wy) * DEG
+            elif name == "beta":
+                J[:, j] = -(pz * gx - px * gz) * DEG
+            elif name == "dx":
+                J[:, j] = -wx
+            elif name == "dy":
+                J[:, j] = -wy
+            elif name == "dz":
+                J[:, j] = -wz
+            else:
+                J[:, j] = -dz_design * design[name]
+        return r, J
+
+    # -- the fit ------------------------------------------------------------------------------------
+    def fit(self) -> PosedFitResult:
+        n, k = len(self.q), len(self.free)
+        if n <= k:
+            raise StepError(f"{n} points for {k} parameters: need more points than parameters")
+        xy = self.q[:, :2] - self.q[:, :2].mean(axis=0)
+        ev = np.linalg.eigvalsh(xy.T @ xy)  # spreads² of the footprint along its principal axes
+        if ev[1] <= 0 or ev[0] <= 1e-18 * ev[1]:
+            raise StepError("all points lie on a line: a profile cannot determine the tilt about its own "
+                            "direction — measure a second line or an areal pattern (or fix those DOF)")
+        x0 = []
+        start = dict(self.initial)
+        if "dz" in self.free and "dz" not in self.given:
+            # start the height from the data: the median vertical gap at the initial pose
+            try:  # (on ≤ 20,000 evenly spread points: a median needs no more)
+                sub = slice(None, None, max(1, n // 20000))
+                q = self.q[sub]
+                u = q - np.array([start["dx"], start["dy"], 0.0])
+                p = u @ (rot_x(start["alpha"] * DEG) @ rot_y(start["beta"] * DEG))
+                gap = p[:, 2] - self.surface0.sag(p[:, 0], p[:, 1])
+                start["dz"] = float(np.median(gap)) - (self.offset if self.residual == "normal" else 0.0)
+                self.initial["dz"] = start["dz"]
+            except DomainError:
+                pass
+        for name in self.free:
+            x0.append(start[name] if name in POSE_DOF else self._design_value(self.surface0, name))
+        try:
+            res = levenberg_marquardt(self.model, np.array(x0), max_iter=self.max_iter, check=self.check)
+        except DomainError as e:
+            raise StepError(f"at the starting pose: {e}") from None
+        vals, surf = self._unpack(res.x)
+        if not res.converged:
+            raise StepError(f"the fit did not converge ({res.message}, {res.iterations} iterations): check "
+                            "the data's units (mm) and frame, the nominal surface, the probe side, or give "
+                            "initial values for the pose")
+        cov, cond = res.covariance()
+        sig = np.sqrt(np.clip(np.diag(cov), 0, None))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corr = np.nan_to_num(cov / np.outer(sig, sig))
+        values = {nm: float(v) for nm, v in zip(self.free, res.x)}
+        unc = {nm: float(s) for nm, s in zip(self.free, sig)}
+        if "radius" in values:  # fitted as curvature c; reported as the vertex radius R = 1/c
+            c = values["radius"]
+            values["radius"] = 1.0 / c if c else np.inf
+            unc["radius"] = unc["radius"] / (c * c) if c else np.inf
+        warnings = []
+        for i in range(k):
+            for j in range(i + 1, k):
+                if abs(corr[i, j]) > DEGENERATE_CORRELATION:
+                    warnings.append(
+                        f"{self.free[i]} and {self.free[j]} trade off (correlation {corr[i, j]:+.5f}): "
+                        "this data cannot tell them apart (a nearly spherical part: tilt ≈ decenter) — "
+                        f"fix one of them (leave it out of `dof`) and read both with care")
+        pose = Pose(vals["alpha"], vals["beta"], vals["dx"], vals["dy"], vals["dz"])
+        return PosedFitResult(pose, surf, list(self.free), values, unc, corr, float(cond), res.residuals,
+                              res.iterations, res.converged, self.part_points(vals), warnings)
