@@ -43,10 +43,13 @@ class LMResult:
 
 
 def levenberg_marquardt(model: Callable, x0, *, max_iter: int = 100, xtol: float = 1e-12,
-                        ftol: float = 1e-13, check: Callable[[], None] | None = None) -> LMResult:
-    """Minimise |r(x)|². Converged when the step is below ``xtol`` relative to x, or when the linear
-    model predicts a gain below ``ftol``·cost — the floor set by rounding the residuals, where no
-    step can be told from noise (without this test LM would keep damping steps it cannot accept)."""
+                        ftol: float = 1e-10, floor: float = 1e-13,
+                        check: Callable[[], None] | None = None) -> LMResult:
+    """Minimise |r(x)|². Converged when an accepted step is below ``xtol`` relative to x, or lowers
+    the cost by less than ``ftol`` of it (a parameter error that small moves the fit by 10⁻⁵ of the
+    residual's RMS), or when the linear model predicts a gain below ``floor``·cost — the floor set by
+    rounding, where no step can be told from noise (without this test LM would keep damping steps
+    it cannot accept)."""
     x = np.asarray(x0, dtype=np.float64).copy()
     r, J = model(x, True)
     cost = float(r @ r)
@@ -65,12 +68,11 @@ def levenberg_marquardt(model: Callable, x0, *, max_iter: int = 100, xtol: float
         accepted = False
         at_floor = False
         for _ in range(30):
-            try:
-                step_s = np.linalg.solve(A + lam * np.eye(len(x)), -g)
-            except np.linalg.LinAlgError:
-                step_s = np.linalg.lstsq(A + lam * np.eye(len(x)), -g, rcond=None)[0]
+            # minimum-norm solve: directions the data cannot determine (a sphere's tilt ≈ decenter,
+            # eigenvalues below 1e-14 of the largest, i.e. cond(J) > 10⁷) are not moved at all
+            step_s = np.linalg.lstsq(A + lam * np.eye(len(x)), -g, rcond=1e-14)[0]
             predicted = -(2.0 * g @ step_s + step_s @ A @ step_s)
-            if predicted <= ftol * cost:
+            if predicted <= floor * cost:
                 at_floor = True
                 break
             step = step_s / scale

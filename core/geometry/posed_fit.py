@@ -24,7 +24,9 @@ from .pose import Pose, rot_x, rot_y
 
 POSE_DOF = ("alpha", "beta", "dx", "dy", "dz")
 DEG = np.pi / 180.0
-# correlations beyond this between two free parameters mean the data cannot tell them apart
+# A fit whose column-scaled Jacobian has a condition number above this amplifies the residual into
+# its parameters by that much: the report warns and names the pairs correlated beyond 0.999.
+ILL_POSED_CONDITION = 1e3
 DEGENERATE_CORRELATION = 0.999
 
 
@@ -196,7 +198,12 @@ class PosedSurfaceFit:
             raise StepError(f"{n} points for {k} parameters: need more points than parameters")
         xy = self.q[:, :2] - self.q[:, :2].mean(axis=0)
         ev = np.linalg.eigvalsh(xy.T @ xy)  # spreads² of the footprint along its principal axes
-        if ev[1] <= 0 or ev[0] <= 1e-18 * ev[1]:
+        # a profile: narrower in x, y than 1/1000 of its length, or (a tilted profile bows sideways by
+        # sag·tilt) all in one plane that stands upright — a plane section, not an areal measurement
+        c3 = self.q - self.q.mean(axis=0)
+        w3, v3 = np.linalg.eigh(c3.T @ c3)
+        upright_plane = w3[0] <= 1e-9 * w3[2] and abs(v3[2, 0]) < 0.3
+        if ev[1] <= 0 or ev[0] <= 1e-6 * ev[1] or upright_plane:
             raise StepError("all points lie on a line: a profile cannot determine the tilt about its own "
                             "direction — measure a second line or an areal pattern (or fix those DOF)")
         x0 = []
@@ -220,11 +227,21 @@ class PosedSurfaceFit:
         except DomainError as e:
             raise StepError(f"at the starting pose: {e}") from None
         vals, surf = self._unpack(res.x)
+        cov, cond = res.covariance()
+        if not res.converged and cond > ILL_POSED_CONDITION:
+            sig = np.sqrt(np.clip(np.diag(cov), 0, None))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                corr = np.nan_to_num(cov / np.outer(sig, sig))
+            pairs = [f"{self.free[i]}/{self.free[j]}" for i in range(k) for j in range(i + 1, k)
+                     if abs(corr[i, j]) > DEGENERATE_CORRELATION]
+            raise StepError(f"the fit cannot separate {', '.join(pairs) or 'its parameters'} (condition number "
+                            f"{cond:.3g}; it wandered {res.iterations} iterations along a valley): on a "
+                            "nearly spherical part a tilt is a decenter — fit fewer DOF, e.g. `dof: [dx, dy, "
+                            "dz]` with the tilts held at `initial` values")
         if not res.converged:
             raise StepError(f"the fit did not converge ({res.message}, {res.iterations} iterations): check "
                             "the data's units (mm) and frame, the nominal surface, the probe side, or give "
                             "initial values for the pose")
-        cov, cond = res.covariance()
         sig = np.sqrt(np.clip(np.diag(cov), 0, None))
         with np.errstate(divide="ignore", invalid="ignore"):
             corr = np.nan_to_num(cov / np.outer(sig, sig))
@@ -235,13 +252,16 @@ class PosedSurfaceFit:
             values["radius"] = 1.0 / c if c else np.inf
             unc["radius"] = unc["radius"] / (c * c) if c else np.inf
         warnings = []
-        for i in range(k):
-            for j in range(i + 1, k):
-                if abs(corr[i, j]) > DEGENERATE_CORRELATION:
-                    warnings.append(
-                        f"{self.free[i]} and {self.free[j]} trade off (correlation {corr[i, j]:+.5f}): "
-                        "this data cannot tell them apart (a nearly spherical part: tilt ≈ decenter) — "
-                        f"fix one of them (leave it out of `dof`) and read both with care")
+        if cond > ILL_POSED_CONDITION:
+            pairs = [f"{self.free[i]}/{self.free[j]} ({corr[i, j]:+.6f})" for i in range(k)
+                     for j in range(i + 1, k) if abs(corr[i, j]) > DEGENERATE_CORRELATION]
+            sphere = any(p.split(" ")[0] in ("alpha/dy", "beta/dx", "alpha/dx", "beta/dy") for p in pairs)
+            warnings.append(
+                f"ill-posed fit (condition number {cond:.3g}): {', '.join(pairs) or 'several parameters'} "
+                "trade off" + (" — on a nearly spherical part a tilt looks like a decenter" if sphere else "")
+                + ". The fitted surface and residual are still right, but these values are not separately "
+                "meaningful: fix one of each pair (leave it out of `dof`, give it in `initial`) to read "
+                "the others")
         pose = Pose(vals["alpha"], vals["beta"], vals["dx"], vals["dy"], vals["dz"])
         return PosedFitResult(pose, surf, list(self.free), values, unc, corr, float(cond), res.residuals,
                               res.iterations, res.converged, self.part_points(vals), warnings)

@@ -96,7 +96,8 @@ class ProbeRadiusStep(Step):
         if params.normals == "refined":
             slopes = residual_slopes(foot[:, :2], e, params.neighbours)
             n_used = refined_normals(n, slopes)
-            tilt = np.arccos(np.clip(np.einsum("ij,ij->i", n, n_used), -1, 1))
+            tilt = np.linalg.norm(n_used - n, axis=1)  # chord = angle for small angles (arccos would
+            # turn the rounding of a dot product of 1 into 1e-8 rad)
             report["normal_correction_rms_urad"] = float(np.sqrt(np.mean(tilt ** 2)) * 1e6)
             report["normal_correction_max_urad"] = float(tilt.max() * 1e6)
         else:
