@@ -94,7 +94,8 @@ class ProbeRadiusStep(Step):
         e = dist - s * rho_b  # envelope residual: form error along the normal, plus noise (mm)
         report = fit.report()
         if params.normals == "refined":
-            slopes = residual_slopes(foot[:, :2], e, params.neighbours)
+            slopes, n_out = residual_slopes(foot[:, :2], e, params.neighbours)
+            report["normal_outliers_set_aside"] = n_out
             n_used = refined_normals(n, slopes)
             tilt = np.linalg.norm(n_used - n, axis=1)  # chord = angle for small angles (arccos would
             # turn the rounding of a dot product of 1 into 1e-8 rad)

@@ -50,7 +50,14 @@ def make(seed: int = 2020):
     x, y, line = star_pattern()
     e = form_error(x, y)
     contact = np.column_stack([x, y, SURFACE.sag(x, y) + e])
-    centre = contact + SIDE * PROBE_RADIUS * SURFACE.normal(x, y)  # DESIGN: contact = centre − s·R·n̂
+    # the ball touches the real part: its normal includes the form error's slope (central differences)
+    h = 1e-3
+    fx, fy = SURFACE.gradient(x, y)
+    ex = (form_error(x + h, y) - form_error(x - h, y)) / (2 * h)
+    ey = (form_error(x, y + h) - form_error(x, y - h)) / (2 * h)
+    m = np.column_stack([-(fx + ex), -(fy + ey), np.ones_like(x)])
+    normal = m / np.linalg.norm(m, axis=1)[:, None]
+    centre = contact + SIDE * PROBE_RADIUS * normal  # DESIGN: contact = centre − s·R·n̂
     centre[:, 2] += rng.normal(0.0, NOISE, len(x))
     outliers = {}
     for i, h in zip(rng.choice(len(x), 3, replace=False), (12e-3, 15e-3, 16e-3)):  # spikes, mm
@@ -61,11 +68,11 @@ def make(seed: int = 2020):
         centre[i, 2] -= 25e-3
         outliers[int(i)] = -25e-3
     measured = POSE.to_measuring(centre)
-    return measured, line, e, outliers
+    return measured, line, e, outliers, POSE.to_measuring(contact)
 
 
 def main():
-    xyz, line, e, outliers = make()
+    xyz, line, e, outliers, _ = make()
     lines = ["# CMM export — probe-centre coordinates (mm), measuring frame",
              "# part: even asphere D1300 C=1/3000 k=-0.98; probe ball radius 4.000 mm, touching from +z",
              "# pattern: star, 18 lines every 10 deg, 5 mm pitch",
