@@ -81,7 +81,7 @@ class PosedSurfaceFit:
                  offset: float = 0.0, max_iter: int = 100, check=None):
         self.surface0 = surface
         self.q = np.asarray(q, dtype=np.float64)
-        self._qx, self._qy, self._qz = (np.ascontiguousarray(self.q[:, i]) for i in range(3))
+        self._qT = np.ascontiguousarray(self.q.T)  # (3, N): coordinates as contiguous rows
         self.free = dof_names_valid(free)
         self.design_free = [n for n in self.free if n not in POSE_DOF]
         if self.design_free and not isinstance(surface, EvenAsphere):
@@ -123,13 +123,9 @@ class PosedSurfaceFit:
         """Part-frame coordinates as three arrays, p = Rᵀ (q − t), and the pieces the Jacobian reuses."""
         a, b = vals["alpha"] * DEG, vals["beta"] * DEG
         R = rot_x(a) @ rot_y(b)
-        ux = self._qx - vals["dx"]
-        uy = self._qy - vals["dy"]
-        uz = self._qz - vals["dz"]
-        px = R[0, 0] * ux + R[1, 0] * uy + R[2, 0] * uz
-        py = R[0, 1] * ux + R[1, 1] * uy + R[2, 1] * uz
-        pz = R[0, 2] * ux + R[1, 2] * uy + R[2, 2] * uz
-        return R, (ux, uy, uz), (px, py, pz)
+        u = self._qT - np.array([[vals["dx"]], [vals["dy"]], [vals["dz"]]])  # (3, N)
+        p = R.T @ u  # one BLAS call on (3, N) rows: contiguous x, y, z arrays
+        return R, (u[0], u[1], u[2]), (p[0], p[1], p[2])
 
     def part_points(self, vals) -> np.ndarray:
         _, _, p = self._part_coords(vals)
@@ -143,19 +139,24 @@ class PosedSurfaceFit:
         R, (ux, uy, uz), (px, py, pz) = self._part_coords(vals)
         if self.residual == "vertical":
             r2 = px * px + py * py
+            G = np.empty((3, len(px)))  # g = (−f_x, −f_y, 1), as rows for the BLAS call below
             if isinstance(surf, EvenAsphere):
                 f, gr = surf.sag_and_slope_over_r(r2)
                 r = pz - f
                 if not want_jac:
                     return r, None
-                gx, gy = -gr * px, -gr * py
+                np.negative(gr, out=gr)
+                np.multiply(gr, px, out=G[0])
+                np.multiply(gr, py, out=G[1])
             else:
                 r = pz - surf.sag(px, py)
                 if not want_jac:
                     return r, None
                 fx, fy = surf.gradient(px, py)
-                gx, gy = -fx, -fy
-            gz = 1.0  # g = (−f_x, −f_y, 1)
+                np.negative(fx, out=G[0])
+                np.negative(fy, out=G[1])
+            G[2] = 1.0
+            gx, gy, gz = G[0], G[1], 1.0
             rho = np.sqrt(r2) if self.design_free else None
             dz_design = 1.0
         else:
@@ -163,32 +164,32 @@ class PosedSurfaceFit:
             r = dist - self.offset
             if not want_jac:
                 return r, None
-            gx, gy, gz = n[:, 0], n[:, 1], n[:, 2]
+            G = np.ascontiguousarray(n.T)
+            gx, gy, gz = G[0], G[1], G[2]
             rho = np.sqrt(foot[:, 0] ** 2 + foot[:, 1] ** 2) if self.design_free else None
             dz_design = gz
         J = np.empty((len(r), len(self.free)), order="F")  # contiguous columns
         need_w = any(nm in self.free for nm in ("alpha", "dx", "dy", "dz"))
-        if need_w:
-            wx = R[0, 0] * gx + R[0, 1] * gy + R[0, 2] * gz
-            wy = R[1, 0] * gx + R[1, 1] * gy + R[1, 2] * gz
-            wz = R[2, 0] * gx + R[2, 1] * gy + R[2, 2] * gz
+        if need_w:  # w = R g, one BLAS call
+            wx, wy, wz = R @ G
         design = None
         if self.design_free:
             names = ["c" if m == "radius" else "k" if m == "conic" else m for m in self.design_free]
             design = dict(zip(self.design_free, surf.parameter_derivatives(rho, names).values()))
         for j, name in enumerate(self.free):
+            col = J[:, j]
             if name == "alpha":
-                J[:, j] = -(uy * wz - uz * wy) * DEG
+                np.multiply(uz, wy, out=col)
+                col -= uy * wz
+                col *= DEG
             elif name == "beta":
-                J[:, j] = -(pz * gx - px * gz) * DEG
-            elif name == "dx":
-                J[:, j] = -wx
-            elif name == "dy":
-                J[:, j] = -wy
-            elif name == "dz":
-                J[:, j] = -wz
+                np.multiply(px, gz, out=col)
+                col -= pz * gx
+                col *= DEG
+            elif name in ("dx", "dy", "dz"):
+                np.negative({"dx": wx, "dy": wy, "dz": wz}[name], out=col)
             else:
-                J[:, j] = -dz_design * design[name]
+                np.multiply(design[name], -dz_design, out=col)
         return r, J
 
     # -- the fit ------------------------------------------------------------------------------------
@@ -196,12 +197,11 @@ class PosedSurfaceFit:
         n, k = len(self.q), len(self.free)
         if n <= k:
             raise StepError(f"{n} points for {k} parameters: need more points than parameters")
-        xy = self.q[:, :2] - self.q[:, :2].mean(axis=0)
-        ev = np.linalg.eigvalsh(xy.T @ xy)  # spreads² of the footprint along its principal axes
+        cov3 = np.cov(self._qT)  # 3 × 3, one BLAS pass over the points
+        ev = np.linalg.eigvalsh(cov3[:2, :2])  # spreads² of the footprint in x, y
+        w3, v3 = np.linalg.eigh(cov3)
         # a profile: narrower in x, y than 1/1000 of its length, or (a tilted profile bows sideways by
         # sag·tilt) all in one plane that stands upright — a plane section, not an areal measurement
-        c3 = self.q - self.q.mean(axis=0)
-        w3, v3 = np.linalg.eigh(c3.T @ c3)
         upright_plane = w3[0] <= 1e-9 * w3[2] and abs(v3[2, 0]) < 0.3
         if ev[1] <= 0 or ev[0] <= 1e-6 * ev[1] or upright_plane:
             raise StepError("all points lie on a line: a profile cannot determine the tilt about its own "
