@@ -73,18 +73,24 @@ def build_window(files: list[Path]):
             poly[title] = vals
             clim = None
             if diverging:
-                m = float(np.max(np.abs(vals))) or 1.0
+                # centred on zero and robust: a few spikes saturate instead of washing the map out
+                lo, hi = np.percentile(vals, [0.5, 99.5])
+                m = float(max(abs(lo), abs(hi))) or 1.0
                 clim = (-m, m)
             plotter.add_mesh(poly, scalars=title, cmap="RdBu_r" if diverging else "viridis", clim=clim,
-                             point_size=5, render_points_as_spheres=True,
+                             point_size=6, render_points_as_spheres=True,
                              scalar_bar_args={"title": title, "vertical": True})
         plotter.add_axes()
+        plotter.view_xy()  # optics are looked at along their axis
         plotter.reset_camera()
         if clouds:
             info.setText(f"{sum(c.n for c in clouds)} points")
 
     if clouds:
-        names = ["z", *[n for n in clouds[0].column_names if n not in ("x", "y", "z", "index")], "x", "y"]
+        rest = [n for n in clouds[0].column_names if n not in ("x", "y", "z", "index")]
+        # a form-error map is what an optician opens a processed cloud for: residual first when present
+        names = (["residual"] if "residual" in rest else []) + ["z"] + [n for n in rest if n != "residual"] \
+            + ["x", "y"]
         combo.addItems(names)
         combo.currentTextChanged.connect(show)
         show(names[0])

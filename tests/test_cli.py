@@ -31,17 +31,25 @@ def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
     assert {p.name for p in folder.iterdir()} == {"cloud.csv", "report.json", "report.html"}
     rep = json.loads((folder / "report.json").read_text())
     assert set(rep) >= {"pointspro", "input", "recipe", "steps", "summary"}
-    assert [s["id"] for s in rep["steps"]] == ["aperture", "manual_edit"]
-    assert rep["steps"][1]["report"]["removed"] == 2
-    assert rep["summary"]["points_in"] == 4680
-    assert rep["summary"]["points_out"] == rep["steps"][-1]["points_out"]
+    ids = [s["id"] for s in rep["steps"]]
+    assert ids == ["manual_edit", "probe_radius", "misalignment", "aperture"]
+    steps = {s["id"]: s["report"] for s in rep["steps"]}
+    assert steps["manual_edit"]["removed"] == 2
+    truth = json.loads((EXAMPLE / "truth.json").read_text())
+    mis = steps["misalignment"]
+    # the pose of the simulation (the form error's projection on tilt/decenter limits dx, dy)
+    assert abs(mis["alpha_deg"] - truth["pose"]["alpha_deg"]) < 0.005
+    assert abs(mis["dx"] - truth["pose"]["dx"]) < 0.2 and abs(mis["dy"] - truth["pose"]["dy"]) < 0.2
+    assert abs(mis["dz"] - truth["pose"]["dz"]) < 0.01
+    s = rep["summary"]
+    assert s["points_in"] == 4680 and s["points_out"] == rep["steps"][-1]["points_out"]
+    # form error 0.47 µm RMS + 0.3 µm noise + the outliers not yet removed (denoising comes later)
+    assert 0.5 < s["rms_um"] < 1.5 and s["pv_um"] > 20
     cloud = read_cloud(folder / "cloud.csv")
-    assert cloud.n == rep["summary"]["points_out"]
+    assert cloud.n == s["points_out"] and "residual" in cloud.channels and "probe_residual" in cloud.channels
     assert 520 not in cloud.index and 3640 not in cloud.index
     assert np.all(np.diff(cloud.index) > 0)  # input order kept
-    src = read_cloud(DATA)
-    pos = np.searchsorted(src.index, cloud.index)
-    assert np.array_equal(src.xyz[pos], cloud.xyz)
+    assert np.sqrt(np.mean(cloud["residual"] ** 2)) * 1e3 == pytest.approx(s["rms_um"], rel=0.05)
     html = (folder / "report.html").read_text()
     assert "Clear aperture" in html and "asphere_cmm.csv" in html
     assert _sha(DATA) == before

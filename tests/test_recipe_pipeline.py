@@ -24,7 +24,7 @@ steps:
 
 def test_example_recipe_loads():
     r = load_recipe(EXAMPLE / "recipe.yaml")
-    assert [s.id for s in r.steps] == ["aperture", "manual_edit"]
+    assert [s.id for s in r.steps] == ["manual_edit", "probe_radius", "misalignment", "aperture"]
     assert r.build_surface().aperture == 1300
 
 
