@@ -71,6 +71,11 @@ def _guard(fn, debug: bool) -> int:
             raise
         print(f"pointspro: {e}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # `pointspro steps | head`: the reader left; not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
     except (Cancelled, KeyboardInterrupt):
         print("pointspro: interrupted", file=sys.stderr)
         return 130

@@ -3,9 +3,23 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict
 
+from pointspro.core.geometry.posed_fit import dof_names_valid
 from pointspro.core.step import param
 
 FIVE_DOF = ["alpha", "beta", "dx", "dy", "dz"]
+INITIAL_HELP = "starting (or held) pose; empty values start at 0, dz from the data"
+MAX_ITER_HELP = "iteration limit of the fit"
+
+
+def validate_dof(names: list[str], aspheric_allowed: bool = True) -> list[str]:
+    """The `dof` list of a pose fit: not empty, known names, none twice."""
+    if not names:
+        raise ValueError("fit at least one degree of freedom")
+    if not aspheric_allowed:
+        bad = [n for n in names if n.startswith("A")]
+        if bad:
+            raise ValueError(f"{bad}: aspheric coefficients are fitted by probe_radius, not here")
+    return dof_names_valid(names)
 
 
 class InitialPose(BaseModel):

@@ -21,29 +21,23 @@ from __future__ import annotations
 import numpy as np
 from pydantic import field_validator
 
-from pointspro.core.geometry.posed_fit import PosedSurfaceFit, dof_names_valid
+from pointspro.core.geometry.posed_fit import PosedSurfaceFit
 from pointspro.core.step import Context, Params, Step, StepResult, param
 
-from .._pose_params import FIVE_DOF, InitialPose
+from .._pose_params import FIVE_DOF, INITIAL_HELP, MAX_ITER_HELP, InitialPose, validate_dof
 
 
 class MisalignmentParams(Params):
     dof: list[str] = param(default_factory=lambda: list(FIVE_DOF),
                            help="fitted degrees of freedom among alpha, beta, dx, dy, dz, radius, "
                                 "conic; leave one out to hold it at its initial value")
-    initial: InitialPose = param(default_factory=InitialPose,
-                                 help="starting (or held) pose; empty values start at 0, dz from the data")
-    max_iterations: int = param(100, ge=1, le=10000, help="iteration limit of the fit")
+    initial: InitialPose = param(default_factory=InitialPose, help=INITIAL_HELP)
+    max_iterations: int = param(100, ge=1, le=10000, help=MAX_ITER_HELP)
 
     @field_validator("dof")
     @classmethod
     def _dof(cls, v):
-        if not v:
-            raise ValueError("fit at least one degree of freedom")
-        bad = [n for n in v if n.startswith("A")]
-        if bad:
-            raise ValueError(f"{bad}: aspheric coefficients are fitted by probe_radius, not here")
-        return dof_names_valid(v)
+        return validate_dof(v, aspheric_allowed=False)
 
 
 class MisalignmentStep(Step):

@@ -24,11 +24,11 @@ import numpy as np
 from pydantic import field_validator
 
 from pointspro.core.errors import StepError
-from pointspro.core.geometry.posed_fit import PosedSurfaceFit, dof_names_valid
+from pointspro.core.geometry.posed_fit import PosedSurfaceFit
 from pointspro.core.step import Context, Params, Step, StepResult, param
 from pointspro.core.surfaces import EvenAsphere
 
-from .._pose_params import FIVE_DOF, InitialPose
+from .._pose_params import FIVE_DOF, INITIAL_HELP, MAX_ITER_HELP, InitialPose, validate_dof
 from .normals import refined_normals, residual_slopes
 
 
@@ -38,20 +38,17 @@ class ProbeRadiusParams(Params):
     dof: list[str] = param(default_factory=lambda: list(FIVE_DOF),
                            help="fitted degrees of freedom: alpha, beta, dx, dy, dz (pose) and, as paper 002 "
                                 "does, radius, conic, A4, A6, … (the design surface)")
-    initial: InitialPose = param(default_factory=InitialPose,
-                                 help="starting (or held) pose; empty values start at 0, dz from the data")
+    initial: InitialPose = param(default_factory=InitialPose, help=INITIAL_HELP)
     normals: Literal["refined", "design"] = param(
         "refined", help="refined: design normals tilted by the data's own slopes (exact on parts with "
                         "form error); design: the fitted surface's normals")
     neighbours: int = param(16, ge=6, le=200, help="points per local slope fit when normals are refined")
-    max_iterations: int = param(100, ge=1, le=10000, help="iteration limit of the fit")
+    max_iterations: int = param(100, ge=1, le=10000, help=MAX_ITER_HELP)
 
     @field_validator("dof")
     @classmethod
     def _dof(cls, v):
-        if not v:
-            raise ValueError("fit at least one degree of freedom")
-        return dof_names_valid(v)
+        return validate_dof(v)
 
 
 def check_no_fold(surface, foot: np.ndarray, side: int, radius: float) -> None:
