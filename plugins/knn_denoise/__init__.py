@@ -1,0 +1,197 @@
+"""`knn_denoise`: find spikes and low points in a residual map (paper 002 §5) and remove them.
+
+Works on the `residual` channel when present (after `misalignment`), otherwise on z. The paper's
+noise measure ω (omega.py) compares each point with the mean of the interpolated residual over the
+2a × 2a square around it. `remove` is the paper's manual count (the N points of largest ω, one pass,
+as the optician chooses them), or `auto`:
+
+    σ = 1.4826 · median |s − median s|,  s = D − window mean   (robust: outliers do not inflate it)
+    threshold = threshold_sigma · σ
+
+and, since a spike lifts the interpolated grid around it (its neighbours' ω rises too — to ~3 µm
+next to a 16 µm spike on a 15 mm raster), removal goes in rounds: each round removes the points above
+the threshold whose ω is at least half the largest ω within 2a of them (the spike, not the neighbours
+whose windows it lifted; all of a cluster of low points together), then ω is computed again without
+them, until no point is above the threshold. On a clean measurement nothing exceeds it.
+
+`method: knn_mean` (classic KNN mean distance) and `method: statistical` (open3d's
+`remove_statistical_outlier`) are there to compare with.
+"""
+from __future__ import annotations
+
+from typing import Literal, Union
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from pointspro.core.errors import StepError
+from pointspro.core.step import Context, Params, Step, StepResult, param
+
+from .omega import omega as omega_field
+from .peers import knn_mean_distance, statistical_open3d
+
+MAX_ROUNDS = 50
+
+
+class KnnDenoiseParams(Params):
+    method: Literal["paper", "knn_mean", "statistical"] = param(
+        "paper", help="paper: ω of paper 002 (z-distance to the interpolated window); knn_mean: "
+                      "classic KNN mean distance; statistical: open3d's statistical outlier removal")
+    window: float = param(10.0, unit="mm", gt=0, help="a: half-side of the 2a × 2a neighbourhood "
+                          "(about the sampling spacing, 10–15 mm on CMM rasters)")
+    spacing: float = param(1.0, unit="mm", gt=0, help="interpolation grid spacing")
+    remove: Union[Literal["auto"], int] = param(
+        "auto", help="number of points to remove (largest ω first), or auto: a robust threshold")
+    threshold_sigma: float = param(8.0, gt=1, le=100, help="auto: threshold in robust σ of D − "
+                                   "window mean (knn_mean/statistical: std ratio 2 is their usual)")
+    interpolation: Literal["auto", "cubic", "binned"] = param(
+        "auto", help="grid interpolation: cubic (Clough–Tocher, the paper's) up to 150,000 points, "
+                     "binned cell means beyond (auto)")
+    neighbours: int = param(16, ge=2, le=1000, help="k of knn_mean and statistical")
+    std_ratio: float = param(2.0, gt=0, help="knn_mean/statistical: outlier beyond mean + std_ratio·std")
+
+    @model_validator(mode="after")
+    def _checks(self):
+        if isinstance(self.remove, int) and self.remove < 0:
+            raise ValueError("remove must be ≥ 0 or auto")
+        if self.method == "statistical" and self.remove != "auto":
+            raise ValueError("open3d's statistical filter decides by itself: use remove: auto")
+        if self.spacing > self.window:
+            raise ValueError("spacing must not exceed window (the window would hold one node)")
+        return self
+
+
+class KnnDenoiseStep(Step):
+    id = "knn_denoise"
+    title = "KNN residual denoising"
+    summary = "Remove spikes and low points by the ω of paper 002 (auto threshold or a count)."
+    Params = KnnDenoiseParams
+
+    @classmethod
+    def example_params(cls) -> dict:
+        return {"window": 100.0, "spacing": 10.0}
+
+    def run(self, cloud, params: KnnDenoiseParams, ctx: Context) -> StepResult:
+        ctx.progress.check()
+        channel = "residual" if "residual" in cloud.channels else "z"
+        d = np.asarray(cloud[channel], dtype=np.float64)
+        x, y = cloud.x, cloud.y
+        n = cloud.n
+        self._check_input(x, y, d, params)
+        report: dict = {"method": params.method, "channel": channel, "warnings": []}
+        removed_pos: list[int] = []
+        omega_removed: list[float] = []
+        if params.method == "paper":
+            keep = np.ones(n, dtype=bool)
+            field = omega_field(x, y, d, params.window, params.spacing, params.interpolation)
+            report["interpolation"] = field.interpolation
+            if params.remove != "auto":
+                order = np.argsort(-field.omega, kind="stable")[: params.remove]
+                keep[order] = False
+                removed_pos, omega_removed = order.tolist(), field.omega[order].tolist()
+                threshold = float(field.omega[order[-1]]) if len(order) else None
+                om_kept = field.omega[keep]
+                rounds = 1
+            else:
+                threshold, rounds = None, 0
+                while rounds < MAX_ROUNDS:
+                    ctx.progress.update(min(0.9, 0.1 + 0.2 * rounds), f"round {rounds + 1}")
+                    idx = np.flatnonzero(keep)
+                    s = field.signed
+                    sigma = 1.4826 * np.median(np.abs(s - np.median(s)))
+                    thr = params.threshold_sigma * sigma
+                    threshold = thr if threshold is None else threshold
+                    cand = np.flatnonzero(field.omega > thr)
+                    rounds += 1
+                    if cand.size == 0:
+                        break
+                    take = cand[_dominant(x[idx[cand]], y[idx[cand]], field.omega[cand], params.window)]
+                    keep[idx[take]] = False
+                    removed_pos += idx[take].tolist()
+                    omega_removed += field.omega[take].tolist()
+                    if keep.sum() < 4:
+                        raise StepError("auto removed nearly every point: the residual is not a surface "
+                                        "with outliers here — check the window and the input")
+                    idx = np.flatnonzero(keep)
+                    field = omega_field(x[idx], y[idx], d[idx], params.window, params.spacing,
+                                        params.interpolation)
+                else:
+                    report["warnings"].append(f"stopped after {MAX_ROUNDS} rounds")
+                om_kept = field.omega
+                report["robust_sigma_um"] = float(sigma * 1e3)
+                report["threshold_sigma"] = params.threshold_sigma
+        else:
+            if params.method == "knn_mean":
+                score = knn_mean_distance(x, y, d, params.neighbours)
+                if params.remove == "auto":
+                    threshold = float(score.mean() + params.std_ratio * score.std())
+                    bad = score > threshold
+                else:
+                    order = np.argsort(-score, kind="stable")[: params.remove]
+                    bad = np.zeros(n, dtype=bool)
+                    bad[order] = True
+                    threshold = float(score[order[-1]]) if len(order) else None
+            else:
+                bad = statistical_open3d(x, y, d, params.neighbours, params.std_ratio)
+                score = knn_mean_distance(x, y, d, params.neighbours)
+                threshold = None
+            keep = ~bad
+            removed_pos = np.flatnonzero(bad).tolist()
+            omega_removed = score[bad].tolist()
+            om_kept = score[keep]
+            rounds = 1
+        ctx.progress.update(0.95, "removing")
+        removed_pos = np.asarray(removed_pos, dtype=np.int64)
+        order = np.argsort(removed_pos)
+        removed_idx = cloud.index[removed_pos[order]]
+        omega_removed = np.asarray(omega_removed)[order]
+        report.update(
+            removed=int(removed_pos.size), removed_index=removed_idx.tolist(),
+            omega_removed_um=(omega_removed * 1e3).tolist(),
+            threshold_um=None if threshold is None else float(threshold) * 1e3,
+            omega_max_kept_um=float(om_kept.max() * 1e3) if om_kept.size else None,
+            rounds=rounds)
+        if removed_pos.size and om_kept.size:
+            report["separation"] = float(omega_removed.min() / max(om_kept.max(), 1e-300))
+        out = cloud.select(keep).replace(channels={"omega": om_kept})
+        return StepResult(out, report)
+
+    @staticmethod
+    def _check_input(x, y, d, params):
+        n = len(x)
+        if isinstance(params.remove, int) and params.remove > n:
+            raise StepError(f"remove = {params.remove} is more than the {n} points in the cloud")
+        if n < 10:
+            raise StepError(f"{n} points: too few to tell outliers from the surface")
+        ext = min(np.ptp(x), np.ptp(y))
+        if np.ptp(x) == 0 and np.ptp(y) == 0:
+            raise StepError("all points have the same x, y: there is no surface to compare them with")
+        if 2 * params.window >= max(np.ptp(x), np.ptp(y)):
+            raise StepError(f"the 2a × 2a window ({2 * params.window:g} mm) covers the whole cloud "
+                            f"({np.ptp(x):.4g} × {np.ptp(y):.4g} mm): fewer points than the window holds")
+        if params.method == "paper":
+            from scipy.spatial import cKDTree
+
+            sample = slice(None, None, max(1, n // 20000))
+            pts = np.column_stack([x, y])
+            dist, _ = cKDTree(pts).query(pts[sample], k=2)
+            pitch = float(np.median(dist[:, 1]))
+            if params.window < pitch:
+                raise StepError(f"window a = {params.window:g} mm is smaller than the sampling spacing "
+                                f"({pitch:.3g} mm): the window would see only its own point — use a ≥ the "
+                                "spacing (the paper: a = spacing, 10–15 mm)")
+        if ext == 0:
+            raise StepError("all points lie on one line in x or y: a profile, not a surface")
+
+
+def _dominant(x, y, om, window) -> np.ndarray:
+    """Candidates whose ω is at least half the largest candidate ω within 2·`window` of them (a spike
+    lifts the grid over a sampling step around it, and every window that reaches those nodes)."""
+    from scipy.spatial import cKDTree
+
+    if len(om) == 1:
+        return np.array([0])
+    tree = cKDTree(np.column_stack([x, y]))
+    local_max = np.array([om[nb].max() for nb in tree.query_ball_point(np.column_stack([x, y]),
+                                                                        r=2.0 * window)])
+    return np.flatnonzero(om >= 0.5 * local_max)

@@ -1,0 +1,29 @@
+"""Generic point-cloud outlier filters, offered for comparison (paper 002 §5: they see nothing here).
+
+`knn_mean`: the classic KNN filter — the mean Euclidean distance of each point to its k nearest
+neighbours in (x, y, D); points beyond mean + std_ratio·std of that distance are outliers (the rule
+of PCL's and open3d's statistical filter). `statistical`: open3d's `remove_statistical_outlier` itself.
+On a residual map D is micrometres while x, y are millimetres, so a spike barely changes a point's
+Euclidean distances — which is why the paper measures z-distances to an interpolated neighbourhood.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+def knn_mean_distance(x, y, d, k: int) -> np.ndarray:
+    pts = np.column_stack([x, y, d])
+    dist, _ = cKDTree(pts).query(pts, k=k + 1)
+    return dist[:, 1:].mean(axis=1)
+
+
+def statistical_open3d(x, y, d, k: int, std_ratio: float) -> np.ndarray:
+    """Boolean mask of the points open3d's statistical filter removes."""
+    import open3d as o3d  # lazy: heavy
+
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.column_stack([x, y, d])))
+    _, kept = pc.remove_statistical_outlier(nb_neighbors=int(k), std_ratio=float(std_ratio))
+    mask = np.ones(len(x), dtype=bool)
+    mask[np.asarray(kept, dtype=np.int64)] = False
+    return mask

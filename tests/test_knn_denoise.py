@@ -1,0 +1,123 @@
+"""knn_denoise on paper 002 §5's cases (Q1 raster with spikes, Q2 star with centre sag)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pointspro.core import PointCloud
+from pointspro.core.errors import StepError
+from pointspro.core.step import Context
+from pointspro.plugins.knn_denoise import KnnDenoiseStep
+from pointspro.plugins.knn_denoise.omega import omega
+
+from .denoise_cases import injected, polishing_residual, q1, q2
+from .paper002 import raster, star
+
+
+def run(cloud, **params):
+    return KnnDenoiseStep().run(cloud, KnnDenoiseStep.Params(**params), Context())
+
+
+def test_omega_matches_a_direct_computation():
+    """The box-filtered ω equals |D(P) − mean of the grid nodes in the 2a square| computed by hand."""
+    x, y = raster(200, 10.0)
+    d = polishing_residual(x, y, 100, 0.4)
+    f = omega(x, y, d, window=20.0, spacing=2.0, interpolation="cubic")
+    # rebuild the same grid and average the nodes around a few points explicitly
+    from pointspro.plugins.knn_denoise.omega import _grid_axes, _lattice, _lattice_grid
+
+    x0, y0, nx, ny = _grid_axes(x, y, 2.0)
+    grid = _lattice_grid(x, y, d, _lattice(x, y), x0, y0, nx, ny, 2.0)
+    gx, gy = x0 + 2.0 * np.arange(nx), y0 + 2.0 * np.arange(ny)
+    for k in (0, 57, 150, len(x) - 1):
+        sel = grid[np.abs(gy - y[k]) <= 20.0 + 1e-9][:, np.abs(gx - x[k]) <= 20.0 + 1e-9]
+        assert f.omega[k] == pytest.approx(abs(d[k] - np.nanmean(sel)), abs=1e-12)
+
+
+def test_q1_spikes_found_exactly_and_stand_out_tenfold():
+    cloud, spikes = q1()
+    res = run(cloud, window=15.0, spacing=1.0)  # the paper's parameters (a = 15, 1 mm grid)
+    rep = res.report
+    assert set(rep["removed_index"]) == spikes
+    assert min(rep["omega_removed_um"]) >= 10 * rep["omega_max_kept_um"]
+    assert res.cloud.n == cloud.n - 3 and "omega" in res.cloud.channels
+    assert np.max(res.cloud["omega"]) * 1e3 == pytest.approx(rep["omega_max_kept_um"])
+    assert rep["threshold_um"] > rep["omega_max_kept_um"]
+
+
+def test_q1_manual_count_is_the_papers_ranking():
+    cloud, spikes = q1()
+    res = run(cloud, window=15.0, remove=3)
+    assert set(res.report["removed_index"]) == spikes and res.report["rounds"] == 1
+
+
+def test_q2_centre_sag_and_spikes():
+    cloud, bad = q2()
+    assert len(bad) >= 34
+    got = set(run(cloud, window=15.0).report["removed_index"])
+    tp = len(got & bad)
+    assert tp / len(bad) >= 0.95 and tp / len(got) >= 0.95, (len(bad), len(got), tp)
+
+
+@pytest.mark.parametrize("case", ["q1", "q2", "scattered"])
+def test_clean_measurement_removes_nothing(case):
+    if case == "q1":
+        cloud, _ = q1(spikes=())
+    elif case == "q2":
+        cloud, _ = q2(n_low=0, spikes=())
+    else:
+        cloud, _ = injected(20000, fraction=0.0, scattered=True)
+    res = run(cloud, window=15.0)
+    assert res.report["removed"] == 0 and res.cloud.n == cloud.n
+
+
+def test_generic_filters_see_nothing_on_a_residual_map():
+    """The paper's point: Euclidean KNN statistics cannot see µm spikes among mm spacings."""
+    cloud, spikes = q1()
+    for method in ("knn_mean", "statistical"):
+        rep = run(cloud, window=15.0, method=method).report
+        # they flag the raster's edge points (fewer neighbours, longer distances), not the spikes
+        assert rep["removed"] > 10 and not set(rep["removed_index"]) & spikes, method
+
+
+def test_large_scattered_cloud_uses_binned_grid_and_finds_outliers():
+    cloud, bad = injected(200_000, scattered=True)
+    rep = run(cloud, window=10.0).report
+    assert rep["interpolation"] == "binned"
+    got = set(rep["removed_index"])
+    tp = len(got & bad)
+    assert tp / len(bad) >= 0.95 and tp / len(got) >= 0.95
+
+
+def test_works_on_z_without_residual_channel():
+    """A flat measured directly: z is its form error (no nominal, no misalignment step)."""
+    x, y = raster(300, 5.0)
+    z = polishing_residual(x, y, 150, 0.05) + np.random.default_rng(4).normal(0, 5e-6, len(x))
+    z[100] += 0.02
+    rep = run(PointCloud.from_xyz(x, y, z), window=10.0).report
+    assert rep["channel"] == "z" and rep["removed_index"] == [100]
+
+
+@pytest.mark.parametrize("kw,pattern", [
+    ({"remove": 10**6}, r"remove = 1000000 is more than the \d+ points"),
+    ({"window": 400.0}, r"covers the whole cloud"),
+    ({"window": 4.0, "spacing": 1.0}, r"window a = 4 mm is smaller than the sampling spacing \(15 mm\)"),
+])
+def test_bad_input(kw, pattern):
+    cloud, _ = q1()
+    with pytest.raises(StepError, match=pattern):
+        run(cloud, **kw)
+
+
+def test_identical_points_and_param_rules():
+    from pydantic import ValidationError
+
+    c = PointCloud.from_xyz(np.zeros(50), np.zeros(50), np.zeros(50))
+    with pytest.raises(StepError, match="same x, y"):
+        run(c)
+    with pytest.raises(ValidationError, match="remove must be"):
+        KnnDenoiseStep.Params(remove=-1)
+    with pytest.raises(ValidationError, match="use remove: auto"):
+        KnnDenoiseStep.Params(method="statistical", remove=5)
+    with pytest.raises(ValidationError, match="spacing must not exceed window"):
+        KnnDenoiseStep.Params(window=1.0, spacing=2.0)
