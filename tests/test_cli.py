@@ -32,7 +32,7 @@ def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
     rep = json.loads((folder / "report.json").read_text())
     assert set(rep) >= {"pointspro", "input", "recipe", "steps", "summary"}
     ids = [s["id"] for s in rep["steps"]]
-    assert ids == ["manual_edit", "probe_radius", "misalignment", "aperture"]
+    assert ids == ["manual_edit", "probe_radius", "misalignment", "knn_denoise", "aperture"]
     steps = {s["id"]: s["report"] for s in rep["steps"]}
     assert steps["manual_edit"]["removed"] == 2
     truth = json.loads((EXAMPLE / "truth.json").read_text())
@@ -43,8 +43,12 @@ def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
     assert abs(mis["dz"] - truth["pose"]["dz"]) < 0.01
     s = rep["summary"]
     assert s["points_in"] == 4680 and s["points_out"] == rep["steps"][-1]["points_out"]
-    # form error 0.47 µm RMS + 0.3 µm noise + the outliers not yet removed (denoising comes later)
-    assert 0.5 < s["rms_um"] < 1.5 and s["pv_um"] > 20
+    # knn_denoise finds exactly the simulated outliers the optician did not delete by hand
+    outliers = {int(k) for k in truth["outliers"]} - {520, 3640}
+    assert set(steps["knn_denoise"]["removed_index"]) == outliers
+    # what is left: form error 0.47 µm RMS ⊕ 0.3 µm noise
+    assert s["rms_um"] == pytest.approx(np.hypot(truth["form_error_rms_um"], truth["noise_um"]), rel=0.05)
+    assert s["pv_um"] < truth["form_error_pv_um"] + 8 * truth["noise_um"]
     cloud = read_cloud(folder / "cloud.csv")
     assert cloud.n == s["points_out"] and "residual" in cloud.channels and "probe_residual" in cloud.channels
     assert 520 not in cloud.index and 3640 not in cloud.index

@@ -24,7 +24,8 @@ steps:
 
 def test_example_recipe_loads():
     r = load_recipe(EXAMPLE / "recipe.yaml")
-    assert [s.id for s in r.steps] == ["manual_edit", "probe_radius", "misalignment", "aperture"]
+    assert [s.id for s in r.steps] == ["manual_edit", "probe_radius", "misalignment", "knn_denoise",
+                                       "aperture"]
     assert r.build_surface().aperture == 1300
 
 

@@ -10,7 +10,7 @@ as the optician chooses them), or `auto`:
 
 and, since a spike lifts the interpolated grid around it (its neighbours' ω rises too — to ~3 µm
 next to a 16 µm spike on a 15 mm raster), removal goes in rounds: each round removes the points above
-the threshold whose ω is at least half the largest ω within 2a of them (the spike, not the neighbours
+the threshold whose ω is at least 0.8 of the largest ω within 2a of them (the spike, not the neighbours
 whose windows it lifted; all of a cluster of low points together), then ω is computed again without
 them, until no point is above the threshold. On a clean measurement nothing exceeds it.
 
@@ -27,10 +27,12 @@ from pydantic import Field, model_validator
 from pointspro.core.errors import StepError
 from pointspro.core.step import Context, Params, Step, StepResult, param
 
-from .omega import omega as omega_field
+from .omega import OmegaGrid
 from .peers import knn_mean_distance, statistical_open3d
 
 MAX_ROUNDS = 50
+# a candidate is removed in this round when its ω is at least this fraction of the largest ω near it
+DOMINANCE = 0.8
 
 
 class KnnDenoiseParams(Params):
@@ -83,7 +85,8 @@ class KnnDenoiseStep(Step):
         omega_removed: list[float] = []
         if params.method == "paper":
             keep = np.ones(n, dtype=bool)
-            field = omega_field(x, y, d, params.window, params.spacing, params.interpolation)
+            grid = OmegaGrid(x, y, d, params.window, params.spacing, params.interpolation)
+            field = grid.field()
             report["interpolation"] = field.interpolation
             if params.remove != "auto":
                 order = np.argsort(-field.omega, kind="stable")[: params.remove]
@@ -100,7 +103,7 @@ class KnnDenoiseStep(Step):
                     s = field.signed
                     sigma = 1.4826 * np.median(np.abs(s - np.median(s)))
                     thr = params.threshold_sigma * sigma
-                    threshold = thr if threshold is None else threshold
+                    threshold = thr  # the one in force when the rounds stopped
                     cand = np.flatnonzero(field.omega > thr)
                     rounds += 1
                     if cand.size == 0:
@@ -112,9 +115,8 @@ class KnnDenoiseStep(Step):
                     if keep.sum() < 4:
                         raise StepError("auto removed nearly every point: the residual is not a surface "
                                         "with outliers here — check the window and the input")
-                    idx = np.flatnonzero(keep)
-                    field = omega_field(x[idx], y[idx], d[idx], params.window, params.spacing,
-                                        params.interpolation)
+                    grid.remove(idx[take])
+                    field = grid.field()
                 else:
                     report["warnings"].append(f"stopped after {MAX_ROUNDS} rounds")
                 om_kept = field.omega
@@ -185,7 +187,7 @@ class KnnDenoiseStep(Step):
 
 
 def _dominant(x, y, om, window) -> np.ndarray:
-    """Candidates whose ω is at least half the largest candidate ω within 2·`window` of them (a spike
+    """Candidates whose ω is at least DOMINANCE of the largest candidate ω within 2·`window` of them (a spike
     lifts the grid over a sampling step around it, and every window that reaches those nodes)."""
     from scipy.spatial import cKDTree
 
@@ -194,4 +196,4 @@ def _dominant(x, y, om, window) -> np.ndarray:
     tree = cKDTree(np.column_stack([x, y]))
     local_max = np.array([om[nb].max() for nb in tree.query_ball_point(np.column_stack([x, y]),
                                                                         r=2.0 * window)])
-    return np.flatnonzero(om >= 0.5 * local_max)
+    return np.flatnonzero(om >= DOMINANCE * local_max)

@@ -43,28 +43,30 @@ def _grid_axes(x, y, h):
     return x0, y0, nx, ny
 
 
-def _cubic_grid(x, y, d, x0, y0, nx, ny, h):
-    """Clough–Tocher on the Delaunay triangulation, limited to the range of each triangle's corners.
+def _clough_tocher(px, py, pd, nodes) -> np.ndarray:
+    """Clough–Tocher on the Delaunay triangulation of (px, py), limited to each triangle's range.
 
     Its vertex gradients are estimated from the neighbours; two nearly coincident points with
     different noise give a wild gradient and the cubic patch overshoots by micrometres (seen here:
     12 µm from 20 nm of noise). Clipping each node to [min, max] of the corners of its triangle keeps
     the cubic where it is right and removes the overshoot; a spike's own triangles keep its height.
+    NaN outside the convex hull.
     """
     from scipy.interpolate import CloughTocher2DInterpolator
     from scipy.spatial import Delaunay
 
-    gx = x0 + h * np.arange(nx)
-    gy = y0 + h * np.arange(ny)
-    tri = Delaunay(np.column_stack([x, y]))
-    X, Y = np.meshgrid(gx, gy)
-    nodes = np.column_stack([X.ravel(), Y.ravel()])
-    grid = CloughTocher2DInterpolator(tri, d)(nodes)  # NaN outside the convex hull
+    tri = Delaunay(np.column_stack([px, py]))
+    vals = CloughTocher2DInterpolator(tri, pd)(nodes)
     simplex = tri.find_simplex(nodes)
     inside = simplex >= 0
-    corners = d[tri.simplices[simplex[inside]]]
-    grid[inside] = np.clip(grid[inside], corners.min(axis=1), corners.max(axis=1))
-    return grid.reshape(ny, nx)
+    corners = pd[tri.simplices[simplex[inside]]]
+    vals[inside] = np.clip(vals[inside], corners.min(axis=1), corners.max(axis=1))
+    return vals
+
+
+def _cubic_grid(x, y, d, x0, y0, nx, ny, h):
+    X, Y = np.meshgrid(x0 + h * np.arange(nx), y0 + h * np.arange(ny))
+    return _clough_tocher(x, y, d, np.column_stack([X.ravel(), Y.ravel()])).reshape(ny, nx)
 
 
 def _lattice(x, y, max_fill: float = 4.0):
@@ -118,32 +120,84 @@ def _binned_grid(x, y, d, x0, y0, nx, ny, h):
     return grid
 
 
+class OmegaGrid:
+    """ω of the kept points of a cloud, recomputed as points are set aside round by round.
+
+    The grid frame (origin, size) is that of the whole cloud. After a removal the lattice and binned
+    grids are rebuilt (cheap); the scattered cubic grid is patched locally: only the triangles around
+    a removed point and the gradient estimates of their corners change, so the nodes within 2.5 local
+    point spacings of it are interpolated again from the kept points within 5 spacings.
+    """
+
+    def __init__(self, x, y, d, window: float, spacing: float, interpolation: str = "auto"):
+        self.x = np.asarray(x, dtype=np.float64)
+        self.y = np.asarray(y, dtype=np.float64)
+        self.d = np.asarray(d, dtype=np.float64)
+        self.h = float(spacing)
+        self.size = 2 * int(round(window / self.h)) + 1  # the 2a × 2a square, in nodes
+        self.x0, self.y0, self.nx, self.ny = _grid_axes(self.x, self.y, self.h)
+        self.keep = np.ones(len(self.x), dtype=bool)
+        if interpolation == "auto":
+            interpolation = "cubic" if len(self.x) <= CUBIC_MAX_POINTS else "binned"
+        self.lattice = _lattice(self.x, self.y) if interpolation == "cubic" else None
+        if self.lattice is not None:
+            interpolation = "cubic (lattice spline)"
+        self.interpolation = interpolation
+        self.grid = self._build()
+
+    def _build(self) -> np.ndarray:
+        k = self.keep
+        args = (self.x[k], self.y[k], self.d[k], self.x0, self.y0, self.nx, self.ny, self.h)
+        if self.lattice is not None:
+            lx0, ly0, px, py, i, j = self.lattice
+            return _lattice_grid(*args[:3], (lx0, ly0, px, py, i[k], j[k]), *args[3:])
+        if self.interpolation == "cubic":
+            return _cubic_grid(*args)
+        return _binned_grid(*args)
+
+    def remove(self, positions) -> None:
+        positions = np.asarray(positions, dtype=np.int64)
+        self.keep[positions] = False
+        if self.interpolation != "cubic" or len(positions) == 0:
+            self.grid = self._build()
+            return
+        from scipy.spatial import cKDTree
+
+        kept = np.flatnonzero(self.keep)
+        tree = cKDTree(np.column_stack([self.x[kept], self.y[kept]]))
+        rx, ry = self.x[positions], self.y[positions]
+        spacing = tree.query(np.column_stack([rx, ry]), k=min(6, len(kept)))[0][:, -1]
+        near = np.unique(np.concatenate(tree.query_ball_point(np.column_stack([rx, ry]), r=5.0 * spacing)))
+        patch = np.zeros((self.ny, self.nx), dtype=bool)
+        for cx, cy, s in zip(rx, ry, 2.5 * spacing):  # a box per removed point: few points
+            i0, i1 = int(np.floor((cx - s - self.x0) / self.h)), int(np.ceil((cx + s - self.x0) / self.h))
+            j0, j1 = int(np.floor((cy - s - self.y0) / self.h)), int(np.ceil((cy + s - self.y0) / self.h))
+            patch[max(j0, 0):max(j1 + 1, 0), max(i0, 0):max(i1 + 1, 0)] = True
+        jj, ii = np.nonzero(patch)
+        nodes = np.column_stack([self.x0 + self.h * ii, self.y0 + self.h * jj])
+        sel = kept[near]
+        if len(sel) >= 3:
+            self.grid[jj, ii] = _clough_tocher(self.x[sel], self.y[sel], self.d[sel], nodes)
+        else:
+            self.grid[jj, ii] = np.nan
+
+    def field(self) -> OmegaField:
+        """ω of the kept points (in the order of np.flatnonzero(keep))."""
+        grid = self.grid
+        valid = np.isfinite(grid)
+        num = ndimage.uniform_filter(np.where(valid, grid, 0.0), self.size, mode="constant")
+        den = ndimage.uniform_filter(valid.astype(np.float64), self.size, mode="constant")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = num / den
+        # read the window-mean field at each point (bilinear; nodes are at x0 + i·h, y0 + j·h)
+        mean = np.where(np.isfinite(mean), mean, 0.0)
+        k = self.keep
+        coords = np.vstack([(self.y[k] - self.y0) / self.h, (self.x[k] - self.x0) / self.h])
+        m = ndimage.map_coordinates(mean, coords, order=1, mode="nearest")
+        signed = self.d[k] - m
+        return OmegaField(np.abs(signed), signed, self.interpolation)
+
+
 def omega(x, y, d, window: float, spacing: float, interpolation: str = "auto") -> OmegaField:
     """ω at every point. x, y, window, spacing in mm; d in any unit (ω comes in the same)."""
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
-    d = np.asarray(d, dtype=np.float64)
-    h = float(spacing)
-    x0, y0, nx, ny = _grid_axes(x, y, h)
-    if interpolation == "auto":
-        interpolation = "cubic" if len(x) <= CUBIC_MAX_POINTS else "binned"
-    lat = _lattice(x, y) if interpolation == "cubic" else None
-    if lat is not None:
-        interpolation = "cubic (lattice spline)"
-        grid = _lattice_grid(x, y, d, lat, x0, y0, nx, ny, h)
-    elif interpolation == "cubic":
-        grid = _cubic_grid(x, y, d, x0, y0, nx, ny, h)
-    else:
-        grid = _binned_grid(x, y, d, x0, y0, nx, ny, h)
-    valid = np.isfinite(grid)
-    size = 2 * int(round(window / h)) + 1  # the 2a × 2a square, in nodes
-    num = ndimage.uniform_filter(np.where(valid, grid, 0.0), size, mode="constant")
-    den = ndimage.uniform_filter(valid.astype(np.float64), size, mode="constant")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = num / den
-    # read the window-mean field at each point (bilinear; nodes are at x0 + i·h, y0 + j·h)
-    mean = np.where(np.isfinite(mean), mean, 0.0)
-    coords = np.vstack([(y - y0) / h, (x - x0) / h])
-    m = ndimage.map_coordinates(mean, coords, order=1, mode="nearest")
-    signed = d - m
-    return OmegaField(np.abs(signed), signed, interpolation)
+    return OmegaGrid(x, y, d, window, spacing, interpolation).field()
