@@ -11,14 +11,17 @@ from pathlib import Path
 
 import numpy as np
 
-# Channels that are deviations: shown in µm on a diverging map centred on zero.
-DEVIATION_CHANNELS = ("residual", "omega", "distance", "gap")
+# Signed deviations (mm): shown in µm on a diverging map centred on zero.
+DEVIATION_CHANNELS = ("residual", "probe_residual", "distance", "gap")
+# Non-negative deviations (mm): shown in µm on a sequential map.
+MAGNITUDE_CHANNELS = ("omega",)
 
 
 def _scalars(cloud, name: str) -> tuple[np.ndarray, str, bool]:
     """(values to colour by, colour-bar title, diverging?) — float32 for display only."""
-    if name in DEVIATION_CHANNELS:
-        return (np.asarray(cloud[name]) * 1e3).astype(np.float32), f"{name} (µm)", True
+    if name in DEVIATION_CHANNELS or name in MAGNITUDE_CHANNELS:
+        um = (np.asarray(cloud[name]) * 1e3).astype(np.float32)  # display only
+        return um, f"{name} (µm)", name in DEVIATION_CHANNELS
     v = np.asarray(cloud[name], dtype=np.float64)
     if name in ("x", "y", "z"):
         return (v - v.mean()).astype(np.float32), f"{name} − mean (mm)", False  # display only
