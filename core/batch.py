@@ -99,32 +99,48 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                             traceback="".join(traceback.format_exception(e)))
 
 
-def _worker(recipe_path: str, path: str, out_dir: str, stem: str) -> InputOutcome:
-    """One input in a worker process: the recipe is re-read there (plain data crosses processes)."""
+def process_job(recipe_path: str, path: str, out_dir: str, stem: str) -> InputOutcome:
+    """One input in a worker (process pool or Dask): the recipe is re-read there from its file, so
+    only plain strings cross process and machine boundaries."""
     from .recipe import load_recipe
 
     recipe = load_recipe(recipe_path)
     return process_input(Path(path), recipe, Path(out_dir), stem)
 
 
-def run_parallel(recipe_path: Path, inputs: list[Path], stems: list[str], out_dir: Path,
-                 workers: int):
-    """Process inputs in ``workers`` processes; yields outcomes as they complete.
+def cleanup_partials(out_dir: Path) -> list[str]:
+    """Remove what an interrupted run leaves: temporary output folders and files (``.*.partial``) and
+    folders set aside while being replaced (``.*.old``). Returns what was removed."""
+    import shutil
 
-    Each input is independent and every step deterministic, so the outputs are identical to a
-    sequential run. Processes are spawned (not forked) so no thread or lock state is inherited.
-    """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    gone = []
+    for p in sorted(Path(out_dir).glob(".*")):
+        if p.name.endswith((".partial", ".old")):
+            if p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
+            gone.append(p.name)
+    return gone
 
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(_worker, str(recipe_path), str(p), str(out_dir), s)
-                   for p, s in zip(inputs, stems)]
-        try:
-            for fut in as_completed(futures):
-                yield fut.result()
-        except BaseException:
-            for f in futures:
-                f.cancel()
-            raise
+
+def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe) -> dict | None:
+    """The report of a complete earlier output of this input with this recipe, else None.
+
+    Output folders appear only when complete (atomic rename); the report must also name the same
+    input and the same recipe (every parameter), so a changed recipe is run again."""
+    import json
+
+    folder = Path(out_dir) / stem
+    rep = folder / "report.json"
+    if not (rep.is_file() and (folder / "cloud.csv").is_file()):
+        return None
+    try:
+        data = json.loads(rep.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    from .report import jsonable
+
+    if data.get("input") != str(path) or data.get("recipe") != jsonable(recipe.to_dict(full=True)):
+        return None
+    return data

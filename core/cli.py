@@ -2,7 +2,7 @@
 
     pointspro [FILE…]                                   open the window with the files
     pointspro --screenshot PNG [FILE…]                  render the window to PNG and exit
-    pointspro --batch RECIPE INPUT… --out DIR           run a recipe on each input
+    pointspro --batch RECIPE INPUT… --out DIR [--workers N] [--scheduler ADDRESS] [--resume]
     pointspro steps                                     list the installed steps
 
 Exit codes: 0 all done; 1 some inputs failed (the others are complete); 2 usage, recipe or input
@@ -33,7 +33,12 @@ def _parser() -> argparse.ArgumentParser:
                    "--batch: RECIPE INPUT…")
     p.add_argument("--batch", action="store_true", help="run RECIPE on each INPUT without a window")
     p.add_argument("--out", metavar="DIR", help="output folder of --batch")
-    p.add_argument("--workers", type=int, default=1, metavar="N", help="parallel inputs (default 1)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="inputs processed in parallel (default: the number of cores)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster (tcp://host:8786), "
+                   "or `local` for a LocalCluster on this machine")
+    p.add_argument("--resume", action="store_true", help="skip inputs whose outputs are complete "
+                   "(same input, same recipe)")
     p.add_argument("--screenshot", metavar="PNG", help="open the window, render, save PNG, exit")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     p.add_argument("--quiet", action="store_true", help="no progress output")
@@ -56,8 +61,9 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_OK
     if args.batch:
         return _guard(lambda: cmd_batch(args), args.debug)
-    if args.out or args.workers != 1:
-        print("pointspro: --out and --workers go with --batch (see pointspro --help)", file=sys.stderr)
+    if args.out or args.workers is not None or args.scheduler or args.resume:
+        print("pointspro: --out, --workers, --scheduler and --resume go with --batch "
+              "(see pointspro --help)", file=sys.stderr)
         return EXIT_USAGE
     return _guard(lambda: cmd_window(args), args.debug)
 
@@ -88,29 +94,47 @@ def _guard(fn, debug: bool) -> int:
 
 
 def cmd_batch(args) -> int:
-    from .batch import check_output_folder, output_stems, process_input
+    import os
+    import signal
+    import time
+
+    from .batch import check_output_folder, cleanup_partials, is_complete, output_stems
     from .errors import RecipeError
     from .recipe import load_recipe
-    from .terminal import TerminalProgress
+    from .summary import entry, table, write_summary
 
     if len(args.files) < 2:
         raise RecipeError("--batch needs RECIPE and at least one INPUT (pointspro --batch RECIPE "
                           "INPUT… --out DIR)")
     if not args.out:
         raise RecipeError("--batch needs --out DIR")
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         raise RecipeError("--workers must be ≥ 1")
-    recipe = load_recipe(args.files[0])
+    recipe_path = Path(args.files[0])
+    recipe = load_recipe(recipe_path)
     surface = recipe.build_surface()  # a missing mesh file is a recipe error: fail before any input
     inputs = [Path(f) for f in args.files[1:]]
     out = Path(args.out)
     check_output_folder(out)
     stems = output_stems(inputs)
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
-    outcomes = []
+    t0 = time.perf_counter()
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    workers = args.workers or cores
+
+    results: dict[str, dict] = {}
+    jobs = []
+    if args.resume:
+        cleanup_partials(out)  # what a killed run left behind
+    for path, stem in zip(inputs, stems):
+        done = is_complete(out, stem, path, recipe) if args.resume else None
+        if done is not None:
+            results[str(path)] = entry(str(path), "skipped", report=done)
+        else:
+            jobs.append((path, stem))
 
     def report(oc):
-        outcomes.append(oc)
+        results[oc.input] = entry(oc.input, "ok" if oc.ok else "failed", oc)
         if oc.ok:
             s = oc.summary or {}
             extra = (f", residual RMS {s['rms_um']:.4g} µm, PV {s['pv_um']:.4g} µm"
@@ -123,20 +147,45 @@ def cmd_batch(args) -> int:
                 print(oc.traceback, file=sys.stderr, end="")
             print(f"pointspro: {oc.error}", file=sys.stderr, flush=True)
 
-    workers = min(args.workers, len(inputs))
-    if workers == 1:
-        for k, (path, stem) in enumerate(zip(inputs, stems), 1):
-            bar = None if args.quiet else TerminalProgress(label=f"[{k}/{len(inputs)}] {path.name}")
-            oc = process_input(path, recipe, out, stem, sink=bar, surface=surface)
-            if bar:
-                bar.done()
-            report(oc)
-    else:
-        from .batch import run_parallel
+    from . import executors
 
-        for oc in run_parallel(Path(args.files[0]), inputs, stems, out, workers):
+    if args.scheduler:
+        runner = executors.run_dask(recipe_path, jobs, out, workers, args.scheduler)
+    elif min(workers, len(jobs)) > 1:
+        runner = executors.run_processes(recipe_path, jobs, out, min(workers, len(jobs)))
+    else:
+        from .terminal import TerminalProgress
+
+        factory = None if args.quiet else (
+            lambda k, p: TerminalProgress(label=f"[{k}/{len(jobs)}] {p.name}"))
+        runner = executors.run_sequential(recipe, surface, jobs, out, factory)
+
+    def on_sigterm(signum, frame):  # SIGTERM stops the batch like Ctrl-C does
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    interrupted = False
+    try:
+        for oc in runner:
             report(oc)
-    failed = [o for o in outcomes if not o.ok]
+    except KeyboardInterrupt:
+        interrupted = True
+        runner.close()  # stops the workers
+        cleanup_partials(out)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+    entries = [results.get(str(p)) or entry(str(p), "not run") for p in inputs]
+    write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
+                  scheduler=args.scheduler, seconds=time.perf_counter() - t0, interrupted=interrupted)
+    if not args.quiet or interrupted:
+        print(table(entries), file=sys.stdout if not interrupted else sys.stderr)
+    failed = [e for e in entries if e["status"] == "failed"]
+    if interrupted:
+        done = sum(e["status"] in ("ok", "skipped") for e in entries)
+        print(f"pointspro: interrupted — {done} of {len(inputs)} inputs complete, no partial output "
+              "left; run the same command with --resume to finish", file=sys.stderr)
+        return 130
     if not failed:
         return EXIT_OK
     if len(inputs) == 1:

@@ -107,7 +107,13 @@ def test_bad_input_exit_2_one_line_no_output(run_cli, tmp_path, make, pattern):
     assert re.search(pattern, err), err
     assert "Traceback" not in err
     outdir = tmp_path / "o"
-    assert not outdir.exists() or not any(outdir.iterdir())
+    # nothing but, once the inputs were reached, the batch's summary recording the failure
+    left = sorted(p.name for p in outdir.iterdir()) if outdir.exists() else []
+    assert left in ([], ["summary.json"])
+    if left:
+        summary = json.loads((outdir / "summary.json").read_text())
+        assert [e["status"] for e in summary["inputs"]] == ["failed"]
+        assert summary["inputs"][0]["error"] in err
 
 
 def test_unwritable_output_folder(run_cli, tmp_path):
@@ -146,7 +152,7 @@ def test_rerun_replaces_a_complete_folder_atomically(run_cli, tmp_path):
     first = (tmp_path / "o" / "good" / "cloud.csv").read_text()
     assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
     assert (tmp_path / "o" / "good" / "cloud.csv").read_text() == first
-    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["good"]
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["good", "summary.json"]
 
 
 def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch):

@@ -1,0 +1,75 @@
+"""Ways to run a batch's inputs: in this process, in a pool of processes, on a Dask cluster.
+
+Each is a generator of `InputOutcome`s in completion order; closing it (the caller does on Ctrl-C or
+SIGTERM) stops its workers at once — the caller then removes the temporary folders they leave, so
+every output folder is complete or absent. Every input is processed by the same function
+(`batch.process_input`) from the same recipe file, so all three give the same results.
+"""
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Iterator
+
+from .batch import InputOutcome, process_input, process_job
+
+
+def run_sequential(recipe, surface, jobs, out_dir: Path, bar_factory=None) -> Iterator[InputOutcome]:
+    for k, (path, stem) in enumerate(jobs, 1):
+        bar = bar_factory(k, path) if bar_factory else None
+        try:
+            yield process_input(path, recipe, out_dir, stem, sink=bar, surface=surface)
+        finally:
+            if bar is not None:
+                bar.done()
+
+
+def _ignore_sigint():  # workers leave Ctrl-C to the parent, which stops them
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _job(args):
+    return process_job(*args)
+
+
+def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int) -> Iterator[InputOutcome]:
+    """A pool of spawned processes (no inherited threads or locks); terminated on close."""
+    import multiprocessing
+
+    pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_ignore_sigint)
+    try:
+        args = [(str(recipe_path), str(p), str(out_dir), s) for p, s in jobs]
+        yield from pool.imap_unordered(_job, args)
+        pool.close()
+    finally:
+        pool.terminate()
+        pool.join()
+
+
+def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str) -> Iterator[InputOutcome]:
+    """On a Dask distributed cluster (`address`), or a LocalCluster of `workers` processes ("local").
+
+    The workers must see the same files (a shared file system for a real cluster) and have pointspro
+    installed. Each input is one task; results come back as they complete.
+    """
+    from distributed import Client, LocalCluster, as_completed  # lazy: only for --scheduler
+
+    cluster = None
+    if address == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, host="127.0.0.1")
+        client = Client(cluster)
+    else:
+        client = Client(address, timeout="30s")
+    futures = []
+    try:
+        futures = [client.submit(process_job, str(recipe_path), str(p), str(out_dir), s, pure=False,
+                                 key=f"pointspro-{s}-{k}") for k, (p, s) in enumerate(jobs)]
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        if futures:
+            client.cancel(futures, force=True)
+        client.close()
+        if cluster is not None:
+            cluster.close()

@@ -1,0 +1,48 @@
+"""The end of a batch: a table on the terminal and ``DIR/summary.json`` (per input: status, the error
+line, seconds, points in/out, RMS/PV of the residual)."""
+from __future__ import annotations
+
+import json
+import time
+
+from . import __version__
+from .io import atomic_path
+
+
+def entry(input_path: str, status: str, outcome=None, report: dict | None = None, error: str | None = None):
+    s = (outcome.summary if outcome is not None and outcome.summary else
+         (report or {}).get("summary", {})) or {}
+    return {"input": input_path, "status": status,
+            "error": error if error is not None else (outcome.error if outcome is not None else None),
+            "seconds": round(outcome.seconds, 3) if outcome is not None else None,
+            "points_in": s.get("points_in"), "points_out": s.get("points_out"),
+            "rms_um": s.get("rms_um"), "pv_um": s.get("pv_um")}
+
+
+def write_summary(out_dir, recipe_path, entries: list[dict], *, workers: int, scheduler: str | None,
+                  seconds: float, interrupted: bool) -> dict:
+    counts: dict = {}
+    for e in entries:
+        counts[e["status"]] = counts.get(e["status"], 0) + 1
+    data = {"pointspro": __version__, "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "recipe": str(recipe_path), "workers": workers, "scheduler": scheduler,
+            "seconds": round(seconds, 3), "interrupted": interrupted, "counts": counts,
+            "inputs": entries}
+    with atomic_path(out_dir / "summary.json") as tmp:
+        tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    return data
+
+
+def table(entries: list[dict]) -> str:
+    def f(v, fmt):
+        return "—" if v is None else format(v, fmt)
+
+    rows = [("input", "status", "points", "RMS µm", "PV µm", "s")]
+    for e in entries:
+        pts = "—" if e["points_in"] is None else f"{e['points_in']}→{e['points_out']}"
+        rows.append((e["input"], e["status"], pts, f(e["rms_um"], ".4g"), f(e["pv_um"], ".4g"),
+                     f(e["seconds"], ".2f")))
+    widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
