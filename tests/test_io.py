@@ -141,3 +141,8 @@ def test_cloud_is_immutable_and_index_survives_selection():
     assert np.array_equal(s.index, c.index[::2])
     with pytest.raises(ValueError, match="shape"):
         PointCloud(np.zeros((3, 3)), {"residual": np.zeros(2)})
+
+
+def test_damaged_first_data_line_is_not_taken_for_a_header(tmp_path):
+    with pytest.raises(InputError, match=r"m.csv, line 2, column 2: '2x' is not a number"):
+        read_cloud(write(tmp_path / "m.csv", "# export\n1,2x,3\n4,5,6\n7,8,9\n"))

@@ -117,6 +117,12 @@ def read_text(path: Path) -> tuple[np.ndarray, dict, dict]:
         htoks = _split(hline, delim)
         if htoks and htoks[-1] == "":
             htoks = htoks[:-1]
+        numeric = [_is_number(t, decimal_comma) for t in htoks]
+        if len(htoks) == ncols and sum(numeric) > len(htoks) / 2:
+            # mostly numbers: a damaged data line, not a header
+            j = numeric.index(False)
+            raise InputError(f"{path}, line {candidates[-1] + 1}, column {j + 1}: {htoks[j][:40]!r} is "
+                             "not a number")
         if len(htoks) == ncols:
             header = (candidates[-1], htoks)
         elif len(_split(hline, None)) == ncols and delim is None:

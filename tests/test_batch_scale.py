@@ -1,0 +1,155 @@
+"""Batch at scale: parallel processes, a Dask LocalCluster, summaries, kills and resumes."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from .conftest import EXAMPLE, write
+
+RECIPE = EXAMPLE / "recipe.yaml"
+
+
+def _inputs(tmp_path, n, bad=()):
+    """n copies of the example measurement under their own names, some of them corrupt."""
+    src = (EXAMPLE / "asphere_cmm.csv").read_text()
+    files = []
+    for k in range(n):
+        p = tmp_path / "in" / f"part{k:02d}.csv"
+        p.parent.mkdir(exist_ok=True)
+        p.write_text(src if k not in bad else src.replace("86.", "8x6.", 1))
+        files.append(p)
+    return files
+
+
+def _normalised(folder: Path) -> dict:
+    """Every file of an output folder; report timing fields (created, seconds) blanked."""
+    out = {}
+    for p in sorted(folder.iterdir()):
+        data = p.read_bytes()
+        if p.name in ("report.json", "report.html"):
+            text = data.decode()
+            text = re.sub(r'"created": "[^"]*"', '"created": ""', text)
+            text = re.sub(r'"seconds": [0-9.e-]+', '"seconds": 0', text)
+            text = re.sub(r"\d+T\d\d:\d\d:\d\d\+00:00", "", text)
+            text = re.sub(r"[0-9.]+ s ·", "s ·", text)
+            data = text.encode()
+        out[p.name] = data
+    return out
+
+
+def test_workers_and_dask_give_identical_outputs(run_cli, tmp_path):
+    files = _inputs(tmp_path, 3)
+    runs = {"seq": ["--workers", "1"], "par": ["--workers", "2"], "dask": ["--scheduler", "local", "--workers", "2"]}
+    for name, extra in runs.items():
+        code, out, err = run_cli("--batch", RECIPE, *files, "--out", tmp_path / name, "--quiet", *extra)
+        assert code == 0, (name, err)
+    for f in files:
+        ref = _normalised(tmp_path / "seq" / f.stem)
+        assert set(ref) == {"cloud.csv", "report.json", "report.html"}
+        for name in ("par", "dask"):
+            assert _normalised(tmp_path / name / f.stem) == ref, (name, f.stem)
+    s = json.loads((tmp_path / "dask" / "summary.json").read_text())
+    assert s["scheduler"] == "local" and s["counts"] == {"ok": 3}
+
+
+def test_summary_table_and_json_with_corrupt_inputs(run_cli, tmp_path):
+    files = _inputs(tmp_path, 4, bad={1, 2})
+    code, out, err = run_cli("--batch", RECIPE, *files, "--out", tmp_path / "o", "--workers", "2")
+    assert code == 1
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert [e["status"] for e in s["inputs"]] == ["ok", "failed", "failed", "ok"]
+    bad = s["inputs"][1]
+    assert re.search(r"part01.csv, line 5, column 3: '8x6.3193\d+' is not a number", bad["error"])
+    good = s["inputs"][0]
+    assert good["points_in"] == 4680 and good["rms_um"] > 0 and good["seconds"] > 0
+    assert s["workers"] == 2 and s["interrupted"] is False and s["counts"] == {"ok": 2, "failed": 2}
+    # the table on the terminal: a row per input
+    rows = [line.split() for line in out.splitlines() if "part0" in line]
+    table = [r for r in rows if not r[0].endswith(":") and r[1] in ("ok", "failed")]
+    assert [r[1] for r in table] == ["ok", "failed", "failed", "ok"]
+    assert table[1][2:] == ["—", "—", "—", table[1][-1]]  # a failed input has no numbers
+    assert not (tmp_path / "o" / "part01").exists()
+
+
+def test_default_workers_is_the_number_of_cores(run_cli, tmp_path):
+    files = _inputs(tmp_path, 2)
+    assert run_cli("--batch", RECIPE, *files, "--out", tmp_path / "o", "--quiet")[0] == 0
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["workers"] == min(2, len(os.sched_getaffinity(0))) or s["workers"] == len(os.sched_getaffinity(0))
+
+
+def test_resume_skips_complete_outputs_and_reruns_changed_recipes(run_cli, tmp_path):
+    files = _inputs(tmp_path, 3)
+    out = tmp_path / "o"
+    assert run_cli("--batch", RECIPE, *files[:2], "--out", out, "--quiet", "--workers", "1")[0] == 0
+    stamp = (out / "part00" / "report.json").stat().st_mtime_ns
+    (out / ".part02.abc.partial").mkdir()  # what a hard kill leaves
+    code, _, _ = run_cli("--batch", RECIPE, *files, "--out", out, "--quiet", "--resume", "--workers", "1")
+    assert code == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert [e["status"] for e in s["inputs"]] == ["skipped", "skipped", "ok"]
+    assert s["inputs"][0]["points_in"] == 4680  # numbers of a skipped input come from its report
+    assert (out / "part00" / "report.json").stat().st_mtime_ns == stamp
+    assert not list(out.glob(".*"))
+    # another recipe: nothing is complete for it
+    other = write(tmp_path / "other.yaml", RECIPE.read_text().replace("window: 15.0", "window: 20.0"))
+    run_cli("--batch", other, *files, "--out", out, "--quiet", "--resume", "--workers", "1")
+    s = json.loads((out / "summary.json").read_text())
+    assert [e["status"] for e in s["inputs"]] == ["ok", "ok", "ok"]
+
+
+def _heavy_inputs(tmp_path, n, points=60_000):
+    """Inputs that take a second or so each, so that a kill lands in the middle of the batch."""
+    rng = np.random.default_rng(5)
+    g = np.linspace(-300, 300, int(np.sqrt(points)))
+    x, y = np.meshgrid(g, g)
+    files = []
+    for k in range(n):
+        z = 1e-3 * np.sin(x / 37.0 + k) * np.cos(y / 53.0) + rng.normal(0, 2e-5, x.shape)
+        p = tmp_path / "in" / f"scan{k:02d}.csv"
+        p.parent.mkdir(exist_ok=True)
+        np.savetxt(p, np.column_stack([x.ravel(), y.ravel(), z.ravel()]), fmt="%.7f", delimiter=",",
+                   header="x,y,z", comments="")
+        files.append(p)
+    recipe = write(tmp_path / "heavy.yaml", "pointspro: 1\nsteps:\n  - knn_denoise: {window: 10.0}\n"
+                   "  - aperture: {diameter: 560}\n")
+    return recipe, files
+
+
+@pytest.mark.parametrize("sig,workers", [(signal.SIGTERM, "2"), (signal.SIGINT, "1")])
+def test_kill_in_the_middle_then_resume(tmp_path, sig, workers):
+    recipe, files = _heavy_inputs(tmp_path, 5)
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-m", "pointspro.core.cli", "--batch", str(recipe), *map(str, files),
+           "--out", str(out), "--workers", workers, "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (out.exists() and any(p.is_dir() and not p.name.startswith(".")
+                                                                     for p in out.iterdir())):
+        time.sleep(0.05)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "run the same command with --resume" in err and "Traceback" not in err
+    assert not list(out.glob(".*")), list(out.glob(".*"))  # no temporary leftovers
+    done = [p for p in out.iterdir() if p.is_dir()]
+    assert 1 <= len(done) < len(files)  # it was stopped in the middle
+    for d in done:  # every folder there is complete
+        assert {q.name for q in d.iterdir()} == {"cloud.csv", "report.json", "report.html"}
+        json.loads((d / "report.json").read_text())
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] is True and s["counts"].get("not run", 0) >= 1
+    res = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["counts"].get("skipped") == len(done) and s["counts"].get("ok") == len(files) - len(done)
+    assert all((out / f.stem / "report.json").is_file() for f in files)
