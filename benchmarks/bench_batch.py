@@ -1,0 +1,82 @@
+"""Night-batch throughput: many inputs with the example recipe, 1 vs N workers vs a Dask LocalCluster.
+
+    .venv/bin/python benchmarks/bench_batch.py [--inputs 200] [--points 50000] [--workers 2]
+
+One simulated CMM measurement of the example part (paper 002 Table 1 set-up, probe-centre points
+of a 4 mm ball on a 5 mm raster, misaligned, 0.3 µm noise, a few spikes) with ~50,000 points is
+hard-linked under `--inputs` names (the same bytes: the page cache serves them alike), and
+`pointspro --batch` runs the example recipe over all of them. Wall time of the whole command.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "resources" / "example"))
+from make_example import NOISE, POSE, PROBE_RADIUS, SURFACE, form_error  # noqa: E402
+
+
+def make_input(path: Path, points: int) -> None:
+    rng = np.random.default_rng(0)
+    pitch = 1290 * np.sqrt(np.pi / 4 / points)
+    g = np.arange(-645, 645.001, pitch)
+    x, y = np.meshgrid(g, g)
+    x, y = x.ravel(), y.ravel()
+    keep = np.hypot(x, y) <= 645
+    x, y = x[keep], y[keep]
+    contact = np.column_stack([x, y, SURFACE.sag(x, y) + form_error(x, y)])
+    centre = contact + PROBE_RADIUS * SURFACE.normal(x, y)
+    centre[:, 2] += rng.normal(0, NOISE, len(x))
+    centre[rng.choice(len(x), 5, replace=False), 2] += 0.015
+    np.savetxt(path, POSE.to_measuring(centre), fmt="%.6f", delimiter=",", header="x,y,z", comments="")
+
+
+def run(args, files, out, extra) -> float:
+    cmd = [sys.executable, "-m", "pointspro.core.cli", "--batch", str(ROOT / "resources/example/recipe.yaml"),
+           *map(str, files), "--out", str(out), "--quiet", *extra]
+    t0 = time.perf_counter()
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    dt = time.perf_counter() - t0
+    if res.returncode != 0:
+        raise SystemExit(res.stderr)
+    return dt
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--inputs", type=int, default=200)
+    ap.add_argument("--points", type=int, default=50_000)
+    ap.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="pointspro-batch-"))
+    first = tmp / "in" / "m000.csv"
+    first.parent.mkdir()
+    make_input(first, args.points)
+    files = [first]
+    for k in range(1, args.inputs):
+        p = tmp / "in" / f"m{k:03d}.csv"
+        os.link(first, p)
+        files.append(p)
+    n_pts = sum(1 for _ in open(first)) - 1
+    t1 = run(args, files, tmp / "w1", ["--workers", "1"])
+    tn = run(args, files, tmp / "wn", ["--workers", str(args.workers)])
+    td = run(args, files, tmp / "dask", ["--scheduler", "local", "--workers", str(args.workers)])
+    print(f"{args.inputs} inputs of {n_pts:,} points, example recipe, {args.workers} workers\n")
+    print("| run | seconds | inputs/s | speed-up |\n|---|---:|---:|---:|")
+    for label, t in (("--workers 1", t1), (f"--workers {args.workers}", tn),
+                     (f"--scheduler local (LocalCluster, {args.workers} processes)", td)):
+        print(f"| {label} | {t:.1f} | {args.inputs / t:.2f} | {t1 / t:.2f}× |")
+    print(f"\nDask overhead per input against the process pool: {(td - tn) / args.inputs * 1e3:+.0f} ms "
+          f"(cluster start-up included)")
+
+
+if __name__ == "__main__":
+    main()
