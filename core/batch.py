@@ -84,8 +84,14 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
             write_csv(result.cloud, tmp / "cloud.csv")
             for name, art in result.artifacts.items():
                 write_artifact(tmp, name, art)
+            if "residual" in result.cloud.channels and result.cloud.n:
+                from .figures import save_png, scattered_map
+
+                c = result.cloud
+                save_png(scattered_map(c.x, c.y, c["residual"], title="Form error (residual) after "
+                                       "all steps"), tmp / "form_error.png")
             (tmp / "report.json").write_text(dumps(report), encoding="utf-8")
-            (tmp / "report.html").write_text(render_html(report), encoding="utf-8")
+            (tmp / "report.html").write_text(render_html(report, tmp), encoding="utf-8")
         progress.update(1.0, "written")
         return InputOutcome(str(path), True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"])

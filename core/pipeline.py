@@ -51,12 +51,14 @@ class PipelineResult:
 
 
 def summarize(cloud_in: PointCloud, cloud_out: PointCloud) -> dict:
-    """points in/out and, where a residual exists, its RMS and PV in µm."""
-    s = {"points_in": cloud_in.n, "points_out": cloud_out.n, "rms_um": None, "pv_um": None}
+    """points in/out and, where a residual exists, the optician's metrics over the kept points:
+    RMS, PV, PVr (µm) and slope RMS (µrad) — core.metrics.form."""
+    from .metrics import form_metrics
+
+    s = {"points_in": cloud_in.n, "points_out": cloud_out.n, "rms_um": None, "pv_um": None,
+         "pvr_um": None, "slope_rms_urad": None}
     if "residual" in cloud_out.channels and cloud_out.n:
-        r = cloud_out["residual"]
-        s["rms_um"] = float(np.sqrt(np.mean((r - r.mean()) ** 2)) * 1e3)
-        s["pv_um"] = float(np.ptp(r) * 1e3)
+        s.update(form_metrics(cloud_out.x, cloud_out.y, cloud_out["residual"]))
     return s
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import html
 import json
 import math
+from pathlib import Path
 from datetime import datetime, timezone
 
 import numpy as np
@@ -51,7 +52,7 @@ body{font-family:system-ui,-apple-system,Segoe UI,sans-serif;margin:2em auto;max
 h1{font-size:1.5em} h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
 table{border-collapse:collapse;margin:.5em 0} td,th{padding:.2em .8em;border-bottom:1px solid #eee;
 text-align:left;vertical-align:top} td.num{text-align:right;font-variant-numeric:tabular-nums}
-.warn{color:#a45200} .muted{color:#777} code,pre{background:#f6f6f6;padding:.1em .3em}
+.warn{color:#a45200} figure{margin:.5em 0} img{max-width:100%} figcaption{color:#777;font-size:.8em} .muted{color:#777} code,pre{background:#f6f6f6;padding:.1em .3em}
 """
 
 
@@ -79,7 +80,22 @@ def _table(d: dict) -> str:
     return "<table>" + "".join(rows) + "</table>"
 
 
-def render_html(report: dict) -> str:
+def _img(folder, name: str) -> str:
+    """An <img> with the PNG embedded (data URI), so report.html is one self-contained file."""
+    import base64
+
+    if folder is None:
+        return ""
+    p = Path(folder) / name
+    if not p.is_file():
+        return ""
+    data = base64.b64encode(p.read_bytes()).decode("ascii")
+    return (f"<figure><img alt='{html.escape(name)}' src='data:image/png;base64,{data}'>"
+            f"<figcaption>{html.escape(name)}</figcaption></figure>")
+
+
+def render_html(report: dict, folder=None) -> str:
+    """The report as one HTML page; figures (PNG artifacts in ``folder``) are embedded."""
     s = report.get("summary", {})
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>PointsPro — "
              f"{html.escape(report['input'])}</title><style>{_CSS}</style></head><body>",
@@ -87,9 +103,11 @@ def render_html(report: dict) -> str:
              f"{html.escape(report.get('created', ''))}</p>",
              "<h2>Input</h2>", _table({"file": report["input"], "points in": s.get("points_in"),
                                        "points out": s.get("points_out")})]
-    summary = {"RMS (µm)": s.get("rms_um"), "PV (µm)": s.get("pv_um")}
+    summary = {"RMS (µm)": s.get("rms_um"), "PV (µm)": s.get("pv_um"),
+               "PVr (µm, Evans: Zernike Z1–Z36 PV + 3·RMS of the rest)": s.get("pvr_um"),
+               "slope RMS (µrad, tilt removed)": s.get("slope_rms_urad")}
     if any(v is not None for v in summary.values()):
-        parts += ["<h2>Form error</h2>", _table(summary)]
+        parts += ["<h2>Form error</h2>", _table(summary), _img(folder, "form_error.png")]
     surf = report.get("recipe", {}).get("surface")
     if surf:
         parts += ["<h2>Nominal surface</h2>", _table(surf)]
@@ -103,6 +121,9 @@ def render_html(report: dict) -> str:
         for w in st["report"].get("warnings", []) or []:
             parts.append(f"<p class='warn'>⚠ {html.escape(str(w))}</p>")
         parts.append(_table(st["report"]))
+        for a in st.get("artifacts", []):
+            if a.endswith(".png"):
+                parts.append(_img(folder, a))
         if st.get("artifacts"):
             links = ", ".join(f"<a href='{html.escape(a)}'>{html.escape(a)}</a>" for a in st["artifacts"])
             parts.append(f"<p>Files: {links}</p>")

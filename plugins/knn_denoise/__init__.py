@@ -156,7 +156,14 @@ class KnnDenoiseStep(Step):
         if removed_pos.size and om_kept.size:
             report["separation"] = float(omega_removed.min() / max(om_kept.max(), 1e-300))
         out = cloud.select(keep).replace(channels={"omega": om_kept})
-        return StepResult(out, report)
+        omega_all = np.full(n, np.nan)
+        omega_all[keep] = om_kept
+        omega_all[removed_pos[order]] = omega_removed
+        from pointspro.core.figures import omega_map, png_artifact
+
+        arts = {"omega_map.png": png_artifact(omega_map, x, y, omega_all, ~keep,
+                                              title=f"ω ({params.method}), {removed_pos.size} removed")}
+        return StepResult(out, report, arts)
 
     @staticmethod
     def _check_input(x, y, d, params):

@@ -1,0 +1,182 @@
+"""The figures of reports and of the window: matplotlib's object API (no pyplot, no global state).
+
+Each function returns a ``matplotlib.figure.Figure``; ``save_png`` renders it with the Agg canvas
+(batch, reports) and the window embeds the same Figure in a Qt canvas. Form errors are shown in µm
+on a diverging colour map centred on zero, limits at the 0.5 / 99.5 percentiles so one spike does
+not wash the map out (the colour bar says when values are clipped).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+DIVERGING = "RdBu_r"
+
+
+def _figure(w=6.4, h=4.8):
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(w, h), dpi=100, layout="constrained")
+
+
+def save_png(fig, path: Path) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    fig.savefig(path, format="png", dpi=100)
+
+
+def png_artifact(make, *args, **kwargs):
+    """An artifact writer (core.step.Artifact) that draws the figure only when outputs are written."""
+    def write(path: Path) -> None:
+        save_png(make(*args, **kwargs), path)
+    return write
+
+
+def robust_limits(v, symmetric=True):
+    v = np.asarray(v)[np.isfinite(v)]
+    if v.size == 0:
+        return -1.0, 1.0
+    lo, hi = np.percentile(v, [0.5, 99.5])
+    if symmetric:
+        m = max(abs(lo), abs(hi)) or 1e-12
+        return -m, m
+    return (lo, hi) if hi > lo else (lo - 1e-12, hi + 1e-12)
+
+
+def _binned(x, y, v, bins=300):
+    """Mean of v in square bins: the image of a scattered map (fast for millions of points)."""
+    x, y, v = (np.asarray(a, dtype=np.float64) for a in (x, y, v))
+    span = max(np.ptp(x), np.ptp(y)) or 1.0
+    cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
+    ext = (cx - span / 2, cx + span / 2, cy - span / 2, cy + span / 2)
+    ix = np.clip(((x - ext[0]) / span * bins).astype(np.intp), 0, bins - 1)
+    iy = np.clip(((y - ext[2]) / span * bins).astype(np.intp), 0, bins - 1)
+    k = iy * bins + ix
+    n = np.bincount(k, minlength=bins * bins)
+    s = np.bincount(k, weights=v, minlength=bins * bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        img = np.where(n > 0, s / n, np.nan).reshape(bins, bins)
+    return img, ext
+
+
+def _map_axes(fig, ax, img, ext, label, title, symmetric=True, cmap=DIVERGING):
+    lo, hi = robust_limits(img, symmetric)
+    im = ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,
+                   interpolation="nearest")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_aspect("equal")
+    ax.set_title(title, fontsize=10)
+    v = img[np.isfinite(img)]
+    extend = "neither"
+    if v.size:
+        extend = {(False, False): "neither", (True, False): "min", (False, True): "max",
+                  (True, True): "both"}[(bool(v.min() < lo), bool(v.max() > hi))]
+    fig.colorbar(im, ax=ax, label=label, extend=extend)
+
+
+def scattered_map(x, y, r_mm, title="Form error"):
+    """Residual (mm) at scattered points, binned, in µm."""
+    fig = _figure()
+    ax = fig.add_subplot()
+    img, ext = _binned(x, y, np.asarray(r_mm) * 1e3)
+    _map_axes(fig, ax, img, ext, "µm", title)
+    return fig
+
+
+def grid_map_figure(grid, title="Form-error map"):
+    fig = _figure()
+    ax = fig.add_subplot()
+    h = grid.spacing / 2
+    ext = (grid.xs[0] - h, grid.xs[-1] + h, grid.ys[0] - h, grid.ys[-1] + h)
+    _map_axes(fig, ax, grid.z * 1e3, ext, "µm", title)
+    return fig
+
+
+def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None):
+    """Two maps side by side on their own scales (µm); x2, y2 when the point sets differ."""
+    fig = _figure(11, 4.6)
+    ax1, ax2 = fig.subplots(1, 2)
+    b = np.asarray(before_mm) * 1e3
+    a = np.asarray(after_mm) * 1e3
+    img, ext = _binned(x, y, b)
+    _map_axes(fig, ax1, img, ext, "µm", f"before {what}: RMS {np.std(b):.4g} µm")
+    img, ext = _binned(x if x2 is None else x2, y if y2 is None else y2, a)
+    _map_axes(fig, ax2, img, ext, "µm", f"after {what}: RMS {np.std(a):.4g} µm")
+    return fig
+
+
+def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients"):
+    fig = _figure(max(6.4, 0.22 * len(labels) + 2), 4.2)
+    ax = fig.add_subplot()
+    colors = ["#bbbbbb" if lab in removed else "#2c6fbb" for lab in labels]
+    ax.bar(np.arange(len(labels)), coef_nm, color=colors)
+    ax.set_xticks(np.arange(len(labels)), labels, rotation=90, fontsize=7)
+    ax.set_ylabel("coefficient (nm RMS)")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_title(title + (" (grey: removed)" if removed else ""), fontsize=10)
+    return fig
+
+
+def profiles_figure(grid, angles=(0.0, 90.0)):
+    from .metrics.profiles import profile, radial_profile
+
+    fig = _figure(11, 4.2)
+    ax1, ax2 = fig.subplots(1, 2)
+    for a in angles:
+        s, z = profile(grid, a)
+        ax1.plot(s, z * 1e3, lw=1, label=f"{a:g}°")
+    ax1.set_xlabel("position along the cut (mm)")
+    ax1.set_ylabel("form error (µm)")
+    ax1.legend(fontsize=8)
+    ax1.set_title("profiles through the centre", fontsize=10)
+    r, m, sd = radial_profile(grid)
+    ax2.plot(r, m * 1e3, color="#2c6fbb", lw=1)
+    ax2.fill_between(r, (m - sd) * 1e3, (m + sd) * 1e3, color="#2c6fbb", alpha=0.2, lw=0)
+    ax2.set_xlabel("radius (mm)")
+    ax2.set_ylabel("form error (µm)")
+    ax2.set_title("radial profile: ring mean ± std", fontsize=10)
+    return fig
+
+
+def psd_figure(grid):
+    from matplotlib.colors import LogNorm
+
+    from .metrics.profiles import psd_1d, psd_2d
+
+    fig = _figure(11, 4.2)
+    ax1, ax2 = fig.subplots(1, 2)
+    for axis in ("x", "y"):
+        f, p = psd_1d(grid, axis)
+        ax1.loglog(f[1:], p[1:] * 1e12, lw=1, label=f"along {axis}")  # mm³ → nm²·mm
+    ax1.set_xlabel("spatial frequency (1/mm)")
+    ax1.set_ylabel("PSD (nm²·mm)")
+    ax1.legend(fontsize=8)
+    ax1.set_title("1-D PSD", fontsize=10)
+    fx, fy, p = psd_2d(grid)
+    p = p * 1e12  # mm⁴ → nm²·mm²
+    pos = p[p > 0]
+    norm = LogNorm(vmin=max(pos.max() * 1e-8, pos.min()), vmax=pos.max()) if pos.size else None
+    im = ax2.imshow(p, origin="lower", extent=(fx[0], fx[-1], fy[0], fy[-1]), norm=norm,
+                    cmap="viridis")
+    ax2.set_xlabel("fx (1/mm)")
+    ax2.set_ylabel("fy (1/mm)")
+    ax2.set_title("2-D PSD", fontsize=10)
+    fig.colorbar(im, ax=ax2, label="nm²·mm²")
+    return fig
+
+
+def omega_map(x, y, omega_mm, removed_mask, title="ω after denoising"):
+    """ω (µm) at the kept points and the removed points marked."""
+    fig = _figure()
+    ax = fig.add_subplot()
+    keep = ~np.asarray(removed_mask, bool)
+    img, ext = _binned(np.asarray(x)[keep], np.asarray(y)[keep], np.asarray(omega_mm)[keep] * 1e3)
+    _map_axes(fig, ax, img, ext, "ω (µm)", title, symmetric=False, cmap="viridis")
+    if (~keep).any():
+        ax.plot(np.asarray(x)[~keep], np.asarray(y)[~keep], "x", color="red", ms=6,
+                label=f"removed ({int((~keep).sum())})")
+        ax.legend(fontsize=8, loc="upper right")
+    return fig

@@ -1,0 +1,226 @@
+"""`register`: best-fit a measured cloud to a mesh nominal (parts with no equation: CAD STL/PLY).
+
+1. Coarse: open3d ICP, point-to-plane (Chen & Medioni 1992; open3d's registration_icp works in
+   float64), measured points against points sampled densely on the mesh with its normals, from the
+   identity (the operator placed the part near nominal) or from matched centroids.
+2. Fine: Gauss–Newton least squares of the exact signed point-to-triangle distances (float64,
+   core.surfaces.mesh: the BVH only finds the triangle), 6 rigid parameters
+        p' = R(ω) R₀ p + t,   ∂d/∂t = n̂,   ∂d/∂ω = p' × n̂   (small-rotation update),
+   with the parameters' standard uncertainties σ²(JᵀJ)⁻¹, σ² = Σd²/(N − 6), and a warning when a
+   motion is undetermined by the shape (condition number — a surface of revolution cannot fix its
+   own rotation about its axis).
+Output: the cloud in the mesh (part) frame; ``residual`` = signed distance to the mesh (mm, positive
+on the +z side). The report gives the transform measuring → part as a 4 × 4 matrix, the rotation
+as angles about x, y, z (deg, R = Rz·Ry·Rx) and the RMS before and after.
+
+Mesh checks: no faces, non-manifold edges, inconsistent orientation, or holes (a sheet must have
+one outer boundary; a solid none) are errors naming the file.
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from pointspro.core.errors import InputError, StepError
+from pointspro.core.step import Context, Params, Step, StepResult, param
+
+
+class RegisterParams(Params):
+    mesh: str | None = param(None, help="nominal mesh (STL/PLY) relative to the recipe; empty: the "
+                             "recipe's `surface:` (a mesh, or any analytic nominal)")
+    init: Literal["identity", "centroid"] = param(
+        "identity", help="start of ICP: as measured, or with the centroids matched")
+    max_distance: float | None = param(
+        None, unit="mm", gt=0, help="ICP correspondence distance; empty: 5 % of the cloud's extent")
+    icp_iterations: int = param(60, ge=1, le=10000, help="ICP iterations at most")
+    refine_iterations: int = param(30, ge=0, le=1000,
+                                   help="least-squares refinement iterations at most (0: ICP only)")
+
+
+def mesh_problems(vertices, triangles) -> list[str]:
+    """What makes a mesh unusable as a nominal: empty, non-manifold, unorientable, or with holes."""
+    import open3d as o3d
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if len(triangles) == 0:
+        return ["it has no faces"]
+    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
+                                  o3d.utility.Vector3iVector(triangles))
+    m.remove_duplicated_vertices()
+    probs = []
+    if not m.is_edge_manifold(allow_boundary_edges=True):
+        probs.append(f"{len(np.asarray(m.get_non_manifold_edges(True)))} non-manifold edges")
+    elif not m.is_orientable():
+        probs.append("its faces cannot be oriented consistently")
+    if not m.is_watertight():
+        edges = np.asarray(m.get_non_manifold_edges(allow_boundary_edges=False))
+        if len(edges):
+            nv = len(m.vertices)
+            g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(nv, nv))
+            used = np.unique(edges)
+            _, lab = connected_components(g, directed=False)
+            loops = len(np.unique(lab[used]))
+            if loops > 1:
+                probs.append(f"it is not watertight: {loops - 1} hole(s) inside its outer boundary")
+    return probs
+
+
+def _target_points(surf, p, n):
+    """ICP target: points with normals sampled densely on the nominal (a mesh's faces uniformly; an
+    analytic surface on a grid over the cloud's footprint, 10 % wider, inside its aperture)."""
+    import open3d as o3d
+
+    from pointspro.core.errors import DomainError
+    from pointspro.core.surfaces.mesh import MeshSurface
+
+    count = int(min(max(4 * n, 50_000), 500_000))
+    if isinstance(surf, MeshSurface):
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(surf.vertices),
+                                         o3d.utility.Vector3iVector(surf.triangles))
+        mesh.compute_triangle_normals()
+        return mesh.sample_points_uniformly(number_of_points=count, use_triangle_normal=True)
+    lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
+    pad = 0.1 * (hi - lo)
+    k = int(np.sqrt(count))
+    gx, gy = np.meshgrid(np.linspace(lo[0] - pad[0], hi[0] + pad[0], k),
+                         np.linspace(lo[1] - pad[1], hi[1] + pad[1], k))
+    gx, gy = gx.ravel(), gy.ravel()
+    if surf.aperture:
+        inside = np.hypot(gx, gy) <= surf.aperture / 2
+        gx, gy = gx[inside], gy[inside]
+    try:
+        gz = surf.sag(gx, gy)
+    except DomainError as e:
+        raise StepError(f"the nominal is not defined over the cloud's footprint: {e}") from None
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.column_stack([gx, gy, gz])))
+    pc.normals = o3d.utility.Vector3dVector(surf.normal(gx, gy))
+    return pc
+
+
+def _rot(w):
+    """Rotation matrix of the rotation vector w (rad), Rodrigues."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(w).as_matrix()
+
+
+class RegisterStep(Step):
+    id = "register"
+    title = "Register to mesh nominal"
+    summary = "ICP (point-to-plane) then least squares to a CAD mesh; signed distance → residual."
+    Params = RegisterParams
+
+    def _load(self, params, ctx):
+        from pathlib import Path
+
+        from pointspro.core.surfaces.mesh import MeshSurface
+
+        if params.mesh is None:
+            surf = ctx.surface
+            if surf is None:
+                raise StepError("no mesh given and the recipe has no nominal `surface:`")
+            return surf, getattr(surf, "source", None) or surf.kind
+        p = Path(params.mesh)
+        if not p.is_absolute() and ctx.base_dir is not None:
+            p = Path(ctx.base_dir) / p
+        if not p.is_file():
+            raise InputError(f"{p}: nominal mesh file not found")
+        import open3d as o3d
+
+        m = o3d.io.read_triangle_mesh(str(p))
+        v, t = np.asarray(m.vertices), np.asarray(m.triangles)
+        probs = mesh_problems(v, t)
+        if probs:
+            raise InputError(f"{p}: unusable nominal mesh: {'; '.join(probs)}")
+        return MeshSurface(v, t, source=str(p)), str(p)
+
+    def run(self, cloud, params: RegisterParams, ctx: Context) -> StepResult:
+        import open3d as o3d
+
+        surf, name = self._load(params, ctx)
+        from pointspro.core.surfaces.mesh import MeshSurface
+
+        if params.mesh is None and isinstance(surf, MeshSurface):
+            probs = mesh_problems(surf.vertices, surf.triangles)
+            if probs:
+                raise InputError(f"{name}: unusable nominal mesh: {'; '.join(probs)}")
+        p = cloud.xyz
+        if cloud.n < 6:
+            raise StepError(f"{cloud.n} points cannot fix a rigid transform (6 parameters)")
+        ctx.progress.update(0.05, "sampling the mesh")
+        target = _target_points(surf, p, cloud.n)
+        src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p.copy()))
+        T0 = np.eye(4)
+        if params.init == "centroid":
+            T0[:3, 3] = np.asarray(target.get_center()) - p.mean(axis=0)
+        extent = float(np.linalg.norm(np.ptp(p, axis=0)))
+        dmax = params.max_distance or 0.05 * extent
+        ctx.progress.update(0.15, "ICP")
+        icp = o3d.pipelines.registration.registration_icp(
+            src, target, dmax, T0, o3d.pipelines.registration.TransformationEstimationPointToPlane(),
+            o3d.pipelines.registration.ICPConvergenceCriteria(relative_fitness=1e-9, relative_rmse=1e-9,
+                                                              max_iteration=params.icp_iterations))
+        T = np.asarray(icp.transformation, dtype=np.float64).copy()
+        ctx.progress.check()
+        q = p @ T[:3, :3].T + T[:3, 3]
+        d = surf.foot_point(q)[2]
+        rms_icp = float(np.sqrt(np.mean(d * d)))
+        warnings = []
+        if icp.fitness < 0.9:
+            warnings.append(f"ICP matched only {icp.fitness:.0%} of the points within {dmax:g} mm: "
+                            "check the start (init) or max_distance")
+        it = 0
+        JtJ = None
+        for it in range(1, params.refine_iterations + 1):
+            ctx.progress.check()
+            ctx.progress.update(0.3 + 0.6 * it / max(params.refine_iterations, 1), "least squares")
+            _, n, d = surf.foot_point(q)
+            J = np.column_stack([np.cross(q, n), n])  # ∂d/∂(ω, t)
+            JtJ = J.T @ J
+            scale = np.sqrt(np.diag(JtJ))
+            scale[scale == 0] = 1.0
+            Js = J / scale
+            step, *_ = np.linalg.lstsq(Js, -d, rcond=1e-12)
+            step /= scale
+            R = _rot(step[:3])
+            T = np.vstack([np.column_stack([R @ T[:3, :3], R @ T[:3, 3] + step[3:]]), [0, 0, 0, 1]])
+            q = p @ T[:3, :3].T + T[:3, 3]
+            if np.max(np.abs(step[:3])) * extent < 1e-12 and np.max(np.abs(step[3:])) < 1e-12:
+                break
+        foot, n, d = surf.foot_point(q)
+        J = np.column_stack([np.cross(q, n), n])
+        JtJ = J.T @ J
+        dof = max(cloud.n - 6, 1)
+        s2 = float(d @ d) / dof
+        scale = np.sqrt(np.diag(JtJ))
+        scale[scale == 0] = 1.0
+        cond = float(np.linalg.cond(JtJ / np.outer(scale, scale)))
+        cov = np.linalg.pinv(JtJ) * s2
+        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+        if cond > 1e6:
+            warnings.append(f"the shape does not fix every rigid motion (condition {cond:.3g}): "
+                            "a symmetric surface leaves a rotation or a slide free")
+        from scipy.spatial.transform import Rotation
+
+        rz, ry, rx = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
+        report = {
+            "nominal": name, "triangles": int(len(getattr(surf, "triangles", ()))),
+            "rx_deg": float(rx), "ry_deg": float(ry), "rz_deg": float(rz),
+            "tx": float(T[0, 3]), "ty": float(T[1, 3]), "tz": float(T[2, 3]),
+            "transform": T.tolist(),
+            "uncertainty": {"rx_deg": float(np.degrees(sd[0])), "ry_deg": float(np.degrees(sd[1])),
+                            "rz_deg": float(np.degrees(sd[2])), "tx": float(sd[3]),
+                            "ty": float(sd[4]), "tz": float(sd[5])},
+            "icp_fitness": float(icp.fitness), "icp_rms_um": rms_icp * 1e3,
+            "refine_iterations": it, "condition_number": cond,
+            "residual_rms_um": float(np.sqrt(np.mean(d * d)) * 1e3),
+            "residual_pv_um": float(np.ptp(d) * 1e3), "warnings": warnings,
+        }
+        out = cloud.replace(xyz=q, channels={"residual": d}, meta={"frame": "part"})
+        return StepResult(out, report)
+
+    @classmethod
+    def example_params(cls) -> dict:
+        return {}

@@ -1,0 +1,134 @@
+"""`zernike`: Zernike decomposition of the form error over the aperture, and removal of chosen terms.
+
+All ``terms`` are fitted together by least squares (core.metrics.zernike: radial part by Jacobi
+polynomials, orthonormal "rms" or "peak" normalisation, ANSI/Noll/Fringe ordering) over the disk of
+radius ``norm_radius`` (default: half the surface's aperture, else the largest point radius). The
+terms named in ``remove`` (names such as piston, tilt, power, astigmatism, coma, trefoil, spherical,
+or single indices in the chosen ordering) are subtracted from the residual; the others stay. The
+coefficients go to the report and to ``zernike.csv`` (nm, with standard uncertainties).
+
+Input channel: ``residual`` when present (after misalignment), else z (an interferometer's map);
+output: ``residual`` with the removed terms subtracted.
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import field_validator
+
+from pointspro.core.errors import StepError
+from pointspro.core.metrics import zernike as zk
+from pointspro.core.step import Context, Params, Step, StepResult, param
+
+
+class ZernikeParams(Params):
+    ordering: Literal["ansi", "noll", "fringe"] = param(
+        "fringe", help="single-index ordering: fringe (Z1 piston…Z36), noll (Z1…), ansi/OSA (Z0…)")
+    terms: int = param(36, ge=1, le=231, help="number of terms fitted (the first N of the ordering)")
+    normalization: Literal["rms", "peak"] = param(
+        "rms", help="rms: orthonormal, a coefficient is the RMS its term adds; peak: each term "
+        "peaks at ±1 on the edge")
+    remove: list[str | int] = param(
+        default_factory=lambda: ["piston", "tilt", "power"],
+        help="terms subtracted from the residual: names (" + ", ".join(zk.TERM_NAMES) + ") or "
+             "indices in the chosen ordering")
+    norm_radius: float | None = param(None, unit="mm", gt=0, help="normalisation radius; empty: "
+                                      "half the surface's aperture, else the largest point radius")
+    center_x: float = param(0.0, unit="mm", help="x of the disk's centre")
+    center_y: float = param(0.0, unit="mm", help="y of the disk's centre")
+
+    @field_validator("remove")
+    @classmethod
+    def _known(cls, v):
+        for t in v:
+            if isinstance(t, str) and t not in zk.TERM_NAMES:
+                raise ValueError(f"unknown term name {t!r}; use one of {', '.join(zk.TERM_NAMES)} "
+                                 "or an index")
+        return v
+
+
+def removed_pairs(remove, ordering, pairs) -> list[tuple[int, int]]:
+    out = []
+    for t in remove:
+        if isinstance(t, str):
+            out += [p for p in zk.TERM_NAMES[t] if p in pairs]
+        else:
+            try:
+                p = zk.nm_of(int(t), ordering)
+            except ValueError as e:
+                raise StepError(f"remove: {e}") from None
+            if p not in pairs:
+                raise StepError(f"remove: term {t} is not among the {len(pairs)} fitted {ordering} terms")
+            out.append(p)
+    return list(dict.fromkeys(out))
+
+
+class ZernikeStep(Step):
+    id = "zernike"
+    title = "Zernike decomposition"
+    summary = "Fit Zernike terms over the aperture; remove piston, tilt, power… from the residual."
+    Params = ZernikeParams
+
+    def run(self, cloud, params: ZernikeParams, ctx: Context) -> StepResult:
+        from pointspro.core.figures import before_after, png_artifact, zernike_bars
+
+        channel = "residual" if "residual" in cloud.channels else "z"
+        v = cloud[channel] if channel == "residual" else cloud.z
+        x, y = cloud.x, cloud.y
+        c = (params.center_x, params.center_y)
+        R = params.norm_radius
+        if R is None and ctx.surface is not None and getattr(ctx.surface, "aperture", None):
+            R = ctx.surface.aperture / 2
+        rr = np.hypot(x - c[0], y - c[1])
+        if R is None:
+            R = float(rr.max()) if rr.size else 0.0
+        if not R > 0:
+            raise StepError("the points have no extent to normalise the Zernike disk by")
+        warnings = []
+        outside = int((rr > R * (1 + 1e-9)).sum())
+        if outside:
+            warnings.append(f"{outside} points lie outside the normalisation radius {R:g} mm "
+                            "(polynomials are extrapolated there); use aperture first")
+        pairs = zk.terms(params.terms, params.ordering)
+        if cloud.n <= len(pairs):
+            raise StepError(f"{cloud.n} points cannot determine {len(pairs)} Zernike terms")
+        ctx.progress.update(0.2, "fitting")
+        coef, sd, resid, A, cond = zk.fit(x, y, v, R, pairs, params.normalization, c)
+        ctx.progress.check()
+        gone = removed_pairs(params.remove, params.ordering, pairs)
+        cols = [pairs.index(p) for p in gone]
+        removed = A[:, cols] @ coef[cols] if cols else np.zeros(cloud.n)
+        after = v - removed
+        if cond > 1e6:
+            warnings.append(f"the terms are nearly dependent on these points (condition {cond:.3g}): "
+                            "fewer terms, or a fuller sampling of the aperture")
+        j0 = zk.first_index(params.ordering)
+        rows = [{"j": j0 + i, "n": n, "m": m, "name": zk.name_of(n, m),
+                 "coefficient_nm": float(coef[i] * 1e6), "uncertainty_nm": float(sd[i] * 1e6),
+                 "removed": (n, m) in gone} for i, (n, m) in enumerate(pairs)]
+        report = {
+            "ordering": params.ordering, "normalization": params.normalization, "norm_radius": R,
+            "channel": channel, "terms": len(pairs),
+            "removed_terms": [zk.index_of(n, m, params.ordering) for n, m in gone],
+            "coefficients": rows, "condition_number": cond,
+            "fit_residual_rms_um": float(np.sqrt(np.mean(resid**2)) * 1e3),
+            "rms_before_um": float(np.std(v) * 1e3), "rms_after_um": float(np.std(after) * 1e3),
+            "pv_after_um": float(np.ptp(after) * 1e3), "warnings": warnings,
+        }
+        csv = "j,n,m,name,coefficient_nm,uncertainty_nm,removed\n" + "".join(
+            f"{r['j']},{r['n']},{r['m']},{r['name']},{r['coefficient_nm']!r},{r['uncertainty_nm']!r},"
+            f"{int(r['removed'])}\n" for r in rows)
+        labels = [f"{params.ordering[0].upper()}{r['j']}" for r in rows]
+        arts = {
+            "zernike.csv": csv,
+            "zernike.png": png_artifact(zernike_bars, labels, coef * 1e6,
+                                        removed=[lab for lab, r in zip(labels, rows) if r["removed"]],
+                                        title=f"Zernike coefficients ({params.ordering}, "
+                                              f"{params.normalization})"),
+            "zernike_removed.png": png_artifact(before_after, x, y, v, after,
+                                                what="removing " + (", ".join(map(str, params.remove))
+                                                                    or "nothing")),
+        }
+        out = cloud.replace(channels={"residual": after})
+        return StepResult(out, report, arts)
