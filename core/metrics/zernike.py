@@ -16,7 +16,8 @@ so that (1/π) ∬_disk Z_i Z_j = δ_ij: a coefficient is the RMS its term contr
 Orderings (single index j of a pair (n, m)):
     ANSI/OSA  j = (n(n + 2) + m) / 2, from 0                   (ANSI 12 → (4, 0))
     Noll      from 1, |m| ascending within n, even j cos / odd j sin   (Noll 4 → (2, 0), 11 → (4, 0))
-    Fringe    j = (1 + (n + |m|)/2)² − 2|m| + [m < 0], from 1  (Fringe 9 → (4, 0))
+    Fringe    j = (1 + (n + |m|)/2)² − 2|m| + [m < 0], from 1  (Fringe 9 → (4, 0); Z1…Z36 are the
+              classical set; beyond, the formula continues ((6, 6) is 37), not Code V's Z37 = (12, 0))
 """
 from __future__ import annotations
 

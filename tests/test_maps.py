@@ -1,0 +1,193 @@
+"""bspline_map: accuracy, files (CSV, X3P, ASCII matrix), measured-region masking, bad input, speed
+guard rails; zernike step; the self-contained report."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pointspro.core import PointCloud
+from pointspro.core.errors import StepError
+from pointspro.core.maps import fit_bspline, grid_map
+from pointspro.core.maps.grid import read_x3p_map
+from pointspro.core.metrics import zernike as zk
+from pointspro.core.step import Context
+from pointspro.plugins.bspline_map import BSplineMapStep
+from pointspro.plugins.zernike import ZernikeStep
+
+R620 = 310.0
+
+
+def smooth_form(x, y):
+    """A polishing-like form error (mm): astigmatism, coma, a zone and a 160 mm ripple, ~µm."""
+    r, t = np.hypot(x, y) / R620, np.arctan2(y, x)
+    return (1.0e-3 * zk.zernike(2, 2, r, t) + 0.4e-3 * zk.zernike(3, 1, r, t)
+            + 0.3e-3 * zk.zernike(4, 0, r, t) + 0.15e-3 * np.cos(2 * np.pi * x / 160.0)
+            * np.cos(2 * np.pi * y / 220.0))
+
+
+def raster_620(step=15.0, noise=0.0, seed=0):
+    g = np.arange(-R620, R620 + 1e-9, step)
+    X, Y = np.meshgrid(g, g)
+    x, y = X.ravel(), Y.ravel()
+    keep = np.hypot(x, y) <= R620
+    x, y = x[keep], y[keep]
+    z = smooth_form(x, y) + np.random.default_rng(seed).normal(0, noise, len(x))
+    return x, y, z
+
+
+def _run(step, cloud, surface=None, **params):
+    return step().run(cloud, step.Params.model_validate(params), Context(surface=surface))
+
+
+def test_raster_620_reproduces_within_2_percent_inside_95_percent():
+    """Issue 5: a known smooth form error on a 620 mm raster at 15 mm → map within 2 % of its RMS
+    inside 95 % of the aperture."""
+    x, y, z = raster_620()
+    cloud = PointCloud.from_xyz(x, y, np.zeros_like(z), residual=z)
+    res = _run(BSplineMapStep, cloud, diameter=620.0, spacing=2.0)
+    from pointspro.core.maps import MapGrid  # noqa: F401
+
+    spline = fit_bspline(x, y, z, bounds=(-R620, R620, -R620, R620))
+    grid = grid_map(spline, 2.0, x, y, diameter=620.0)
+    X, Y = np.meshgrid(grid.xs, grid.ys)
+    inner = (np.hypot(X, Y) <= 0.95 * R620) & grid.valid
+    truth = smooth_form(X[inner], Y[inner])
+    err = grid.z[inner] - truth
+    rel = np.sqrt(np.mean(err**2)) / np.std(truth)
+    assert rel < 0.02, rel
+    assert inner.sum() > 0.9 * np.pi * (0.95 * R620) ** 2 / 4.0  # the inner disk is mapped
+    assert res.report["nodes"] == int(grid.valid.sum())
+    assert res.report["map_rms_um"] == pytest.approx(np.std(grid.z[grid.valid]) * 1e3)
+
+
+def test_noise_is_smoothed_not_interpolated():
+    x, y, z = raster_620(step=5.0, noise=2e-5, seed=3)
+    s = fit_bspline(x, y, z)
+    inner = np.hypot(x, y) < 0.9 * R620
+    err = s(x[inner], y[inner]) - smooth_form(x[inner], y[inner])
+    # ~4 points per knot cell: the map is about half as noisy as the data (and unbiased)
+    assert np.sqrt(np.mean(err**2)) < 0.6 * 2e-5
+    assert abs(np.mean(err)) < 1e-6
+
+
+def test_derivatives_match_the_function():
+    x, y, z = raster_620(step=5.0)
+    s = fit_bspline(x, y, z)
+    p = np.array([[10.0, -40.0], [120.0, 80.0], [-150.0, 30.0]])
+    h = 1e-3
+    fx = (smooth_form(p[:, 0] + h, p[:, 1]) - smooth_form(p[:, 0] - h, p[:, 1])) / (2 * h)
+    fy = (smooth_form(p[:, 0], p[:, 1] + h) - smooth_form(p[:, 0], p[:, 1] - h)) / (2 * h)
+    assert np.allclose(s(p[:, 0], p[:, 1], dx=1), fx, atol=0.03 * np.abs(fx).max())
+    assert np.allclose(s(p[:, 0], p[:, 1], dy=1), fy, atol=0.03 * np.abs(fy).max())
+
+
+def test_map_has_no_values_beyond_the_measured_region():
+    x, y, z = raster_620()
+    half = x < 0  # only the left half measured
+    s = fit_bspline(x[half], y[half], z[half], bounds=(-R620, R620, -R620, R620))
+    g = grid_map(s, 5.0, x[half], y[half], diameter=620.0)
+    X, _ = np.meshgrid(g.xs, g.ys)
+    assert np.all(np.isnan(g.z[X > 2 * s.h]))
+    g2 = grid_map(s, 5.0, x[half], y[half], diameter=620.0, extrapolate=True)
+    assert np.isfinite(g2.z[X > 2 * s.h]).any()
+
+
+def test_map_files_round_trip(tmp_path):
+    x, y, z = raster_620()
+    cloud = PointCloud.from_xyz(x, y, np.zeros_like(z), residual=z)
+    res = _run(BSplineMapStep, cloud, diameter=620.0, spacing=5.0, matrix_unit="nm")
+    for name, art in res.artifacts.items():
+        art(tmp_path / name)
+    # CSV: one row per valid node, x y z in mm
+    data = np.loadtxt(tmp_path / "map.csv", delimiter=",", skiprows=1)
+    assert data.shape == (res.report["nodes"], 3)
+    assert np.all(np.hypot(data[:, 0], data[:, 1]) <= R620 + 1e-9)
+    assert np.allclose(np.round(data[:, :2] / 5.0) * 5.0, data[:, :2])
+    # X3P through x3pio, back bit-exact (float64 storage) with its position and spacing
+    g = read_x3p_map(tmp_path / "map.x3p")
+    assert g.spacing == pytest.approx(5.0)
+    X, Y = np.meshgrid(g.xs, g.ys)
+    v = np.isfinite(g.z)
+    assert v.sum() == len(data)
+    back = np.column_stack([X[v], Y[v], g.z[v]])
+    assert np.allclose(back[:, :2], data[:, :2], atol=1e-9)
+    assert np.allclose(back[:, 2], data[:, 2], rtol=0, atol=1e-15)
+    # ASCII matrix: header, NaN outside, heights in nm
+    lines = (tmp_path / "map.asc").read_text().splitlines()
+    assert lines[0].startswith("#") and "nm" in "".join(lines[:5])
+    M = np.loadtxt(tmp_path / "map.asc", comments="#")
+    assert M.shape == g.z.shape
+    assert np.allclose(M[v] * 1e-6, g.z[v], atol=1e-15)
+    assert np.isnan(M[~v]).all()
+    for png in ("map.png", "profiles.png", "psd.png"):
+        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bad_input_messages():
+    x, y, z = raster_620()
+    cloud = PointCloud.from_xyz(x[:10], y[:10], z[:10])
+    with pytest.raises(StepError, match="10 points cannot carry a bicubic spline"):
+        _run(BSplineMapStep, cloud)
+    cloud = PointCloud.from_xyz(x, y, z)
+    with pytest.raises(StepError, match="no point lies inside the 100 mm aperture"):
+        _run(BSplineMapStep, cloud, diameter=100.0, center_x=2000.0)
+    with pytest.raises(StepError, match="asked for, but the cloud has none"):
+        _run(BSplineMapStep, cloud, channel="residual")
+    line = PointCloud.from_xyz(np.linspace(0, 10, 100), np.zeros(100), np.zeros(100))
+    with pytest.raises(StepError, match="do not span an area"):
+        _run(BSplineMapStep, line)
+    with pytest.raises(StepError, match="use a larger spacing"):
+        _run(BSplineMapStep, cloud, knot_spacing=0.1)
+
+
+def test_zernike_step_removes_named_terms_and_keeps_the_rest():
+    x, y, _ = raster_620(step=10.0)
+    r, t = np.hypot(x, y) / R620, np.arctan2(y, x)
+    keep_part = 0.8e-3 * zk.zernike(2, 2, r, t)
+    z = 0.5e-3 + 0.3e-3 * zk.zernike(1, 1, r, t) + 0.6e-3 * zk.zernike(2, 0, r, t) + keep_part
+    cloud = PointCloud.from_xyz(x, y, np.zeros_like(z), residual=z)
+    res = _run(ZernikeStep, cloud, norm_radius=R620, remove=["piston", "tilt", "power"])
+    assert np.allclose(res.cloud["residual"], keep_part, atol=1e-12)
+    rows = {(c["n"], c["m"]): c for c in res.report["coefficients"]}
+    assert rows[(2, 2)]["coefficient_nm"] == pytest.approx(0.8e3 * 1e3 * 1e-3, rel=1e-9)
+    assert rows[(2, 0)]["removed"] and not rows[(2, 2)]["removed"]
+    assert res.report["removed_terms"] == [1, 2, 3, 4]  # Fringe piston, tilt x/y, power
+    # the same by index in Noll ordering: Noll 4 is power
+    res2 = _run(ZernikeStep, cloud, ordering="noll", norm_radius=R620, remove=[1, 2, 3, 4])
+    assert np.allclose(res2.cloud["residual"], keep_part, atol=1e-12)
+    assert "zernike.csv" in res.artifacts and "j,n,m,name" in res.artifacts["zernike.csv"]
+
+
+def test_zernike_bad_input():
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="unknown term name 'focus'"):
+        ZernikeStep.Params.model_validate({"remove": ["focus"]})
+    x, y, z = raster_620(step=100.0)
+    cloud = PointCloud.from_xyz(x, y, z)
+    with pytest.raises(StepError, match="cannot determine 36 Zernike terms"):
+        _run(ZernikeStep, cloud)
+    x, y, z = raster_620(step=20.0)
+    with pytest.raises(StepError, match="term 40 is not among the 36"):
+        _run(ZernikeStep, PointCloud.from_xyz(x, y, z), remove=[40])
+
+
+def test_report_html_is_self_contained_with_figures(tmp_path, run_cli):
+    from tests.conftest import EXAMPLE
+
+    out = tmp_path / "out"
+    code, _, err = run_cli("--batch", str(EXAMPLE / "recipe.yaml"), str(EXAMPLE / "asphere_cmm.csv"),
+                           "--out", str(out))
+    assert code == 0, err
+    folder = out / "asphere_cmm"
+    html = (folder / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 6  # form error, ω, Zernike ×2, map, profiles, PSD
+    assert "src='http" not in html and 'src="http' not in html
+    import json
+
+    rep = json.loads((folder / "report.json").read_text())
+    s = rep["summary"]
+    assert s["pvr_um"] is not None and s["slope_rms_urad"] > 0
+    assert s["pvr_um"] <= s["pv_um"] * 1.5
+    for name in ("map.csv", "map.x3p", "map.asc", "zernike.csv"):
+        assert (folder / name).is_file()
