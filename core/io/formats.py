@@ -1,6 +1,8 @@
 """Reading and writing point clouds by file extension.
 
-read:  .csv .txt .xyz .asc .dat (text exports), .ply (all vertex properties kept), .pcd .pts (open3d)
+read:  .csv .txt .xyz .asc .dat (text exports), .ply (all vertex properties kept), .pcd .pts (open3d),
+       areal instrument files .datx .dat (MetroPro, told from text by its magic) .sur .sdf .x3p
+       (core.io.instruments)
 write: .csv (all channels, `index` included, shortest round-trip decimal), .ply (binary, float64)
 """
 from __future__ import annotations
@@ -16,7 +18,9 @@ from .atomic import atomic_path
 
 TEXT_SUFFIXES = (".csv", ".txt", ".xyz", ".asc", ".dat")
 OPEN3D_SUFFIXES = (".pcd", ".pts")
-READ_SUFFIXES = TEXT_SUFFIXES + (".ply",) + OPEN3D_SUFFIXES
+from .instruments import AREAL_SUFFIXES, is_metropro
+
+READ_SUFFIXES = TEXT_SUFFIXES + (".ply",) + OPEN3D_SUFFIXES + AREAL_SUFFIXES
 WRITE_SUFFIXES = (".csv", ".ply")
 
 
@@ -32,7 +36,11 @@ def read_cloud(path) -> PointCloud:
     suffix = path.suffix.lower()
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file — no data rows")
-    if suffix in TEXT_SUFFIXES:
+    if suffix in AREAL_SUFFIXES or (suffix == ".dat" and is_metropro(path)):
+        from .instruments import read_areal
+
+        xyz, cols, meta = read_areal(path)
+    elif suffix in TEXT_SUFFIXES:
         from .text import read_text
 
         xyz, cols, meta = read_text(path)
