@@ -201,3 +201,71 @@ def test_spec_validation():
         surface_from_spec({"type": "xy_polynomial", "terms": {"x2z1": 1.0}})
     with pytest.raises(ValidationError):
         surface_from_spec({"type": "torus"})
+
+
+# -- Forbes Q-con / Q-bfs ------------------------------------------------------------------------
+
+def test_qbfs_polynomials_closed_forms_and_slope_orthonormality():
+    from numpy.polynomial.legendre import leggauss
+
+    from pointspro.core.surfaces.forbes import qbfs_polynomials
+
+    v = np.linspace(0, 1, 7)
+    Q = qbfs_polynomials(2, v)
+    assert np.allclose(Q[1][0], (13 - 16 * v) / np.sqrt(19), atol=1e-15)          # Forbes 2007 eq. 3.4
+    assert np.allclose(Q[2][0], np.sqrt(2) * (29 - 4 * v * (25 - 19 * v)) / np.sqrt(95), atol=1e-14)
+    # (2/π)∫₀¹ S_m' S_n' du / sqrt(1 − u²) = δ_mn, S_m = u²(1 − u²) Q_m(u²); u = sin θ
+    t, w = leggauss(120)
+    th = (t + 1) * np.pi / 4
+    u = np.sin(th)
+    wt = w * np.pi / 4
+    M = 10
+    Qs = qbfs_polynomials(M, u * u)
+    # S'(u) = d/du[v(1 − v) Q(v)] = 2u [(1 − 2v) Q + v(1 − v) Q']
+    v = u * u
+    D = np.array([2 * u * ((1 - 2 * v) * q + v * (1 - v) * qd) for q, qd, _ in Qs])
+    G = (2 / np.pi) * np.einsum("ia,ja,a->ij", D, D, wt)
+    assert np.allclose(G, np.eye(M + 1), atol=1e-10)
+
+
+@pytest.mark.parametrize("kind", ["qcon", "qbfs"])
+def test_forbes_surfaces_derivatives_and_spec(kind):
+    from mpmath import mp
+
+    from pointspro.core.surfaces import surface_from_spec
+
+    spec = {"type": kind, "R": 400.0, "norm_radius": 60.0, "a": [2e-3, -4e-4, 1e-4, 3e-5]}
+    if kind == "qcon":
+        spec["k"] = -0.7
+    s = surface_from_spec(spec)
+    r = np.array([0.0, 5.0, 23.0, 41.0, 59.0])
+    h = 1e-4
+    d1 = (s.sag_r(r + h) - s.sag_r(r - h)) / (2 * h)
+    d2 = (s.sag_r(r + h) - 2 * s.sag_r(r) + s.sag_r(r - h)) / h**2
+    assert np.allclose(s.slope_over_r(r) * r, d1, atol=1e-9)
+    assert np.allclose(s.curvature_r(r), d2, atol=2e-5)
+    assert s.slope_over_r(np.array([0.0]))[0] == pytest.approx(s.curvature_r(np.array([0.0]))[0])
+    # sag against a direct high-precision evaluation of the defining formula at one radius
+    mp.dps = 40
+    rr = mp.mpf(37)
+    c = mp.mpf(1) / 400
+    v = (rr / 60) ** 2
+    if kind == "qcon":
+        base = c * rr**2 / (1 + mp.sqrt(1 - (1 + mp.mpf(-0.7)) * c**2 * rr**2))
+        dep = v**2 * sum(mp.mpf(a) * mp.jacobi(m, 0, 4, 2 * v - 1) for m, a in enumerate(spec["a"]))
+    else:
+        base = c * rr**2 / (1 + mp.sqrt(1 - c**2 * rr**2))
+        q = [mp.mpf(1), (13 - 16 * v) / mp.sqrt(19), mp.sqrt(2) * (29 - 4 * v * (25 - 19 * v)) / mp.sqrt(95)]
+        from pointspro.core.surfaces.forbes import qbfs_polynomials
+
+        q.append(mp.mpf(qbfs_polynomials(3, np.array([float(v)]))[3][0][0]))
+        dep = v * (1 - v) / mp.sqrt(1 - c**2 * rr**2) * sum(mp.mpf(a) * qq for a, qq in zip(spec["a"], q))
+    assert float(s.sag_r(np.array([37.0]))[0]) == pytest.approx(float(base + dep), abs=1e-13)
+    # exact foot point of the surface of revolution
+    p = np.array([[10.0, 20.0, float(s.sag(10.0, 20.0)) + 0.01]])
+    foot, n, d = s.foot_point(p)
+    assert d[0] == pytest.approx(0.01 / np.sqrt(1 + s.slope_r(np.hypot(10, 20)) ** 2), rel=1e-3)
+    assert np.allclose(foot + d[:, None] * n, p, atol=1e-12)
+    assert foot[0, 2] == pytest.approx(float(s.sag(foot[0, 0], foot[0, 1])), abs=1e-13)
+    assert np.allclose(n, s.normal(foot[:, 0], foot[:, 1]), atol=1e-12)
+    assert s.describe()["type"] == kind

@@ -4,6 +4,8 @@
     surface: {type: even_asphere, R: -1646.4, k: -0.9861, A: {4: 4e-16}}
     surface: {type: xy_polynomial, c: 0, k: 0, norm_radius: 50, terms: {x2y0: 1e-3, x0y2: -1e-3}}
     surface: {type: mesh, path: nominal.stl}        # path relative to the recipe file
+    surface: {type: qcon, R: 500, k: -1, norm_radius: 50, a: [1e-4, -2e-5]}   # Forbes Q-con
+    surface: {type: qbfs, R: 500, norm_radius: 50, a: [2e-3, 1e-4]}           # Forbes Q-bfs
 """
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, field_validator,
 
 from .base import NominalSurface
 from .even_asphere import EvenAsphere
+from .forbes import QBfsAsphere, QConAsphere
 from .mesh import MeshSurface
 from .xy_polynomial import XYPolynomial
 
@@ -85,9 +88,45 @@ class MeshSpec(_Spec):
         return MeshSurface.from_file(p, self.aperture)
 
 
-SurfaceSpec = Annotated[Union[EvenAsphereSpec, XYPolynomialSpec, MeshSpec], Field(discriminator="type")]
+class _ForbesSpec(_Spec):
+    c: float | None = Field(None, description="vertex (Q-con) or best-fit-sphere (Q-bfs) curvature "
+                            "1/R (1/mm); give c or R")
+    R: float | None = Field(None, description="the same as a radius (mm); give c or R")
+    norm_radius: float = Field(gt=0, description="normalisation radius r_n (mm), u = r / r_n")
+    a: list[float] = Field(default_factory=list, description="coefficients a_0, a_1, … (mm)")
+
+    @model_validator(mode="after")
+    def _one_curvature(self):
+        if (self.c is None) == (self.R is None):
+            raise ValueError("give exactly one of c (1/mm) and R (mm)")
+        if self.R == 0:
+            raise ValueError("R must not be 0 (use c: 0 for a flat base)")
+        return self
+
+    @property
+    def curvature(self) -> float:
+        return self.c if self.c is not None else 1.0 / self.R
+
+
+class QConSpec(_ForbesSpec):
+    type: Literal["qcon"]
+    k: float = Field(0.0, description="conic constant of the base")
+
+    def build(self, base_dir: Path | None = None) -> QConAsphere:
+        return QConAsphere(self.curvature, self.k, self.a, self.norm_radius, self.aperture)
+
+
+class QBfsSpec(_ForbesSpec):
+    type: Literal["qbfs"]
+
+    def build(self, base_dir: Path | None = None) -> QBfsAsphere:
+        return QBfsAsphere(self.curvature, self.a, self.norm_radius, self.aperture)
+
+
+SurfaceSpec = Annotated[Union[EvenAsphereSpec, XYPolynomialSpec, MeshSpec, QConSpec, QBfsSpec],
+                        Field(discriminator="type")]
 _ADAPTER = TypeAdapter(SurfaceSpec)
-SURFACE_TYPES = ("even_asphere", "xy_polynomial", "mesh")
+SURFACE_TYPES = ("even_asphere", "xy_polynomial", "mesh", "qcon", "qbfs")
 
 
 def parse_surface_spec(data: dict):

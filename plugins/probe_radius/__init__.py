@@ -54,7 +54,9 @@ class ProbeRadiusParams(Params):
 def check_no_fold(surface, foot: np.ndarray, side: int, radius: float) -> None:
     """The offset surface at distance s·ρ folds where s·ρ·κ ≥ 1 (κ a principal curvature, > 0 when
     its centre is on +z): the ball cannot touch there and the centres do not define a surface."""
-    if not isinstance(surface, EvenAsphere):
+    from pointspro.core.surfaces import SurfaceOfRevolution
+
+    if not isinstance(surface, SurfaceOfRevolution):
         return
     rho = np.sqrt(foot[:, 0] ** 2 + foot[:, 1] ** 2)
     km, ks = surface.principal_curvatures(rho)
