@@ -13,7 +13,7 @@ import pytest
 
 from pointspro.core.io import read_cloud
 
-from .conftest import EXAMPLE, write
+from .conftest import EXAMPLE, EXAMPLE_OUTPUTS, write
 
 RECIPE = EXAMPLE / "recipe.yaml"
 DATA = EXAMPLE / "asphere_cmm.csv"
@@ -28,11 +28,12 @@ def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
     code, out, err = run_cli("--batch", RECIPE, DATA, "--out", tmp_path / "out")
     assert code == 0, err
     folder = tmp_path / "out" / "asphere_cmm"
-    assert {p.name for p in folder.iterdir()} == {"cloud.csv", "report.json", "report.html"}
+    assert {p.name for p in folder.iterdir()} == EXAMPLE_OUTPUTS
     rep = json.loads((folder / "report.json").read_text())
     assert set(rep) >= {"pointspro", "input", "recipe", "steps", "summary"}
     ids = [s["id"] for s in rep["steps"]]
-    assert ids == ["manual_edit", "probe_radius", "misalignment", "knn_denoise", "aperture"]
+    assert ids == ["manual_edit", "probe_radius", "misalignment", "knn_denoise", "aperture", "zernike",
+                   "bspline_map"]
     steps = {s["id"]: s["report"] for s in rep["steps"]}
     assert steps["manual_edit"]["removed"] == 2
     truth = json.loads((EXAMPLE / "truth.json").read_text())

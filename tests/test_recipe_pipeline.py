@@ -25,7 +25,7 @@ steps:
 def test_example_recipe_loads():
     r = load_recipe(EXAMPLE / "recipe.yaml")
     assert [s.id for s in r.steps] == ["manual_edit", "probe_radius", "misalignment", "knn_denoise",
-                                       "aperture"]
+                                       "aperture", "zernike", "bspline_map"]
     assert r.build_surface().aperture == 1300
 
 
