@@ -56,6 +56,15 @@ def build_window(files: list[Path]):
     dock.setMaximumHeight(120)
     win.addDockWidget(QtCore.Qt.BottomDockWidgetArea, dock)
 
+    # the report's figures, drawn by the same core.figures functions (matplotlib in a Qt canvas)
+    fig_dock = QtWidgets.QDockWidget("Form-error map (as in the report)", win)
+    fig_holder = QtWidgets.QWidget()
+    fig_layout = QtWidgets.QVBoxLayout(fig_holder)
+    fig_layout.setContentsMargins(0, 0, 0, 0)
+    fig_dock.setWidget(fig_holder)
+    win.addDockWidget(QtCore.Qt.RightDockWidgetArea, fig_dock)
+    fig_dock.setVisible(False)
+
     clouds = []
     for f in files:
         try:
@@ -85,9 +94,30 @@ def build_window(files: list[Path]):
                              scalar_bar_args={"title": title, "vertical": True})
         plotter.add_axes()
         plotter.view_xy()  # optics are looked at along their axis
+        show_figure(name)
         plotter.reset_camera()
         if clouds:
             info.setText(f"{sum(c.n for c in clouds)} points")
+
+    def show_figure(name: str):
+        if not clouds or name not in DEVIATION_CHANNELS:
+            fig_dock.setVisible(False)
+            return
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+
+        from pointspro.core.figures import scattered_map
+
+        c = clouds[0]
+        canvas = FigureCanvasQTAgg(scattered_map(c.x, c.y, c[name], title=f"{name} ({c.n} points)"))
+        canvas.setMinimumWidth(420)
+        while fig_layout.count():
+            old = fig_layout.takeAt(0).widget()
+            if old is not None:
+                old.deleteLater()
+        fig_layout.addWidget(canvas)
+        fig_dock.setVisible(True)
+        win.resizeDocks([fig_dock], [480], QtCore.Qt.Horizontal)
+        win.figure_canvas = canvas
 
     if clouds:
         rest = [n for n in clouds[0].column_names if n not in ("x", "y", "z", "index")]
@@ -118,5 +148,10 @@ def run_window(files: list[Path], screenshot: str | None = None) -> int:
             win.grab().save(str(screenshot))
         win.plotter.close()
         win.close()
+        # destroy the widgets (and the matplotlib canvas) while the QApplication still exists
+        win.figure_canvas = None
+        win.deleteLater()
+        app.sendPostedEvents(None, 0)
+        app.processEvents()
         return 0
     return app.exec()

@@ -45,9 +45,12 @@ def robust_limits(v, symmetric=True):
     return (lo, hi) if hi > lo else (lo - 1e-12, hi + 1e-12)
 
 
-def _binned(x, y, v, bins=300):
-    """Mean of v in square bins: the image of a scattered map (fast for millions of points)."""
+def _binned(x, y, v, bins=None):
+    """Mean of v in square bins: the image of a scattered map (fast for millions of points). By
+    default ~1.2 √N bins across (60…400), so sparse patterns still read as a surface."""
     x, y, v = (np.asarray(a, dtype=np.float64) for a in (x, y, v))
+    if bins is None:
+        bins = int(np.clip(1.2 * np.sqrt(len(x)), 60, 400))
     span = max(np.ptp(x), np.ptp(y)) or 1.0
     cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
     ext = (cx - span / 2, cx + span / 2, cy - span / 2, cy + span / 2)
