@@ -99,11 +99,14 @@ def grid_map_figure(grid, title="Form-error map"):
 
 
 def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None):
-    """Two maps side by side on their own scales (µm); x2, y2 when the point sets differ."""
+    """Two maps side by side on their own scales (µm, each about its mean: piston is not shown);
+    x2, y2 when the point sets differ."""
     fig = _figure(11, 4.6)
     ax1, ax2 = fig.subplots(1, 2)
     b = np.asarray(before_mm) * 1e3
     a = np.asarray(after_mm) * 1e3
+    b = b - b.mean()
+    a = a - a.mean()
     img, ext = _binned(x, y, b)
     _map_axes(fig, ax1, img, ext, "µm", f"before {what}: RMS {np.std(b):.4g} µm")
     img, ext = _binned(x if x2 is None else x2, y if y2 is None else y2, a)

@@ -136,8 +136,8 @@ def test_bad_input_messages():
     line = PointCloud.from_xyz(np.linspace(0, 10, 100), np.zeros(100), np.zeros(100))
     with pytest.raises(StepError, match="do not span an area"):
         _run(BSplineMapStep, line)
-    with pytest.raises(StepError, match="use a larger spacing"):
-        _run(BSplineMapStep, cloud, knot_spacing=0.1)
+    with pytest.raises(StepError, match=r"points are too few for knots every 5 mm .*use knot_spacing ≥"):
+        _run(BSplineMapStep, cloud, knot_spacing=5.0)
 
 
 def test_zernike_step_removes_named_terms_and_keeps_the_rest():

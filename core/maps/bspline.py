@@ -202,6 +202,11 @@ def fit_bspline(x, y, z, *, knot_spacing: float | None = None, smoothing: float 
         raise ValueError("knot spacing must be > 0")
     nx = max(int(np.ceil((xmax - xmin) / h - 1e-9)), 1)
     ny = max(int(np.ceil((ymax - ymin) / h - 1e-9)), 1)
+    if (nx + 3) * (ny + 3) > len(z):
+        span = max(xmax - xmin, ymax - ymin)
+        need = span / max(np.sqrt(len(z)) - 3.0, 1.0)
+        raise ValueError(f"{len(z)} points are too few for knots every {h:g} mm "
+                         f"({(nx + 3) * (ny + 3)} coefficients); use knot_spacing ≥ {need:.3g} mm")
     if (nx + 3) * (ny + 3) > 1_000_000:
         raise ValueError(f"knot spacing {h:g} mm gives {(nx + 3) * (ny + 3)} coefficients; "
                          "use a larger spacing")

@@ -59,4 +59,20 @@ class MisalignmentStep(Step):
         if fit.surface is not surface:
             report["surface"] = fit.surface.describe()
         out = cloud.replace(xyz=part, channels={"residual": residual}, meta={"frame": "part"})
-        return StepResult(out, report)
+        from pointspro.core.figures import png_artifact
+
+        arts = {"misalignment.png": png_artifact(_before_after, surface, cloud.xyz, part, residual)}
+        return StepResult(out, report, arts)
+
+
+def _before_after(surface, measured, part, residual):
+    """z − sag(x, y) as measured (the pose still in it) beside the residual in the part frame."""
+    from pointspro.core.errors import DomainError
+    from pointspro.core.figures import before_after, scattered_map
+
+    try:
+        before = measured[:, 2] - surface.sag(measured[:, 0], measured[:, 1])
+    except DomainError:
+        return scattered_map(part[:, 0], part[:, 1], residual, "residual after removing the pose")
+    return before_after(measured[:, 0], measured[:, 1], before, residual, what="pose removal",
+                        x2=part[:, 0], y2=part[:, 1])
