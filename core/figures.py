@@ -126,19 +126,19 @@ def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients"):
     return fig
 
 
-def profiles_figure(grid, angles=(0.0, 90.0)):
+def profiles_figure(grid, angles=(0.0, 90.0), center=(0.0, 0.0)):
     from .metrics.profiles import profile, radial_profile
 
     fig = _figure(11, 4.2)
     ax1, ax2 = fig.subplots(1, 2)
     for a in angles:
-        s, z = profile(grid, a)
+        s, z = profile(grid, a, center)
         ax1.plot(s, z * 1e3, lw=1, label=f"{a:g}°")
     ax1.set_xlabel("position along the cut (mm)")
     ax1.set_ylabel("form error (µm)")
     ax1.legend(fontsize=8)
     ax1.set_title("profiles through the centre", fontsize=10)
-    r, m, sd = radial_profile(grid)
+    r, m, sd = radial_profile(grid, center)
     ax2.plot(r, m * 1e3, color="#2c6fbb", lw=1)
     ax2.fill_between(r, (m - sd) * 1e3, (m + sd) * 1e3, color="#2c6fbb", alpha=0.2, lw=0)
     ax2.set_xlabel("radius (mm)")

@@ -17,7 +17,7 @@ EXAMPLE = ROOT / "resources" / "example"
 #: what `pointspro --batch` writes for the example recipe, per input
 EXAMPLE_OUTPUTS = {"cloud.csv", "report.json", "report.html", "form_error.png", "omega_map.png",
                    "zernike.csv", "zernike.png", "zernike_removed.png", "misalignment.png", "map.csv", "map.x3p", "map.asc",
-                   "map.png", "profiles.png", "psd.png"}
+                   "map.png", "profiles.png", "psd.png", "profiles.csv", "psd.csv"}
 
 
 @pytest.fixture

@@ -115,10 +115,19 @@ def test_map_files_round_trip(tmp_path):
     # ASCII matrix: header, NaN outside, heights in nm
     lines = (tmp_path / "map.asc").read_text().splitlines()
     assert lines[0].startswith("#") and "nm" in "".join(lines[:5])
+    assert f"# x0 {float(g.xs[0])!r} mm, y0 {float(g.ys[0])!r} mm, spacing 5.0 mm" in lines
     M = np.loadtxt(tmp_path / "map.asc", comments="#")
     assert M.shape == g.z.shape
     assert np.allclose(M[v] * 1e-6, g.z[v], atol=1e-15)
     assert np.isnan(M[~v]).all()
+    prof = np.genfromtxt(tmp_path / "profiles.csv", delimiter=",", names=True)
+    assert set(prof["angle_deg"]) == {0.0, 90.0}
+    at0 = prof[prof["angle_deg"] == 0.0]
+    ok = np.isfinite(at0["z"])
+    assert np.allclose(at0["y"], 0.0) and np.allclose(at0["x"], at0["s"])
+    assert np.allclose(at0["z"][ok], smooth_form(at0["x"][ok], at0["y"][ok]), atol=0.05 * np.std(z))
+    psd = np.genfromtxt(tmp_path / "psd.csv", delimiter=",", names=True)
+    assert psd["f"][0] == 0 and np.all(psd["psd_x"] >= 0)
     for png in ("map.png", "profiles.png", "psd.png"):
         assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -52,7 +52,8 @@ class MapGrid:
         scale = {"mm": 1.0, "um": 1e3, "nm": 1e6}[unit]
         with open(path, "w", encoding="utf-8", newline="\n") as f:
             f.write(f"# PointsPro form-error map, ASCII matrix\n# columns {len(self.xs)} rows {len(self.ys)}\n"
-                    f"# x0 {self.xs[0]!r} mm, y0 {self.ys[0]!r} mm, spacing {self.spacing!r} mm\n"
+                    f"# x0 {float(self.xs[0])!r} mm, y0 {float(self.ys[0])!r} mm, "
+                    f"spacing {float(self.spacing)!r} mm\n"
                     f"# row i is y = y0 + i*spacing (lowest y first), column j is x = x0 + j*spacing\n"
                     f"# heights in {unit}; NaN = not measured\n")
             for row in self.z * scale:

@@ -36,6 +36,9 @@ class BSplineMapParams(Params):
     extrapolate: bool = param(False, help="also fill nodes of the aperture outside the measured "
                               "region (continued smoothly by the penalty)")
     matrix_unit: Literal["mm", "um", "nm"] = param("um", help="height unit of the ASCII matrix")
+    profile_angles: list[float] = param(default_factory=lambda: [0.0, 90.0], unit="deg",
+                                        help="angles of the profiles through the aperture's centre "
+                                             "(from +x towards +y)")
 
 
 class BSplineMapStep(Step):
@@ -111,14 +114,44 @@ class BSplineMapStep(Step):
             "map.png": png_artifact(grid_map_figure, grid,
                                     title=f"{channel} map: RMS {report['map_rms_um']:.4g} µm, "
                                           f"PV {report['map_pv_um']:.4g} µm"),
-            "profiles.png": png_artifact(profiles_figure, grid),
+            "profiles.png": png_artifact(profiles_figure, grid, tuple(params.profile_angles), center),
+            "profiles.csv": lambda p: _write_profiles(p, grid, params.profile_angles, center),
             "psd.png": png_artifact(psd_figure, grid),
+            "psd.csv": lambda p: _write_psd(p, grid),
         }
         return StepResult(cloud.replace(), report, arts)
 
     @classmethod
     def example_params(cls) -> dict:
         return {}
+
+
+def _write_profiles(path, grid, angles, center) -> None:
+    """angle_deg, s (mm along the cut through the centre), x, y, z (mm); one block per angle."""
+    from pointspro.core.metrics.profiles import profile
+
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        f.write("angle_deg,s,x,y,z\n")
+        for a in angles:
+            s, z = profile(grid, a, center)
+            t = np.deg2rad(a)
+            for si, zi in zip(s.tolist(), z.tolist()):
+                f.write(f"{float(a)!r},{si!r},{float(center[0] + si * np.cos(t))!r},"
+                        f"{float(center[1] + si * np.sin(t))!r},"
+                        f"{'nan' if zi != zi else repr(zi)}\n")
+
+
+def _write_psd(path, grid) -> None:
+    """f (1/mm), PSD along x and along y (mm³ = mm² per 1/mm), one-sided, Hann window."""
+    from pointspro.core.metrics.profiles import psd_1d
+
+    fx, px = psd_1d(grid, "x")
+    fy, py = psd_1d(grid, "y")
+    n = min(len(fx), len(fy))
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        f.write("f,psd_x,psd_y\n")
+        for a, b, c in zip(fx[:n].tolist(), px[:n].tolist(), py[:n].tolist()):
+            f.write(f"{a!r},{b!r},{c!r}\n")
 
 
 def _nice(v: float) -> float:
