@@ -29,12 +29,11 @@ class _Spec(BaseModel):
     aperture: float | None = Field(None, gt=0, description="clear-aperture diameter (mm)")
 
 
-class EvenAsphereSpec(_Spec):
-    type: Literal["even_asphere"]
+class _CurvatureSpec(_Spec):
+    """A base sphere/conic given by its curvature c or its radius R, exactly one of them."""
+
     c: float | None = Field(None, description="vertex curvature 1/R (1/mm); give c or R")
     R: float | None = Field(None, description="vertex radius (mm); give c or R")
-    k: float = Field(0.0, description="conic constant")
-    A: dict[int, float] = Field(default_factory=dict, description="aspheric coefficients A_n by power n")
 
     @model_validator(mode="after")
     def _one_curvature(self):
@@ -43,6 +42,16 @@ class EvenAsphereSpec(_Spec):
         if self.R == 0:
             raise ValueError("R must not be 0 (use c: 0 for a flat)")
         return self
+
+    @property
+    def curvature(self) -> float:
+        return self.c if self.c is not None else 1.0 / self.R
+
+
+class EvenAsphereSpec(_CurvatureSpec):
+    type: Literal["even_asphere"]
+    k: float = Field(0.0, description="conic constant")
+    A: dict[int, float] = Field(default_factory=dict, description="aspheric coefficients A_n by power n")
 
     @field_validator("A")
     @classmethod
@@ -53,8 +62,7 @@ class EvenAsphereSpec(_Spec):
         return v
 
     def build(self, base_dir: Path | None = None) -> EvenAsphere:
-        c = self.c if self.c is not None else 1.0 / self.R
-        return EvenAsphere(c, self.k, self.A, self.aperture)
+        return EvenAsphere(self.curvature, self.k, self.A, self.aperture)
 
 
 class XYPolynomialSpec(_Spec):
@@ -88,24 +96,11 @@ class MeshSpec(_Spec):
         return MeshSurface.from_file(p, self.aperture)
 
 
-class _ForbesSpec(_Spec):
-    c: float | None = Field(None, description="vertex (Q-con) or best-fit-sphere (Q-bfs) curvature "
-                            "1/R (1/mm); give c or R")
-    R: float | None = Field(None, description="the same as a radius (mm); give c or R")
+class _ForbesSpec(_CurvatureSpec):
+    """c/R: the vertex curvature (Q-con) or the best-fit sphere's (Q-bfs)."""
+
     norm_radius: float = Field(gt=0, description="normalisation radius r_n (mm), u = r / r_n")
     a: list[float] = Field(default_factory=list, description="coefficients a_0, a_1, … (mm)")
-
-    @model_validator(mode="after")
-    def _one_curvature(self):
-        if (self.c is None) == (self.R is None):
-            raise ValueError("give exactly one of c (1/mm) and R (mm)")
-        if self.R == 0:
-            raise ValueError("R must not be 0 (use c: 0 for a flat base)")
-        return self
-
-    @property
-    def curvature(self) -> float:
-        return self.c if self.c is not None else 1.0 / self.R
 
 
 class QConSpec(_ForbesSpec):
