@@ -110,6 +110,31 @@ def test_freeform_nominal():
     assert res.report["alpha_deg"] == pytest.approx(0.3, abs=1e-3)  # the marks project slightly on tilt
 
 
+@pytest.mark.parametrize("kind", ["qcon", "qbfs"])
+def test_forbes_nominals(kind):
+    """Misalignment and probe-radius compensation on Forbes Q-con / Q-bfs nominals."""
+    from pointspro.core.surfaces import surface_from_spec
+    from pointspro.plugins.probe_radius import ProbeRadiusStep
+
+    spec = {"type": kind, "R": 300.0, "norm_radius": 60.0, "a": [5e-2, -1e-2, 3e-3], "aperture": 120}
+    if kind == "qcon":
+        spec["k"] = -0.8
+    s = surface_from_spec(spec)
+    x, y = raster(120, 3.0)
+    pose = Pose(0.3, -0.2, 0.5, -0.7, 2.0)
+    e = machining_marks(x, y, 120, pv_um=0.5)
+    res = run(measured(s, pose, x, y, e), s)
+    assert np.sqrt(np.mean((res.cloud["residual"] - e) ** 2)) < 1e-5
+    err = errors(res.report, pose)
+    assert err["alpha_deg"] < 1e-3 and err["dz"] < 1e-3
+    # probe-ball centres of a 2 mm ball on the part → contact points
+    part = np.column_stack([x, y, s.sag(x, y)])
+    centres = part + 2.0 * s.normal(x, y)
+    out = ProbeRadiusStep().run(PointCloud(centres), ProbeRadiusStep.Params(radius=2.0, side=1),
+                                Context(surface=s))
+    assert np.max(np.abs(out.cloud.xyz - part)) < 1e-9
+
+
 @pytest.mark.parametrize("mutate,pattern", [
     (lambda q: q[:5], r"5 points for 5 parameters"),
     (lambda q: q[:180], r"all points lie on a line"),
