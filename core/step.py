@@ -91,3 +91,9 @@ class Step:
     def example_params(cls) -> dict:
         """Valid parameters for the contract test on the generic test cloud (defaults suffice)."""
         return {}
+
+    @classmethod
+    def example_cloud(cls, cloud: PointCloud) -> PointCloud:
+        """The contract test's cloud for this step: the generic one, plus what the step needs (e.g.
+        the time channels of on-machine data)."""
+        return cloud

@@ -90,6 +90,7 @@ def _ctx(surface, token=None):
 
 
 def test_runs_without_touching_its_input(step_cls, raster_cloud, asphere_002):
+    raster_cloud = step_cls.example_cloud(raster_cloud)
     before_xyz = raster_cloud.xyz.copy()
     before = {k: v.copy() for k, v in raster_cloud.channels.items()}
     params = step_cls.Params.model_validate(step_cls.example_params())
@@ -106,6 +107,7 @@ def test_runs_without_touching_its_input(step_cls, raster_cloud, asphere_002):
 
 
 def test_cancellation_is_honoured(step_cls, raster_cloud, asphere_002):
+    raster_cloud = step_cls.example_cloud(raster_cloud)
     tok = CancelToken()
     tok.cancel()
     params = step_cls.Params.model_validate(step_cls.example_params())

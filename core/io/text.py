@@ -72,8 +72,22 @@ def _header_name(tok: str) -> tuple[str, float | None, str | None]:
     return name, scale, unit
 
 
-def read_text(path: Path) -> tuple[np.ndarray, dict, dict]:
-    """Read a text export. Returns (xyz (N,3) float64 mm, channels, meta)."""
+def read_table(path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """A headed text table (e.g. a calibration series ``t, xd, ref``) as columns by name, with the
+    same parsing and messages as point files; ``required`` names must be in the header."""
+    _, cols, meta = read_text(Path(path), need_xyz=False)
+    if meta.get("header_line") is None:
+        raise InputError(f"{path}: needs a header line naming the columns ({', '.join(required)})")
+    missing = [n for n in required if n not in cols]
+    if missing:
+        raise InputError(f"{path}, line {meta['header_line']}: no {'/'.join(missing)} column "
+                         f"(columns: {', '.join(cols)})")
+    return cols
+
+
+def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dict, dict]:
+    """Read a text export. Returns (xyz (N,3) float64 mm, channels, meta); with ``need_xyz=False``
+    a header without x, y, z is allowed and every column comes back as a channel (xyz None)."""
     raw = path.read_bytes()
     try:
         text = raw.decode("utf-8-sig")
@@ -162,6 +176,15 @@ def read_text(path: Path) -> tuple[np.ndarray, dict, dict]:
         if dup:
             raise InputError(f"{path}, line {header[0] + 1}: duplicate column name(s) {sorted(dup)}")
         missing = [a for a in "xyz" if a not in names]
+        if not need_xyz:
+            cols = {n: data[:, j] for j, n in enumerate(names)}
+            bad = ~np.isfinite(data)
+            if bad.any():
+                row, col = np.argwhere(bad)[0]
+                ln = _data_line_number(lines.all(), first_data, int(row))
+                raise InputError(f"{path}, line {ln}, column {col + 1} ({names[col]}): "
+                                 f"{float(data[row, col])!r} is not a finite number")
+            return None, cols, meta
         if missing:
             raise InputError(f"{path}, line {header[0] + 1}: no {'/'.join(missing)} column in the header "
                              f"(columns: {', '.join(header[1])})")

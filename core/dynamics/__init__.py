@@ -1,0 +1,1 @@
+"""On-machine time series: checks, identification of the measuring loop, correction, vibrations."""

@@ -1,0 +1,81 @@
+"""Vibrations in on-machine series: spectra in time and along the surface, aliasing, phase lag.
+
+Aliasing (004 §"Mid-to-high frequency"): a vibration at f sampled at fs appears at
+    f_a = |f − fs · NINT(f / fs)|          (NINT rounds half up; 680 Hz at 1 kHz → 320 Hz)
+Phase lag of y behind u from their analytic signals (Hilbert transform, 004 Fig. 9d):
+    φ(t) = arg H[u](t) − arg H[y](t), unwrapped; the median over the middle 80 % of the series.
+Advice (seed 000 §3.1): sample at least twice the highest vibration frequency present, and choose the
+scan speed so that the vibrations that remain fall at spatial periods the map does not need.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def aliased_frequency(f_hz, fs_hz: float):
+    f = np.asarray(f_hz, dtype=np.float64)
+    return np.abs(f - fs_hz * np.floor(f / fs_hz + 0.5))
+
+
+def psd_time(v, fs: float):
+    """(f Hz, PSD mm²/Hz) by Welch (Hann, linear detrend)."""
+    from scipy.signal import welch
+
+    v = np.asarray(v, dtype=np.float64)
+    return welch(v, fs=fs, nperseg=min(len(v), 8192), detrend="linear")
+
+
+def psd_space(x, y, v):
+    """(spatial frequency 1/mm, PSD mm²·mm) along the scan path: v resampled at the mean step of
+    the path length s = Σ |Δ(x, y)|, then Welch."""
+    from scipy.signal import welch
+
+    s = np.r_[0.0, np.cumsum(np.hypot(np.diff(x), np.diff(y)))]
+    ds = s[-1] / max(len(s) - 1, 1)
+    if ds <= 0:
+        return np.array([0.0]), np.array([0.0])
+    keep = np.r_[True, np.diff(s) > 0]
+    su = np.arange(0.0, s[-1], ds)
+    vu = np.interp(su, s[keep], np.asarray(v, dtype=np.float64)[keep])
+    return welch(vu, fs=1.0 / ds, nperseg=min(len(vu), 8192), detrend="linear")
+
+
+def phase_lag_hilbert_deg(u, y) -> float:
+    """Median phase lag (deg) of y behind u from their analytic signals (both detrended)."""
+    from scipy.signal import detrend, hilbert
+
+    pu = np.unwrap(np.angle(hilbert(detrend(np.asarray(u, dtype=np.float64)))))
+    py = np.unwrap(np.angle(hilbert(detrend(np.asarray(y, dtype=np.float64)))))
+    n = len(pu)
+    mid = slice(n // 10, n - n // 10)
+    return float(np.degrees(np.median(pu[mid] - py[mid])))
+
+
+def dominant_peaks(f, p, count: int = 3, fmin: float = 0.0) -> list[float]:
+    """Frequencies of the largest local maxima of a spectrum above fmin."""
+    from scipy.signal import find_peaks
+
+    keep = f > fmin
+    f, p = f[keep], p[keep]
+    if p.size < 3:
+        return []
+    idx, _ = find_peaks(p)
+    idx = idx[np.argsort(p[idx])[::-1][:count]]
+    return [float(f[i]) for i in sorted(idx)]
+
+
+def advice(fs: float, vibrations_hz, speed_mm_s: float) -> list[str]:
+    out = []
+    for f in vibrations_hz:
+        fa = float(aliased_frequency(f, fs))
+        if f > fs / 2:
+            period = speed_mm_s / fa * 1e3 if fa > 0 else float("inf")
+            out.append(f"vibration at {f:g} Hz is above the Nyquist frequency ({fs / 2:g} Hz): it "
+                       f"appears at {fa:g} Hz, i.e. a false spatial period of {period:.3g} µm at "
+                       f"{speed_mm_s:.3g} mm/s — sample at ≥ {2 * f:g} Hz or low-pass the sensor")
+        else:
+            period = speed_mm_s / f * 1e3
+            out.append(f"vibration at {f:g} Hz is sampled correctly; it marks the map with a spatial "
+                       f"period of {period:.3g} µm at {speed_mm_s:.3g} mm/s — change the scan speed to "
+                       "move it away from the periods of interest")
+    return out

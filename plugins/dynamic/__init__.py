@@ -1,0 +1,141 @@
+"""`dynamic`: remove the measuring loop's dynamic error from an on-machine scan (004 eq 13).
+
+The scan is a time series with channels t (s), xd (encoder of the axis carrying the sensor, mm) and
+xc (sensor reading, mm), z = xd + xc. The sensor point sits at Gm·xd, not at xd, so
+    z_corrected = Gm·xd + xc        (004 eq 13: the recursion x_o[k] = Σ b_i x[k−i] − Σ a_i x_o[k−i] + x_c[k])
+with Gm identified from ``calibration`` (core.dynamics.identify, as `dynamic_id`) or read from
+``model`` (a dynamic_model.json). The model's sampling rate must be the scan's. Channels added:
+``z_raw`` (z before) and ``dynamic_error`` = z_raw − z (mm).
+
+Vibration analysis in the report: PSD of the sensor signal in time and along the surface, its
+largest peaks, the phase lag of the sensor point behind the carriage over the scan (Hilbert), the
+aliased frequency of each known vibration (``vibrations``) and the sampling advice of 000 §3.1.
+"""
+from __future__ import annotations
+
+import numpy as np
+from pydantic import model_validator
+
+from pointspro.core.errors import InputError, StepError
+from pointspro.core.step import Context, Params, Step, StepResult, param
+
+
+class DynamicParams(Params):
+    calibration: str | None = param(None, help="calibration series (CSV with t, xd, ref): identify "
+                                    "Gm here; give this or model")
+    model: str | None = param(None, help="dynamic_model.json from dynamic_id; give this or calibration")
+    order: int | None = param(None, ge=1, le=8, help="model order when identifying; empty: by BIC")
+    t: str = param("t", help="time channel of the scan (s)")
+    xd: str = param("xd", help="encoder channel of the axis carrying the sensor (mm)")
+    xc: str = param("xc", help="sensor reading channel (mm)")
+    vibrations: list[float] = param(default_factory=list, unit="Hz",
+                                    help="known vibration frequencies to check for aliasing")
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        if (self.calibration is None) == (self.model is None):
+            raise ValueError("give exactly one of calibration and model")
+        return self
+
+
+def _figure(t, z_raw, z, x, y, fs):
+    from pointspro.core.dynamics.vibration import psd_space, psd_time
+    from pointspro.core.figures import _figure as new
+
+    fig = new(11, 4.2)
+    ax1, ax2 = fig.subplots(1, 2)
+    n = len(t)
+    w = slice(n // 2, min(n // 2 + int(5 * fs), n))
+    e = (z_raw - z) * 1e3
+    ax1.plot(t[w], e[w], lw=1)
+    ax1.set_xlabel("time (s)")
+    ax1.set_ylabel("dynamic error z_raw − z (µm)")
+    ax1.set_title(f"removed: RMS {np.std(e):.3g} µm, PV {np.ptp(e):.3g} µm", fontsize=10)
+    f, p = psd_time(z - np.polyval(np.polyfit(t, z, 1), t), fs)
+    ax2.loglog(f[1:], p[1:] * 1e6, lw=1, label="z in time (µm²/Hz)")
+    ax2.set_xlabel("frequency (Hz)")
+    fs_, ps = psd_space(x, y, z)
+    ax3 = ax2.twiny()
+    ax3.loglog(fs_[1:], ps[1:] * 1e6, lw=1, color="#c0392b", label="along the surface (µm²·mm)")
+    ax3.set_xlabel("spatial frequency (1/mm)", color="#c0392b")
+    ax2.set_title("PSD of the corrected height", fontsize=10)
+    ax2.legend(fontsize=8, loc="lower left")
+    return fig
+
+
+class DynamicStep(Step):
+    id = "dynamic"
+    title = "Dynamic error correction"
+    summary = "z = Gm·xd + xc: remove the measuring loop's lag from an on-machine scan (004 eq 13)."
+    Params = DynamicParams
+
+    def run(self, cloud, params: DynamicParams, ctx: Context) -> StepResult:
+        from pointspro.core.dynamics.identify import LoopModel
+        from pointspro.core.dynamics.timeseries import sampling_rate
+        from pointspro.core.dynamics.vibration import (advice, aliased_frequency, dominant_peaks,
+                                                       phase_lag_hilbert_deg, psd_time)
+        from pointspro.core.figures import png_artifact
+        from pointspro.plugins.dynamic_id import identify_from_file, model_report, resolve
+
+        missing = [c for c in (params.t, params.xd, params.xc) if c not in cloud.channels]
+        if missing:
+            raise StepError(f"the scan has no {'/'.join(missing)} channel (on-machine data need time t, "
+                            "encoder xd and sensor xc)")
+        src = cloud.meta.get("source", "scan")
+        fs = sampling_rate(cloud[params.t], src, row_offset=2)
+        arts = {}
+        if params.model is not None:
+            p = resolve(params.model, ctx)
+            if not p.is_file():
+                raise InputError(f"{p}: dynamic model file not found")
+            model = LoopModel.from_json(p.read_text(encoding="utf-8"), str(p))
+        else:
+            p = resolve(params.calibration, ctx)
+            model, _ = identify_from_file(p, ("t", "xd", "ref"), params.order, 5, ctx)
+            arts["dynamic_model.json"] = model.to_json()
+        if abs(model.fs - fs) > 0.01 * fs:
+            raise StepError(f"the model was identified at {model.fs:g} Hz but the scan is sampled at "
+                            f"{fs:g} Hz; identify at the scan's rate")
+        ctx.progress.check()
+        ctx.progress.update(0.6, "correcting")
+        xd, xc = cloud[params.xd], cloud[params.xc]
+        z_raw = cloud.z
+        gap = np.abs(z_raw - (xd + xc))
+        if gap.max() > 1e-6 * max(1.0, np.abs(z_raw).max()):
+            i = int(np.argmax(gap))
+            raise StepError(f"z ≠ xd + xc at row {int(cloud.index[i])} (off by {gap[i]:.3g} mm): the "
+                            "channels are not the scan's encoder and sensor")
+        sensor_point = model.apply(xd)
+        z = sensor_point + xc
+        e = z_raw - z
+        ctx.progress.update(0.8, "vibrations")
+        f, ps = psd_time(xc, fs)
+        t = cloud[params.t]
+        speed = float(np.sum(np.hypot(np.diff(cloud.x), np.diff(cloud.y))) / (t[-1] - t[0]))
+        peaks = dominant_peaks(f, ps, 3, fmin=1.0)
+        report = {
+            "model": model_report(model), "fs_hz": fs, "samples": cloud.n,
+            "dynamic_error_rms_um": float(np.std(e) * 1e3), "dynamic_error_pv_um": float(np.ptp(e) * 1e3),
+            "phase_lag_scan_deg": phase_lag_hilbert_deg(xd, sensor_point) if cloud.n > 100 else None,
+            "scan_speed_mm_s": speed, "sensor_psd_peaks_hz": peaks,
+            "vibrations": [{"frequency_hz": v, "aliased_hz": float(aliased_frequency(v, fs)),
+                            "above_nyquist": bool(v > fs / 2)} for v in params.vibrations],
+            "advice": advice(fs, params.vibrations, speed) if params.vibrations else [],
+            "warnings": [],
+        }
+        out = cloud.replace(xyz=np.column_stack([cloud.x, cloud.y, z]),
+                            channels={"z_raw": z_raw, "dynamic_error": e})
+        arts["dynamic.png"] = png_artifact(_figure, t, z_raw, z, cloud.x, cloud.y, fs)
+        return StepResult(out, report, arts)
+
+    @classmethod
+    def example_cloud(cls, cloud):
+        """On-machine channels on the generic cloud: sampled at 1 kHz, z = xd + xc."""
+        t = np.arange(cloud.n) / 1000.0
+        return cloud.replace(channels={"t": t, "xd": cloud.z.copy(), "xc": np.zeros(cloud.n)})
+
+    @classmethod
+    def example_params(cls) -> dict:
+        from pointspro.plugins.dynamic_id import DynamicIdStep
+
+        return DynamicIdStep.example_params()

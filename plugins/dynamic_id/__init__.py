@@ -1,0 +1,118 @@
+"""`dynamic_id`: identify the measuring loop's transfer function Gm from calibration steps (004).
+
+Reads the calibration series (``calibration``: a CSV with columns t (s), xd and ref (mm), e.g. 10 steps
+up and 10 down of 10 µm) and fits Gm by output error with the order chosen by BIC
+(core.dynamics.identify). Writes ``dynamic_model.json`` (what the `dynamic` step's ``model`` reads)
+and ``dynamic_fit.png``; reports the order, poles, resonances, DC gain, phase lag at 1, 5, 15, 50 Hz
+and the fit's RMS. The cloud passes through unchanged (run it in the recipe that corrects, or alone).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from pointspro.core.step import Context, Params, Step, StepResult, param
+
+LAG_FREQUENCIES = (1.0, 5.0, 15.0, 50.0)
+
+
+class DynamicIdParams(Params):
+    calibration: str = param(help="calibration series (CSV with t, xd, ref), relative to the recipe")
+    t: str = param("t", help="time column (s)")
+    xd: str = param("xd", help="encoder column of the axis carrying the sensor (mm)")
+    ref: str = param("ref", help="reference sensor column (mm)")
+    order: int | None = param(None, ge=1, le=8, help="model order; empty: chosen by BIC")
+    max_order: int = param(5, ge=1, le=8, help="largest order tried when the order is chosen")
+
+
+def resolve(path: str, ctx: Context):
+    from pathlib import Path
+
+    p = Path(path)
+    if not p.is_absolute() and ctx.base_dir is not None:
+        p = Path(ctx.base_dir) / p
+    return p
+
+
+def identify_from_file(path, names, order, max_order, ctx):
+    from pointspro.core.dynamics.identify import identify
+    from pointspro.core.io.text import read_table
+
+    ctx.progress.check()
+    cols = read_table(path, names)
+    ctx.progress.update(0.2, "identifying Gm")
+    model = identify(cols[names[0]], cols[names[1]], cols[names[2]], max_order=max_order, order=order,
+                     what=str(path))
+    return model, cols
+
+
+def model_report(model) -> dict:
+    d = model.describe()
+    d["phase_lag_deg"] = {f"{f:g}_hz": float(v) for f, v in
+                          zip(LAG_FREQUENCIES, model.phase_lag_deg(LAG_FREQUENCIES))}
+    d["nyquist_hz"] = model.fs / 2
+    return d
+
+
+def fit_figure(model, t, xd, ref):
+    """Reference against the model's Gm·xd around the largest step, and the frequency response."""
+    from pointspro.core.figures import _figure
+
+    fig = _figure(11, 4.2)
+    ax1, ax2 = fig.subplots(1, 2)
+    y = model.apply(xd)
+    c = np.mean(ref - y)
+    k = int(np.argmax(np.abs(np.diff(xd))))
+    w = slice(max(k - int(0.02 * model.fs), 0), k + int(0.08 * model.fs))
+    ax1.plot((t[w] - t[k]) * 1e3, (xd[w] - xd[k]) * 1e3, label="encoder xd", lw=1)
+    ax1.plot((t[w] - t[k]) * 1e3, (ref[w] - c - xd[k]) * 1e3, ".", ms=3, label="reference")
+    ax1.plot((t[w] - t[k]) * 1e3, (y[w] - xd[k]) * 1e3, label=f"Gm·xd (order {model.order})", lw=1)
+    ax1.set_xlabel("time from the step (ms)")
+    ax1.set_ylabel("displacement (µm)")
+    ax1.legend(fontsize=8)
+    ax1.set_title(f"fit RMS {model.fit_rms * 1e3:.3g} µm", fontsize=10)
+    f = np.logspace(-1, np.log10(model.fs / 2 * 0.999), 400)
+    h = model.response(f)
+    ax2.semilogx(f, 20 * np.log10(np.abs(h)), color="#2c6fbb")
+    ax2.set_xlabel("frequency (Hz)")
+    ax2.set_ylabel("|Gm| (dB)", color="#2c6fbb")
+    ax3 = ax2.twinx()
+    ax3.semilogx(f, -np.degrees(np.angle(h)), color="#c0392b")
+    ax3.set_ylabel("phase lag (deg)", color="#c0392b")
+    ax2.set_title("identified Gm", fontsize=10)
+    return fig
+
+
+class DynamicIdStep(Step):
+    id = "dynamic_id"
+    title = "Dynamic error identification"
+    summary = "Identify the measuring loop Gm from calibration steps; writes dynamic_model.json."
+    Params = DynamicIdParams
+
+    def run(self, cloud, params: DynamicIdParams, ctx: Context) -> StepResult:
+        from pointspro.core.figures import png_artifact
+
+        path = resolve(params.calibration, ctx)
+        names = (params.t, params.xd, params.ref)
+        model, cols = identify_from_file(path, names, params.order, params.max_order, ctx)
+        report = {"calibration": str(path), **model_report(model), "warnings": []}
+        if model.modes() and max(m["frequency_hz"] for m in model.modes()) > 0.8 * model.fs / 2:
+            report["warnings"].append("a resonance lies near the Nyquist frequency: modes above it "
+                                      "appear aliased; sample faster to resolve them")
+        arts = {"dynamic_model.json": model.to_json(),
+                "dynamic_fit.png": png_artifact(fit_figure, model, cols[params.t], cols[params.xd],
+                                                cols[params.ref])}
+        return StepResult(cloud.replace(), report, arts)
+
+    @classmethod
+    def example_params(cls) -> dict:
+        import tempfile
+        from pathlib import Path
+
+        # the contract test runs every step on a generic cloud: give it a small calibration file
+        t = np.arange(2000) / 1000.0
+        xd = np.where((t > 0.5) & (t < 1.5), 0.01, 0.0)
+        xd = np.convolve(xd, np.ones(5) / 5, mode="same")
+        ref = np.convolve(xd, [0.6, 0.3, 0.1], mode="full")[: len(xd)] + 1e-6 * np.sin(t * 7)
+        p = Path(tempfile.mkdtemp(prefix="pointspro-dynid-")) / "calibration.csv"
+        np.savetxt(p, np.column_stack([t, xd, ref]), delimiter=",", header="t,xd,ref", comments="")
+        return {"calibration": str(p)}
