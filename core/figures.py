@@ -15,9 +15,14 @@ DIVERGING = "RdBu_r"
 
 
 def _figure(w=6.4, h=4.8):
+    """Fixed margins, not constrained layout: the layout engine draws every figure twice and took
+    40 % of a batch input's time (bench_batch)."""
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(w, h), dpi=100, layout="constrained")
+    fig = Figure(figsize=(w, h), dpi=100)
+    fig.subplots_adjust(left=0.75 / w, right=1 - 0.35 / w, bottom=0.55 / h, top=1 - 0.4 / h,
+                        wspace=0.35)
+    return fig
 
 
 def save_png(fig, path: Path) -> None:
