@@ -58,6 +58,7 @@ def fit_figure(model, t, xd, ref):
     from pointspro.core.figures import _figure
 
     fig = _figure(11, 4.2)
+    fig.subplots_adjust(right=0.92, wspace=0.3)  # room for the phase axis on the right
     ax1, ax2 = fig.subplots(1, 2)
     y = model.apply(xd)
     c = np.mean(ref - y)

@@ -31,13 +31,14 @@ def map_figure(m):
     from pointspro.core.figures import _figure
 
     fig = _figure(6.4, 5.2)
+    fig.subplots_adjust(top=0.86)
     ax = fig.add_subplot(projection="polar")
     C, R = np.meshgrid(np.deg2rad(np.r_[m.c_deg, 360.0]), m.r)
     E = np.concatenate([m.e, m.e[:, :1]], axis=1) * 1e6
     lim = float(np.max(np.abs(E))) or 1.0
     pc = ax.pcolormesh(C, R, E, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="auto")
     fig.colorbar(pc, ax=ax, label="kinematic error e (nm)", shrink=0.8)
-    ax.set_title("kinematic error map over (c, r)", fontsize=10)
+    ax.set_title("kinematic error map e over spindle angle c and radius r (mm)", fontsize=10, pad=18)
     return fig
 
 
