@@ -1,0 +1,266 @@
+"""`pointspro explain`: gap = measured − simulated, the effects that explain it, the model updated
+with them, and the gap before and after (explain.json, explain.html, model.updated.yaml)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, RecipeError
+from ..simulate.effects import LIBRARY, ScanContext, Vibration
+from .select import select, separate_by
+
+REGION_MIN_SIGMA = 5.0
+
+
+def _stats(v) -> dict:
+    v = np.asarray(v)
+    return {"rms_um": float(np.sqrt(np.mean((v - v.mean()) ** 2)) * 1e3), "pv_um": float(np.ptp(v) * 1e3)}
+
+
+def regions(x, y, r, sigma, cells=24) -> list[dict]:
+    """Clusters of cells whose mean residual is significant (|mean| > 5 σ/√n), each with its centre and
+    the radius of a disk of the same area (mm)."""
+    from scipy import ndimage
+
+    x0, x1, y0, y1 = x.min(), x.max(), y.min(), y.max()
+    span = max(x1 - x0, y1 - y0) or 1.0
+    h = span / cells
+    ix = np.clip(((x - x0) / h).astype(int), 0, cells - 1)
+    iy = np.clip(((y - y0) / h).astype(int), 0, cells - 1)
+    k = iy * cells + ix
+    n = np.bincount(k, minlength=cells * cells)
+    s = np.bincount(k, weights=r, minlength=cells * cells)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(n > 0, s / n, 0.0)
+        z = np.abs(mean) * np.sqrt(n) / max(sigma, 1e-300)
+    flag = (z > REGION_MIN_SIGMA) & (n >= 4)
+    lab, nlab = ndimage.label(flag.reshape(cells, cells))
+    out = []
+    for i in range(1, nlab + 1):
+        cellsi = np.flatnonzero(lab.ravel() == i)
+        pts = np.isin(k, cellsi)
+        w = np.abs(r[pts])
+        cx = float(np.average(x[pts], weights=w + 1e-300))
+        cy = float(np.average(y[pts], weights=w + 1e-300))
+        out.append({"x": cx, "y": cy, "radius": float(np.sqrt(cellsi.size * h * h / np.pi)),
+                    "mean_um": float(np.mean(r[pts]) * 1e3)})
+    return sorted(out, key=lambda d: -abs(d["mean_um"]))
+
+
+def _params_of(found) -> tuple[dict, dict]:
+    gr, beta, sd = found["group"], found["beta"], found["sd"]
+    if gr.name == "vibration":
+        raw = beta / gr.scale
+        p = Vibration.from_columns(gr.frequency, raw)
+        u = {"amplitude": float(np.hypot(*(sd / gr.scale)))}
+        return p, u
+    names = LIBRARY[gr.name].params
+    kept = [i for i, s in enumerate(gr.scale) if np.isfinite(s)]
+    params, unc = {}, {}
+    for j, i in enumerate(kept):
+        params[names[i]] = float(beta[j] / gr.scale[i])
+        unc[names[i]] = float(sd[j] / gr.scale[i])
+    return params, unc
+
+
+def _merge(effects: list[dict], name: str, params: dict) -> list[dict]:
+    """Add fitted parameters to the model's effects (summed into an effect already there)."""
+    out = [dict(e) for e in effects]
+    for e in out:
+        if name in e:
+            old = dict(e[name] or {})
+            if name == "vibration":
+                break
+            for k, v in params.items():
+                old[k] = float(old.get(k, 0.0)) + v
+            e[name] = old
+            return out
+    out.append({name: params})
+    return out
+
+
+def _view(name: str) -> str:
+    return {"squareness": "radius", "straightness": "radius", "z_scale": "radius", "probe_radius": "radius",
+            "spindle_tilt": "angle", "spindle_axial": "angle", "thermal_drift": "time",
+            "dynamic_lag": "time", "vibration": "spectrum"}.get(name, "map")
+
+
+def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simulated: Path | None = None,
+            bootstrap: int = 10) -> dict:
+    from ..io import read_cloud
+    from ..io.atomic import atomic_dir
+    from ..simulate.model import load_model, simulate
+
+    meas = read_cloud(measured)
+    model = None
+    if model_path is not None:
+        model = load_model(model_path)
+        base = Path(model_path).parent
+        t = meas["t"] if "t" in meas.channels else None
+        c = meas["c"] if "c" in meas.channels else None
+        if t is None or c is None:
+            from scipy.spatial import cKDTree
+
+            from ..simulate.scan import scan_points
+
+            sp = scan_points(model.scan)
+            _, j = cKDTree(np.column_stack([sp["x"], sp["y"]])).query(meas.xyz[:, :2])
+            t = sp["t"][j] if t is None else t
+            c = sp["c"][j] if c is None else c
+        at = {"x": meas.x, "y": meas.y, "t": t, "c": c}
+        sim = simulate(model, base, at=at, noise=False)
+        surf = model.build_surface(base)
+        ctx = ScanContext.from_surface(surf, meas.x, meas.y, t, c)
+        z_sim = sim["z"]
+        match = "model evaluated at the measured positions"
+    elif simulated is not None:
+        simc = read_cloud(simulated)
+        for ch in ("t", "c"):
+            if ch not in simc.channels:
+                raise InputError(f"{simulated}: the simulation has no '{ch}' channel")
+        if simc.n == meas.n and np.max(np.abs(simc.xyz[:, :2] - meas.xyz[:, :2])) < 1e-6:
+            j = np.arange(meas.n)
+            match = "by row"
+        else:
+            from scipy.spatial import cKDTree
+
+            d, j = cKDTree(simc.xyz[:, :2]).query(meas.xyz[:, :2])
+            match = f"by position (nearest simulated point, up to {float(d.max()):.3g} mm away)"
+        z_sim = simc.z[j]
+        from ..maps.bspline import fit_bspline
+
+        sp = fit_bspline(simc.x, simc.y, simc.z)
+        ctx = ScanContext(meas.x, meas.y, z_sim, sp(meas.x, meas.y, dx=1), sp(meas.x, meas.y, dy=1),
+                          simc["t"][j], simc["c"][j])
+    else:
+        raise RecipeError("explain needs --model MODEL.yaml or --simulated FILE")
+    gap = meas.z - z_sim
+    res = select(ctx, gap, bootstrap=bootstrap)
+    sigma = res["sigma"]
+    found = []
+    effects = list(model.effects) if model is not None else []
+    for f in res["found"]:
+        params, unc = _params_of(f)
+        st = f["stage"]
+        effects = _merge(effects, f["group"].name, params)
+        found.append({"effect": f["group"].name, "params": params, "uncertainty": unc,
+                      "gap_after": _stats(f["resid_upto"]),
+                      "evidence": {"F": st.F, "p": st.p, "delta_bic": st.delta_bic, "vif_max": f["vif_max"],
+                                   "stability": res["stability"].get(f["group"].name),
+                                   "ssr_before_um2": st.ssr_before * 1e6, "ssr_after_um2": st.ssr_after * 1e6}})
+    ambiguous = []
+    for f in res["found"]:
+        for a in f["stage"].ambiguous_with:
+            ambiguous.append({"effects": [f["group"].name, a["effect"]],
+                              "why": "on this scan path the two signatures fit the gap equally well "
+                                     f"(their fits differ by {a['ssr_excess'] / max(sigma, 1e-300) ** 2:.3g} σ² "
+                                     "in the sum of squares, below the χ² threshold)",
+                              "separate_by": separate_by(f["group"].name, a["effect"])})
+    # gap after: re-simulate with the updated model when there is one
+    if model is not None:
+        updated = model.model_copy(update={"effects": effects})
+        after = meas.z - simulate(updated, Path(model_path).parent, at={"x": meas.x, "y": meas.y,
+                                  "t": ctx.t, "c": ctx.c}, noise=False)["z"]
+    else:
+        updated = None
+        after = res["residual"]
+    after_c = after - after.mean()
+    regs = regions(meas.x, meas.y, after_c, sigma)
+    structure = bool(regs) or res["rms"] > 1.25 * sigma
+    if structure:
+        verdict = "unexplained"
+    elif ambiguous:
+        verdict = "ambiguous"
+    elif found:
+        verdict = "explained"
+    else:
+        verdict = "nothing_missing"
+    report = {
+        "verdict": verdict, "gap_before": _stats(gap), "gap_after": _stats(after),
+        "noise_um": sigma * 1e3, "found": found, "ambiguous_with": ambiguous,
+        "unexplained": {"rms_um": _stats(after)["rms_um"] if structure else 0.0, "regions": regs if structure else []},
+        "checks": {"chi2_p": res["chi2_p"], "residual_lag1_autocorrelation": res["rho1"],
+                   "residual_rms_over_noise": res["rms"] / max(sigma, 1e-300)},
+        "not_observable_on_this_scan": res["unobservable"], "points": int(meas.n), "match": match,
+        "measured": str(measured), "model": str(model_path) if model_path else None,
+        "simulated": str(simulated) if simulated else None,
+    }
+    from ..report import dumps, jsonable
+
+    with atomic_dir(Path(out_dir)) as tmp:
+        (tmp / "explain.json").write_text(dumps(jsonable(report)), encoding="utf-8")
+        if updated is not None:
+            (tmp / "model.updated.yaml").write_text(updated.to_yaml(), encoding="utf-8")
+        else:
+            import yaml
+
+            (tmp / "model.updated.yaml").write_text(yaml.safe_dump({"effects": effects}, sort_keys=False),
+                                                    encoding="utf-8")
+        _figures(tmp, ctx, gap, after, found, res["order"])
+        (tmp / "explain.html").write_text(_html(report, tmp), encoding="utf-8")
+    return report
+
+
+def _figures(folder, ctx, gap, after, found, order):
+    from ..figures import _figure, before_after, save_png
+
+    save_png(before_after(ctx.x, ctx.y, gap, after, what="adding the found effects"), folder / "gap_map.png")
+    view = _view(found[0]["effect"]) if found else "radius"
+    fig = _figure(11, 4.2)
+    ax1, ax2 = fig.subplots(1, 2)
+    if view == "angle":
+        xv, lab = ctx.c, "spindle angle c (deg)"
+    elif view in ("time", "spectrum"):
+        xv, lab = ctx.t, "time (s)"
+    else:
+        xv, lab = ctx.r, "radius (mm)"
+    k = max(gap.size // 20000, 1)
+    ax1.plot(xv[::k], (gap - gap.mean())[::k] * 1e3, ",", alpha=0.5, label="before")
+    ax1.plot(xv[::k], (after - after.mean())[::k] * 1e3, ",", alpha=0.5, label="after")
+    ax1.set_xlabel(lab)
+    ax1.set_ylabel("gap (µm)")
+    ax1.legend(markerscale=20, fontsize=8)
+    ax1.set_title("the gap against " + lab.split(" (")[0], fontsize=10)
+    t = ctx.t[order]
+    if np.ptp(t) > 0 and np.std(np.diff(t)) < 1e-3 * np.mean(np.diff(t)):
+        from scipy.signal import welch
+
+        fs = 1.0 / np.mean(np.diff(t))
+        for v, name in ((gap, "before"), (after, "after")):
+            f, p = welch(v[order] - v.mean(), fs=fs, nperseg=min(v.size, 4096))
+            ax2.loglog(f[1:], p[1:] * 1e6, lw=1, label=name)
+        ax2.set_xlabel("frequency (Hz)")
+        ax2.set_ylabel("PSD (µm²/Hz)")
+        ax2.legend(fontsize=8)
+        ax2.set_title("spectrum of the gap along the scan", fontsize=10)
+    else:
+        ax2.set_axis_off()
+    save_png(fig, folder / "gap_views.png")
+
+
+def _html(report: dict, folder: Path) -> str:
+    import html
+
+    from ..report import _CSS, _img, _table
+
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>PointsPro explain</title><style>{_CSS}"
+             "</style></head><body><h1>Explain: where simulation and measurement disagree</h1>",
+             f"<p><b>Verdict: {html.escape(report['verdict'])}</b> — gap {report['gap_before']['rms_um']:.4g} µm RMS "
+             f"before, {report['gap_after']['rms_um']:.4g} µm after; noise {report['noise_um']:.3g} µm.</p>",
+             _img(folder, "gap_map.png"), _img(folder, "gap_views.png"), "<h2>Found (in the order added)</h2>"]
+    for f in report["found"]:
+        parts.append(f"<h3>{html.escape(f['effect'])}</h3>" + _table({**f["params"], "gap after": f["gap_after"],
+                                                                     **{"evidence " + k: v for k, v in f["evidence"].items()}}))
+    if not report["found"]:
+        parts.append("<p class='muted'>No effect of the library is supported by the gap.</p>")
+    if report["ambiguous_with"]:
+        parts.append("<h2>Cannot be told apart on this scan</h2>")
+        for a in report["ambiguous_with"]:
+            parts.append(f"<p class='warn'>{html.escape(' / '.join(a['effects']))}: {html.escape(a['why'])}. "
+                         f"Separate them by: {html.escape(a['separate_by'])}.</p>")
+    if report["unexplained"]["regions"]:
+        parts.append("<h2>Unexplained regions</h2>" + "".join(_table(r) for r in report["unexplained"]["regions"]))
+    parts.append("<h2>Checks</h2>" + _table(report["checks"]) + "</body></html>\n")
+    return "".join(parts)

@@ -1,0 +1,1 @@
+"""The measurement-chain simulator: nominal surface, scan path and timing, probe, and named effects."""

@@ -1,0 +1,193 @@
+"""The library of physical effects — each written once, used both to simulate and to explain.
+
+An effect adds a height error Δz (mm) to every simulated point. Each is linear in its parameters
+around zero (the first-order physics of small errors), so its *signature* — ∂Δz/∂parameters, one
+column per parameter — is the same function the simulator evaluates: Δz = S·p. Only `vibration` has
+a non-linear parameter (its frequency), found from the gap's spectrum before its amplitude is fitted.
+
+Names are DESIGN's contract. Point context: x, y (mm), nominal sag f and slopes f_x, f_y, radius r,
+spindle angle c (deg), time t (s), ż = df/dt along the scan (mm/s).
+
+  pose           α, β (deg), dx, dy, dz (mm): p_meas = Rx(α)Ry(β)p + d to first order, measured against
+                 the nominal at the measured (x, y):  Δz = α(y + f f_y) − β(x + f f_x) − f_x dx − f_y dy + dz
+  z_scale        s: Δz = s·f                               (amplification error of the z axis)
+  probe_radius   ρ (mm) left uncompensated: Δz = ρ(√(1 + f_x² + f_y²) − 1)   (constant part = piston)
+  squareness     EB0C (arcsec), X–C squareness: Δz = −r·EB0C        (a cone; 003 selective model)
+  spindle_tilt   EBC lobes k = 2…4 (arcsec): Δz = −r Σ (a_k cos kc + b_k sin kc)   (k = 1 is a part tilt)
+  spindle_axial  EZC lobes k = 1…4 (mm): Δz = Σ (a_k cos kc + b_k sin kc)
+  straightness   slide straightness over radius (mm at the rim): Δz = Σ_{k=2..4} s_k (r/R)^k
+  thermal_drift  d1, d2 (mm over the scan): Δz = d1 τ + d2 τ²,  τ = (t − t₀)/T
+  dynamic_lag    τ (s), a first-order measuring loop Gm = 1/(1 + τs): Δz = (1 − Gm)z ≈ τ ż
+  vibration      f (Hz, as sampled — the aliased frequency), amplitude (mm), phase (deg):
+                 Δz = A cos(2πft + φ)
+  volumetric     a smooth machine field (fiducial/GP issue): Δz = cxx x² + cxy xy + cyy y² + cxz xz + cyz yz
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+ARCSEC = np.pi / 180 / 3600
+DEG = np.pi / 180
+
+
+@dataclass
+class ScanContext:
+    x: np.ndarray
+    y: np.ndarray
+    f: np.ndarray
+    fx: np.ndarray
+    fy: np.ndarray
+    t: np.ndarray
+    c: np.ndarray
+
+    @property
+    def r(self):
+        return np.hypot(self.x, self.y)
+
+    @property
+    def zdot(self):
+        """df/dt along the scan order (mm/s)."""
+        if self.t.size < 2 or np.ptp(self.t) == 0:
+            return np.zeros_like(self.f)
+        return np.gradient(self.f, self.t)
+
+    @classmethod
+    def from_surface(cls, surface, x, y, t, c):
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        fx, fy = surface.gradient(x, y)
+        return cls(x, y, surface.sag(x, y), fx, fy, np.asarray(t, float), np.asarray(c, float))
+
+
+class Effect:
+    name: str = ""
+    params: tuple[str, ...] = ()
+    units: tuple[str, ...] = ()
+    linear = True
+
+    def columns(self, ctx: ScanContext) -> np.ndarray:
+        raise NotImplementedError
+
+    def apply(self, ctx: ScanContext, values: dict) -> np.ndarray:
+        unknown = set(values) - set(self.params)
+        if unknown:
+            raise KeyError(f"effect '{self.name}' has no parameter(s) {sorted(unknown)}; "
+                           f"it has {', '.join(self.params)}")
+        p = np.array([float(values.get(k, 0.0)) for k in self.params])
+        return self.columns(ctx) @ p
+
+
+class Pose(Effect):
+    name, params, units = "pose", ("alpha_deg", "beta_deg", "dx", "dy", "dz"), ("deg", "deg", "mm", "mm", "mm")
+
+    def columns(self, c):
+        return np.column_stack([(c.y + c.f * c.fy) * DEG, -(c.x + c.f * c.fx) * DEG, -c.fx, -c.fy,
+                                np.ones_like(c.x)])
+
+
+class ZScale(Effect):
+    name, params, units = "z_scale", ("scale",), ("1",)
+
+    def columns(self, c):
+        return c.f[:, None]
+
+
+class ProbeRadius(Effect):
+    name, params, units = "probe_radius", ("radius",), ("mm",)
+
+    def columns(self, c):
+        return (np.sqrt(1.0 + c.fx**2 + c.fy**2) - 1.0)[:, None]
+
+
+class Squareness(Effect):
+    name, params, units = "squareness", ("eb0c_arcsec",), ("arcsec",)
+
+    def columns(self, c):
+        return (-c.r * ARCSEC)[:, None]
+
+
+def _lobes(c_deg, ks):
+    a = np.deg2rad(c_deg)
+    return np.column_stack([f(k * a) for k in ks for f in (np.cos, np.sin)])
+
+
+class SpindleTilt(Effect):
+    name = "spindle_tilt"
+    lobes = (2, 3, 4)
+    params = tuple(f"{ab}{k}_arcsec" for k in lobes for ab in ("a", "b"))
+    units = ("arcsec",) * 6
+
+    def columns(self, c):
+        return -c.r[:, None] * ARCSEC * _lobes(c.c, self.lobes)
+
+
+class SpindleAxial(Effect):
+    name = "spindle_axial"
+    lobes = (1, 2, 3, 4)
+    params = tuple(f"{ab}{k}" for k in lobes for ab in ("a", "b"))
+    units = ("mm",) * 8
+
+    def columns(self, c):
+        return _lobes(c.c, self.lobes)
+
+
+class Straightness(Effect):
+    name, params, units = "straightness", ("s2", "s3", "s4"), ("mm", "mm", "mm")
+
+    def columns(self, c):
+        r = c.r
+        R = float(r.max()) or 1.0
+        return np.column_stack([(r / R) ** k for k in (2, 3, 4)])
+
+
+class ThermalDrift(Effect):
+    name, params, units = "thermal_drift", ("d1", "d2"), ("mm", "mm")
+
+    def columns(self, c):
+        T = float(np.ptp(c.t)) or 1.0
+        tau = (c.t - c.t.min()) / T
+        return np.column_stack([tau, tau * tau])
+
+
+class DynamicLag(Effect):
+    name, params, units = "dynamic_lag", ("tau_s",), ("s",)
+
+    def columns(self, c):
+        return c.zdot[:, None]
+
+
+class Vibration(Effect):
+    name, params, units = "vibration", ("frequency_hz", "amplitude", "phase_deg"), ("Hz", "mm", "deg")
+    linear = False
+
+    def columns_at(self, c, f_hz):
+        w = 2 * np.pi * f_hz * c.t
+        return np.column_stack([np.cos(w), -np.sin(w)])  # A cos(wt + φ) = A cosφ cos wt − A sinφ sin wt
+
+    def apply(self, c, values):
+        unknown = set(values) - set(self.params)
+        if unknown:
+            raise KeyError(f"effect 'vibration' has no parameter(s) {sorted(unknown)}")
+        f = float(values.get("frequency_hz", 0.0))
+        A = float(values.get("amplitude", 0.0))
+        ph = np.deg2rad(float(values.get("phase_deg", 0.0)))
+        return self.columns_at(c, f) @ np.array([A * np.cos(ph), A * np.sin(ph)])
+
+    @staticmethod
+    def from_columns(f_hz, coef) -> dict:
+        A = float(np.hypot(*coef))
+        return {"frequency_hz": float(f_hz), "amplitude": A, "phase_deg": float(np.degrees(np.arctan2(coef[1], coef[0])))}
+
+
+class Volumetric(Effect):
+    name, params, units = "volumetric", ("cxx", "cxy", "cyy", "cxz", "cyz"), ("1/mm",) * 5
+
+    def columns(self, c):
+        return np.column_stack([c.x * c.x, c.x * c.y, c.y * c.y, c.x * c.f, c.y * c.f])
+
+
+LIBRARY: dict[str, Effect] = {e.name: e for e in (
+    Pose(), ZScale(), ProbeRadius(), Squareness(), SpindleTilt(), SpindleAxial(), Straightness(),
+    ThermalDrift(), DynamicLag(), Vibration(), Volumetric())}

@@ -1,0 +1,107 @@
+"""A measurement model (YAML): nominal surface, scan, probe, effects — and the simulator that runs it.
+
+    pointspro_model: 1
+    surface: {type: even_asphere, R: 200, k: -1, aperture: 50}
+    scan: {type: spiral, radius: 20, rpm: 30, pitch: 0.1, fs: 500}
+    probe: {noise: 2.0e-6}            # mm RMS of the probe's reading
+    seed: 1
+    effects:
+      - pose: {alpha_deg: 0.002, dz: 0.001}
+      - vibration: {frequency_hz: 37, amplitude: 5.0e-6}
+
+`pointspro simulate MODEL.yaml --out FILE` writes x, y, z, t, c (and xd, the encoder of an axis that
+follows the nominal) — z = f(x, y) + Σ effects + noise.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from ..errors import RecipeError
+from .effects import LIBRARY, ScanContext
+from .scan import ScanSpec, scan_points
+
+
+class ProbeSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    noise: float = Field(0.0, ge=0, description="RMS noise of the reading (mm)")
+    radius: float = Field(0.0, ge=0, description="tip radius (mm); an uncompensated radius is the "
+                          "probe_radius effect")
+
+
+class ModelSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    pointspro_model: int = Field(1, description="model format version")
+    surface: dict = Field(description="nominal surface, as in recipes")
+    scan: ScanSpec
+    probe: ProbeSpec = ProbeSpec()
+    seed: int = Field(0, description="seed of the noise")
+    effects: list[dict[str, dict]] = Field(default_factory=list, description="[{effect: {param: value}}]")
+
+    @field_validator("effects")
+    @classmethod
+    def _known(cls, v):
+        for i, e in enumerate(v):
+            if len(e) != 1:
+                raise ValueError(f"effect {i + 1}: one effect name per list item")
+            (name, params), = e.items()
+            if name not in LIBRARY:
+                raise ValueError(f"effect {i + 1}: unknown effect '{name}'; the library has "
+                                 f"{', '.join(LIBRARY)}")
+            bad = set(params or {}) - set(LIBRARY[name].params)
+            if bad:
+                raise ValueError(f"effect {i + 1} '{name}': unknown parameter(s) {sorted(bad)}; it has "
+                                 f"{', '.join(LIBRARY[name].params)}")
+        return v
+
+    def build_surface(self, base_dir=None):
+        from ..surfaces import surface_from_spec
+
+        return surface_from_spec(self.surface, base_dir)
+
+    def to_yaml(self) -> str:
+        import yaml
+
+        return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False, default_flow_style=None)
+
+
+def load_model(path) -> ModelSpec:
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise RecipeError(f"{path}: model file not found")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as e:
+        raise RecipeError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
+    if not isinstance(data, dict) or "pointspro_model" not in data:
+        raise RecipeError(f"{path}: not a PointsPro measurement model (no 'pointspro_model:' key)")
+    try:
+        return ModelSpec.model_validate(data)
+    except ValidationError as e:
+        err = e.errors()[0]
+        key = ".".join(str(k) for k in err["loc"])
+        raise RecipeError(f"{path}: key '{key}': {err['msg']}") from None
+
+
+def effects_dz(ctx: ScanContext, effects: list[dict]) -> np.ndarray:
+    dz = np.zeros_like(ctx.x)
+    for e in effects:
+        (name, params), = e.items()
+        dz = dz + LIBRARY[name].apply(ctx, params or {})
+    return dz
+
+
+def simulate(model: ModelSpec, base_dir=None, at: dict | None = None, noise: bool = True) -> dict:
+    """Columns x, y, z, t, c, xd of the simulated measurement; ``at`` (x, y, t, c) to evaluate the
+    model at given scan coordinates instead of its own scan (explain does, to match a measurement)."""
+    pts = scan_points(model.scan) if at is None else at
+    surf = model.build_surface(base_dir)
+    ctx = ScanContext.from_surface(surf, pts["x"], pts["y"], pts["t"], pts["c"])
+    z = ctx.f + effects_dz(ctx, model.effects)
+    if noise and model.probe.noise > 0:
+        z = z + np.random.default_rng(model.seed).normal(0, model.probe.noise, z.size)
+    return {"x": ctx.x, "y": ctx.y, "z": z, "t": ctx.t, "c": ctx.c, "xd": ctx.f.copy()}

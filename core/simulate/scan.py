@@ -1,0 +1,60 @@
+"""Scan paths with their timing: raster (serpentine rows), star (spokes), spiral (spindle + slide).
+
+Every path gives x, y (mm, part frame), t (s) and c (deg, the spindle angle: on a spiral the polar
+angle of the probed point; on raster and star paths the polar angle too, for effects written in c).
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class ScanSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: Literal["raster", "star", "spiral"] = Field(description="path shape")
+    radius: float = Field(gt=0, description="radius of the scanned disk (mm)")
+    spacing: float = Field(1.0, gt=0, description="raster/star: point spacing along a line (mm)")
+    lines: int = Field(20, ge=1, le=100000, description="raster: rows; star: spokes")
+    speed: float = Field(10.0, gt=0, description="raster/star: scan speed (mm/s)")
+    rpm: float = Field(30.0, gt=0, description="spiral: spindle speed (rev/min)")
+    pitch: float = Field(0.1, gt=0, description="spiral: radial feed per revolution (mm/rev)")
+    fs: float = Field(1000.0, gt=0, description="spiral: sampling rate (Hz)")
+    direction: Literal["inward", "outward"] = Field("inward", description="spiral: from the rim inward "
+                                                    "or from the centre outward")
+
+
+def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
+    R = spec.radius
+    if spec.type == "spiral":
+        revs = R / spec.pitch
+        T = revs * 60.0 / spec.rpm
+        n = int(T * spec.fs)
+        if n > 5_000_000:
+            raise ValueError(f"the spiral has {n} samples; lower fs or raise pitch")
+        t = np.arange(n) / spec.fs
+        c = (360.0 * spec.rpm / 60.0 * t) % 360.0
+        frac = t / T
+        r = R * (1 - frac) if spec.direction == "inward" else R * frac
+        a = np.deg2rad(c)
+        return {"x": r * np.cos(a), "y": r * np.sin(a), "t": t, "c": c}
+    xs, ys = [], []
+    if spec.type == "raster":
+        for k, y in enumerate(np.linspace(-R, R, spec.lines)):
+            half = np.sqrt(max(R * R - y * y, 0.0))
+            x = np.arange(-half, half + 1e-9, spec.spacing)
+            xs.append(x if k % 2 == 0 else x[::-1])
+            ys.append(np.full(x.size, y))
+    else:  # star
+        for k in range(spec.lines):
+            a = np.pi * k / spec.lines
+            s = np.arange(-R, R + 1e-9, spec.spacing)
+            s = s if k % 2 == 0 else s[::-1]
+            xs.append(s * np.cos(a))
+            ys.append(s * np.sin(a))
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    step = np.r_[0.0, np.hypot(np.diff(x), np.diff(y))]
+    t = np.cumsum(step) / spec.speed
+    c = np.degrees(np.arctan2(y, x)) % 360.0
+    return {"x": x, "y": y, "t": t, "c": c}
