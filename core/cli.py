@@ -234,7 +234,8 @@ def cmd_simulate(args) -> int:
         from .errors import RecipeError
 
         raise RecipeError(f"{args.model}: {e}") from None
-    cloud = PointCloud.from_xyz(sim["x"], sim["y"], sim["z"], t=sim["t"], c=sim["c"], xd=sim["xd"])
+    extra = {"fiducial": sim["fiducial"]} if "fiducial" in sim else {}
+    cloud = PointCloud.from_xyz(sim["x"], sim["y"], sim["z"], t=sim["t"], c=sim["c"], xd=sim["xd"], **extra)
     write_cloud(cloud, args.out)
     print(f"{args.out}: {cloud.n} simulated points")
     return EXIT_OK

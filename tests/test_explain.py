@@ -121,6 +121,21 @@ def test_time_versus_radius_on_a_spiral_is_ambiguous(tmp_path):
     assert rep["gap_after"]["rms_um"] <= 1.5 * NOISE * 1e3
 
 
+def test_scan_paths():
+    from pointspro.core.simulate.scan import ScanSpec, scan_points
+
+    sp = scan_points(ScanSpec(type="spiral", radius=10, rpm=60, pitch=0.5, fs=100))
+    assert sp["x"].size == 2000 and np.hypot(sp["x"], sp["y"]).max() <= 10
+    assert np.allclose(np.diff(sp["t"]), 0.01)
+    ra = scan_points(ScanSpec(type="raster", radius=10, spacing=0.5, lines=11, speed=5))
+    assert np.all(np.diff(ra["t"]) >= 0) and np.hypot(ra["x"], ra["y"]).max() <= 10 + 1e-9
+    fi = scan_points(ScanSpec(type="fiducials", radius=50, centers=[(20, 0), (-20, 10)], patch=6, points=20))
+    assert fi["x"].size == 40 and set(fi["fiducial"]) == {1, 2}
+    assert np.abs(fi["x"][fi["fiducial"] == 1] - 20).max() <= 3 + 1e-9
+    with pytest.raises(ValueError, match="needs `centers`"):
+        scan_points(ScanSpec(type="fiducials", radius=5))
+
+
 def test_commands_and_simulated_file(tmp_path, run_cli):
     truth = model(BASE_EFFECTS + [{"spindle_axial": {"a1": 1e-5, "b2": -6e-6}}])
     write_model(tmp_path / "truth.yaml", truth)

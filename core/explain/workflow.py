@@ -204,39 +204,49 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
 
 
 def _figures(folder, ctx, gap, after, found, order):
+    """gap_map.png (before/after maps) and gap_views.png: the gap against radius, spindle angle,
+    time and scan velocity, and its spectrum along the scan — the first found effect's view first."""
     from ..figures import _figure, before_after, save_png
 
     save_png(before_after(ctx.x, ctx.y, gap, after, what="adding the found effects"), folder / "gap_map.png")
-    view = _view(found[0]["effect"]) if found else "radius"
-    fig = _figure(11, 4.2)
-    ax1, ax2 = fig.subplots(1, 2)
-    if view == "angle":
-        xv, lab = ctx.c, "spindle angle c (deg)"
-    elif view in ("time", "spectrum"):
-        xv, lab = ctx.t, "time (s)"
-    else:
-        xv, lab = ctx.r, "radius (mm)"
-    k = max(gap.size // 20000, 1)
-    ax1.plot(xv[::k], (gap - gap.mean())[::k] * 1e3, ",", alpha=0.5, label="before")
-    ax1.plot(xv[::k], (after - after.mean())[::k] * 1e3, ",", alpha=0.5, label="after")
-    ax1.set_xlabel(lab)
-    ax1.set_ylabel("gap (µm)")
-    ax1.legend(markerscale=20, fontsize=8)
-    ax1.set_title("the gap against " + lab.split(" (")[0], fontsize=10)
     t = ctx.t[order]
-    if np.ptp(t) > 0 and np.std(np.diff(t)) < 1e-3 * np.mean(np.diff(t)):
+    uniform = np.ptp(t) > 0 and np.std(np.diff(t)) < 1e-3 * np.mean(np.diff(t))
+    speed = np.zeros_like(ctx.x)
+    if np.ptp(ctx.t) > 0:
+        v = np.hypot(np.gradient(ctx.x[order], t), np.gradient(ctx.y[order], t))
+        speed[order] = v
+    views = [("radius (mm)", ctx.r), ("spindle angle c (deg)", ctx.c), ("time (s)", ctx.t),
+             ("scan speed (mm/s)", speed)]
+    first = _view(found[0]["effect"]) if found else "radius"
+    views.sort(key=lambda v: 0 if v[0].startswith({"angle": "spindle", "time": "time", "spectrum": "time"}
+                                                     .get(first, "radius")) else 1)
+    fig = _figure(14, 7.5)
+    axes = fig.subplots(2, 3).ravel()
+    k = max(gap.size // 20000, 1)
+    g0, a0 = gap - gap.mean(), after - after.mean()
+    for ax, (lab, xv) in zip(axes[:4], views):
+        ax.plot(xv[::k], g0[::k] * 1e3, ",", alpha=0.5, label="before")
+        ax.plot(xv[::k], a0[::k] * 1e3, ",", alpha=0.5, label="after")
+        ax.set_xlabel(lab, fontsize=8)
+        ax.set_ylabel("gap (µm)", fontsize=8)
+        ax.set_title("against " + lab.split(" (")[0], fontsize=9)
+    axes[0].legend(markerscale=20, fontsize=8)
+    ax = axes[4]
+    if uniform:
         from scipy.signal import welch
 
         fs = 1.0 / np.mean(np.diff(t))
         for v, name in ((gap, "before"), (after, "after")):
             f, p = welch(v[order] - v.mean(), fs=fs, nperseg=min(v.size, 4096))
-            ax2.loglog(f[1:], p[1:] * 1e6, lw=1, label=name)
-        ax2.set_xlabel("frequency (Hz)")
-        ax2.set_ylabel("PSD (µm²/Hz)")
-        ax2.legend(fontsize=8)
-        ax2.set_title("spectrum of the gap along the scan", fontsize=10)
+            ax.loglog(f[1:], p[1:] * 1e6, lw=1, label=name)
+        ax.set_xlabel("frequency (Hz)", fontsize=8)
+        ax.set_ylabel("PSD (µm²/Hz)", fontsize=8)
+        ax.legend(fontsize=8)
+        ax.set_title("spectrum along the scan", fontsize=9)
     else:
-        ax2.set_axis_off()
+        ax.set_axis_off()
+    axes[5].set_axis_off()
+    fig.subplots_adjust(hspace=0.45, wspace=0.3)
     save_png(fig, folder / "gap_views.png")
 
 

@@ -104,4 +104,7 @@ def simulate(model: ModelSpec, base_dir=None, at: dict | None = None, noise: boo
     z = ctx.f + effects_dz(ctx, model.effects)
     if noise and model.probe.noise > 0:
         z = z + np.random.default_rng(model.seed).normal(0, model.probe.noise, z.size)
-    return {"x": ctx.x, "y": ctx.y, "z": z, "t": ctx.t, "c": ctx.c, "xd": ctx.f.copy()}
+    out = {"x": ctx.x, "y": ctx.y, "z": z, "t": ctx.t, "c": ctx.c, "xd": ctx.f.copy()}
+    if "fiducial" in pts:
+        out["fiducial"] = np.asarray(pts["fiducial"])
+    return out

@@ -2,6 +2,7 @@
 
 Every path gives x, y (mm, part frame), t (s) and c (deg, the spindle angle: on a spiral the polar
 angle of the probed point; on raster and star paths the polar angle too, for effects written in c).
+A fiducial pattern probes a square patch around each centre (channel `fiducial`, 1, 2, …).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 class ScanSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-    type: Literal["raster", "star", "spiral"] = Field(description="path shape")
+    type: Literal["raster", "star", "spiral", "fiducials"] = Field(description="path shape")
     radius: float = Field(gt=0, description="radius of the scanned disk (mm)")
     spacing: float = Field(1.0, gt=0, description="raster/star: point spacing along a line (mm)")
     lines: int = Field(20, ge=1, le=100000, description="raster: rows; star: spokes")
@@ -23,6 +24,10 @@ class ScanSpec(BaseModel):
     fs: float = Field(1000.0, gt=0, description="spiral: sampling rate (Hz)")
     direction: Literal["inward", "outward"] = Field("inward", description="spiral: from the rim inward "
                                                     "or from the centre outward")
+    centers: list[tuple[float, float]] = Field(default_factory=list, description="fiducials: (x, y) of "
+                                               "each ball or mark (mm)")
+    patch: float = Field(6.0, gt=0, description="fiducials: side of the square patch probed on each (mm)")
+    points: int = Field(20, ge=1, le=100000, description="fiducials: points per patch")
 
 
 def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
@@ -40,6 +45,22 @@ def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
         a = np.deg2rad(c)
         return {"x": r * np.cos(a), "y": r * np.sin(a), "t": t, "c": c}
     xs, ys = [], []
+    if spec.type == "fiducials":
+        if not spec.centers:
+            raise ValueError("a fiducial scan needs `centers`")
+        k = int(np.ceil(np.sqrt(spec.points)))
+        u = (np.arange(k) / max(k - 1, 1) - 0.5) * spec.patch
+        U, V = np.meshgrid(u, u)
+        U, V = U.ravel()[: spec.points], V.ravel()[: spec.points]
+        ids = []
+        for i, (cx, cy) in enumerate(spec.centers):
+            xs.append(cx + U)
+            ys.append(cy + V)
+            ids.append(np.full(U.size, i + 1))
+        x, y = np.concatenate(xs), np.concatenate(ys)
+        t = np.arange(x.size) * spec.spacing / spec.speed
+        return {"x": x, "y": y, "t": t, "c": np.degrees(np.arctan2(y, x)) % 360.0,
+                "fiducial": np.concatenate(ids)}
     if spec.type == "raster":
         for k, y in enumerate(np.linspace(-R, R, spec.lines)):
             half = np.sqrt(max(R * R - y * y, 0.0))
