@@ -1,0 +1,1 @@
+"""Calibrations done once and applied to many measurements."""

@@ -1,0 +1,74 @@
+"""`z_scale`: correct the z axis's amplification error (seed paper 000 §2.6, §3.2).
+
+Either from ``calibration`` — a CSV of step-artefact scans (columns x, z in mm, optional `scan` for
+repeats) with the calibrated ``heights`` (µm, in the order the steps occur along x) — evaluated by
+core.calibration.zscale (ISO 5436-1 line fits, amplification = slope of measured vs calibrated,
+linearity = largest deviation), or from a known ``amplification``. Heights are corrected about the
+cloud's mean: z' = z̄ + (z − z̄)/m (and the residual likewise, when present).
+"""
+from __future__ import annotations
+
+import numpy as np
+from pydantic import model_validator
+
+from pointspro.core.step import Context, Params, Step, StepResult, param
+
+
+class ZScaleParams(Params):
+    calibration: str | None = param(None, help="step-artefact scans (CSV x, z [, scan]), relative to "
+                                    "the recipe; give this or amplification")
+    heights: list[float] = param(default_factory=list, unit="µm",
+                                 help="calibrated step heights in the order along x")
+    amplification: float | None = param(None, gt=0.5, lt=2.0, help="known amplification coefficient "
+                                        "(measured / true height); give this or calibration")
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        if (self.calibration is None) == (self.amplification is None):
+            raise ValueError("give exactly one of calibration and amplification")
+        if self.calibration is not None and len(self.heights) < 2:
+            raise ValueError("a calibration needs at least two calibrated heights")
+        return self
+
+
+class ZScaleStep(Step):
+    id = "z_scale"
+    title = "z-scale correction"
+    summary = "Amplification of the z axis from a step artefact (or given), removed from the heights."
+    Params = ZScaleParams
+
+    def run(self, cloud, params: ZScaleParams, ctx: Context) -> StepResult:
+        ctx.progress.check()
+        report = {"warnings": []}
+        arts = {}
+        if params.calibration is not None:
+            from pointspro.core.calibration.zscale import calibrate
+            from pointspro.core.io.text import read_table
+            from pointspro.plugins.dynamic_id import resolve
+
+            p = resolve(params.calibration, ctx)
+            cols = read_table(p, ("x", "z"))
+            scan = cols.get("scan", np.zeros(cols["x"].size))
+            cal = calibrate(cols["x"], cols["z"], scan, np.asarray(params.heights) * 1e-3)
+            m = cal.amplification
+            report.update(cal.describe())
+            import json
+
+            arts["z_scale.json"] = json.dumps({"pointspro_z_scale": 1, **cal.describe()}, indent=2) + "\n"
+        else:
+            m = params.amplification
+            report["amplification"] = m
+        z = cloud.z
+        zbar = float(z.mean()) if cloud.n else 0.0
+        znew = zbar + (z - zbar) / m
+        ch = {}
+        if "residual" in cloud.channels:
+            r = cloud["residual"]
+            ch["residual"] = r.mean() + (r - r.mean()) / m
+        out = cloud.replace(xyz=np.column_stack([cloud.x, cloud.y, znew]), channels=ch or None)
+        report["z_change_pv_um"] = float(np.ptp(znew - z) * 1e3) if cloud.n else 0.0
+        return StepResult(out, report, arts)
+
+    @classmethod
+    def example_params(cls) -> dict:
+        return {"amplification": 0.9754}
