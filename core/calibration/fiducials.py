@@ -1,0 +1,179 @@
+"""Fiducial-aided calibration: the 12-parameter transform between calibrated and measured fiducial
+centres with its GUM uncertainty (seed papers 000 eqs 3–11 and 001 eqs 1–14).
+
+    X_c = D X_r + A        (D a full 3 × 3 matrix: rotation, scale and shear of the machine frame;
+                            A the translation — 12 parameters D1…D9, Ax, Ay, Az)
+fitted by weighted least squares, χ² = Σ_i Σ_k (X_m,ik − X_c,ik)² / σ_m,k² (001 eq 11). Each axis k is
+a linear least-squares problem in (D_k1, D_k2, D_k3, A_k) with the design [X_r, 1]; its covariance
+σ_m,k² (XᵀX)⁻¹ is the inverse normal matrix of 001 eq 15/16. The calibrated positions carry σ_r too
+(001 eqs 6–7): their effect is propagated by the Jacobian ∂θ/∂X_r (computed by central differences)
+and added: Σθ = Σ_m + J_r diag(σ_r²) J_rᵀ. A transformed point's standard uncertainty is
+u(X_c)² = g Σθ gᵀ with g = ∂X_c/∂θ (001 eqs 12–14, with every covariance term). The reduced χ² is
+reported against 3N − 12 degrees of freedom (000 prints 3N − 8).
+
+The affine transform needs four fiducials that are not coplanar (rank of [X_r, 1] = 4); fewer, or a
+nearly coplanar set (condition number of the centred positions > 1e3), is said with the numbers.
+Volumetric error at a fiducial: e_i = X_c(X_r,i) − X_m,i, Ev_i = |e_i| (000).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import StepError
+
+PARAMS = ("D1", "D2", "D3", "D4", "D5", "D6", "D7", "D8", "D9", "Ax", "Ay", "Az")
+
+
+def layout_check(ref) -> tuple[float, list[str]]:
+    """(condition number of the centred layout, warnings); StepError when it cannot determine D."""
+    ref = np.asarray(ref, dtype=np.float64)
+    n = ref.shape[0]
+    if n < 3:
+        raise StepError(f"{n} fiducial(s): the transform needs at least 3 non-collinear balls "
+                        "(4 non-coplanar for all 12 parameters)")
+    s = np.linalg.svd(ref - ref.mean(axis=0), compute_uv=False)
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    if s[1] <= 1e-9 * s[0]:
+        raise StepError(f"the {n} fiducials are collinear (singular values {s.round(6).tolist()} mm): "
+                        "no transform can be determined")
+    if n < 4 or s[2] <= 1e-9 * s[0]:
+        raise StepError(f"the {n} fiducials are coplanar (singular values {s.round(6).tolist()} mm): "
+                        "the 12-parameter transform is undetermined out of their plane — add a ball "
+                        "at another height (4 non-coplanar at least)")
+    warnings = []
+    if cond > 1e3:
+        warnings.append(f"the fiducials are nearly coplanar (condition number {cond:.3g}): the transform "
+                        "is poorly determined out of their plane")
+    if 3 * n - 12 <= 6:
+        warnings.append(f"{n} fiducials leave {3 * n - 12} degrees of freedom for the χ² check")
+    return cond, warnings
+
+
+def _solve(ref, meas):
+    X = np.column_stack([ref, np.ones(len(ref))])
+    theta, *_ = np.linalg.lstsq(X, meas, rcond=None)  # (4, 3): column k = (D_k1, D_k2, D_k3, A_k)
+    D = theta[:3].T
+    A = theta[3]
+    return np.r_[D.ravel(), A]
+
+
+@dataclass
+class AffineFit:
+    theta: np.ndarray            # (12,) D1…D9, Ax, Ay, Az
+    cov: np.ndarray              # (12, 12)
+    chi2: float
+    dof: int
+    cond: float
+    residuals: np.ndarray        # (N, 3) measured − transformed (mm)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def D(self):
+        return self.theta[:9].reshape(3, 3)
+
+    @property
+    def A(self):
+        return self.theta[9:]
+
+    def transform(self, p) -> np.ndarray:
+        return np.asarray(p, dtype=np.float64) @ self.D.T + self.A
+
+    def inverse(self, q) -> np.ndarray:
+        return np.linalg.solve(self.D, (np.asarray(q, dtype=np.float64) - self.A).T).T
+
+    def jacobian(self, p) -> np.ndarray:
+        """(N, 3, 12) ∂X_c/∂θ."""
+        p = np.atleast_2d(np.asarray(p, dtype=np.float64))
+        J = np.zeros((p.shape[0], 3, 12))
+        for k in range(3):
+            J[:, k, 3 * k: 3 * k + 3] = p
+            J[:, k, 9 + k] = 1.0
+        return J
+
+    def point_sigma(self, p) -> np.ndarray:
+        """(N, 3) standard uncertainties of transformed points (001 eqs 12–14, full covariance)."""
+        J = self.jacobian(p)
+        return np.sqrt(np.einsum("nkp,pq,nkq->nk", J, self.cov, J))
+
+    @property
+    def volumetric_errors(self) -> np.ndarray:
+        return -self.residuals
+
+    def to_dict(self) -> dict:
+        return {"params": dict(zip(PARAMS, self.theta.tolist())), "covariance": self.cov.tolist(),
+                "chi2": self.chi2, "dof": self.dof, "chi2_reduced": self.chi2 / max(self.dof, 1),
+                "condition_number": self.cond}
+
+
+def fit_affine(ref, meas, sigma_m, sigma_r=(0.0, 0.0, 0.0)) -> AffineFit:
+    """The weighted fit and its covariance (module doc). σ in mm, per axis."""
+    ref = np.asarray(ref, dtype=np.float64)
+    meas = np.asarray(meas, dtype=np.float64)
+    sm = np.broadcast_to(np.asarray(sigma_m, dtype=np.float64), (3,))
+    sr = np.broadcast_to(np.asarray(sigma_r, dtype=np.float64), (3,))
+    if np.any(sm <= 0):
+        raise StepError("the measured fiducials' σ must be > 0 in every axis")
+    cond, warnings = layout_check(ref)
+    theta = _solve(ref, meas)
+    X = np.column_stack([ref, np.ones(len(ref))])
+    inv = np.linalg.inv(X.T @ X)
+    cov = np.zeros((12, 12))
+    for k in range(3):
+        idx = [3 * k, 3 * k + 1, 3 * k + 2, 9 + k]
+        cov[np.ix_(idx, idx)] = sm[k] ** 2 * inv
+    if np.any(sr > 0):
+        h = 1e-6
+        Jr = np.zeros((12, ref.size))
+        for i in range(ref.shape[0]):
+            for k in range(3):
+                dp = np.zeros_like(ref)
+                dp[i, k] = h
+                Jr[:, 3 * i + k] = (_solve(ref + dp, meas) - _solve(ref - dp, meas)) / (2 * h)
+        cov = cov + Jr @ np.diag(np.tile(sr ** 2, ref.shape[0])) @ Jr.T
+    fit = AffineFit(theta, cov, 0.0, 3 * len(ref) - 12, cond, np.zeros_like(ref), warnings)
+    fit.residuals = meas - fit.transform(ref)
+    fit.chi2 = float(np.sum(fit.residuals ** 2 / sm ** 2))
+    return fit
+
+
+def monte_carlo(ref, meas, sigma_m, sigma_r, points, runs: int = 3000, seed: int = 0) -> np.ndarray:
+    """GUM Supplement 1: the (N, 3) standard deviation of transformed ``points`` over ``runs`` fits
+    with the measured and calibrated centres drawn from their normal distributions."""
+    rng = np.random.default_rng(seed)
+    ref = np.asarray(ref, float)
+    meas = np.asarray(meas, float)
+    out = np.empty((runs, len(points), 3))
+    sm = np.broadcast_to(np.asarray(sigma_m, float), (3,))
+    sr = np.broadcast_to(np.asarray(sigma_r, float), (3,))
+    P = np.asarray(points, float)
+    for r in range(runs):
+        th = _solve(ref + rng.normal(0, 1, ref.shape) * sr, meas + rng.normal(0, 1, meas.shape) * sm)
+        out[r] = P @ th[:9].reshape(3, 3).T + th[9:]
+    return out.std(axis=0, ddof=1)
+
+
+def count_study(ref, meas, sigma_m, counts, runs: int = 200, seed: int = 0) -> list[dict]:
+    """000 Fig. 3: how Ev (RMS over all fiducials of |X_c − X_m|, the transform fitted on random
+    subsets of n fiducials) settles with n; mean and spread over ``runs`` subsets per n."""
+    rng = np.random.default_rng(seed)
+    ref = np.asarray(ref, float)
+    meas = np.asarray(meas, float)
+    out = []
+    for n in counts:
+        if n < 4 or n > len(ref):
+            continue
+        ev = []
+        for _ in range(runs):
+            pick = rng.choice(len(ref), n, replace=False)
+            s = np.linalg.svd(ref[pick] - ref[pick].mean(axis=0), compute_uv=False)
+            if s[2] <= 1e-6 * s[0]:
+                continue
+            th = _solve(ref[pick], meas[pick])
+            e = ref @ th[:9].reshape(3, 3).T + th[9:] - meas
+            ev.append(np.sqrt(np.mean(np.sum(e * e, axis=1))))
+        if ev:
+            out.append({"fiducials": int(n), "ev_mean_um": float(np.mean(ev) * 1e3),
+                        "ev_std_um": float(np.std(ev) * 1e3)})
+    return out

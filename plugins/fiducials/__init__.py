@@ -1,0 +1,201 @@
+"""`fiducials`: fiducial-aided calibration (seed papers 000 and 001).
+
+Input cloud: probe points on the fiducial balls with a `fiducial` channel (ball id), e.g. 20 points on
+a 6 × 6 mm patch per ball. ``reference``: CSV `fiducial, x, y, z` of the calibrated centres (the CMM's
+frame). Each ball's centre is fitted (sphere of the calibrated ``diameter``, or free) with its
+uncertainty; the 12-parameter transform by weighted least squares with its GUM covariance, checked by
+Monte Carlo (GUM Supplement 1); the volumetric errors at the fiducials and Ev; the fiducial-count study
+(000 Fig. 3); a GP of the volumetric error (core.calibration.gp: spectral mixture vs RBF vs Matérn by
+leave-one-out). Writes ``volumetric_model.json`` (what `volumetric` applies), ``volumetric_grid.csv``
+(predicted error and its uncertainty on a grid over the workspace) and figures. The cloud passes
+through unchanged.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from pointspro.core.errors import InputError, StepError
+from pointspro.core.step import Context, Params, Step, StepResult, param
+
+
+class FiducialsParams(Params):
+    reference: str = param(help="calibrated centres: CSV fiducial, x, y, z (mm), relative to the recipe")
+    diameter: float | None = param(9.997, gt=0, unit="mm", help="ball diameter; empty: fitted freely")
+    sigma_reference: float = param(0.2, ge=0, unit="µm", help="standard uncertainty of the calibrated "
+                                   "centres (001: 0.2 µm)")
+    sigma_measured: float | None = param(None, gt=0, unit="µm", help="σ of the measured centres; empty: "
+                                         "from the ball fits (RMS of their centre uncertainties)")
+    Q: int = param(10, ge=1, le=30, help="components of the spectral-mixture kernel (000: 10)")
+    monte_carlo_runs: int = param(2000, ge=0, le=100000, help="GUM S1 check runs (0: none)")
+    grid: int = param(9, ge=2, le=60, help="nodes per axis of the predicted-error grid")
+
+
+def fit_centres(cloud, diameter):
+    from pointspro.core.geometry.fits import fit_sphere
+
+    ids = cloud["fiducial"].astype(int)
+    out = {}
+    for i in np.unique(ids):
+        p = cloud.xyz[ids == i]
+        if len(p) < 5:
+            raise StepError(f"fiducial {i}: {len(p)} points — a ball needs at least 5")
+        f = fit_sphere(p, None if diameter is None else diameter / 2)
+        rms = float(np.sqrt(np.mean(f.residuals**2)))
+        if rms > 0.01 * (diameter or 10.0):
+            raise StepError(f"fiducial {i}: the points are not on a sphere (fit RMS {rms * 1e3:.3g} µm)")
+        out[int(i)] = (np.array([f.params["x0"], f.params["y0"], f.params["z0"]]), f.covariance[:3, :3], rms)
+    return out
+
+
+def arrows_figure(ref, errors, title):
+    from pointspro.core.figures import _figure
+
+    fig = _figure(11, 4.4)
+    ax1, ax2 = fig.subplots(1, 2)
+    e = errors * 1e3
+    q = ax1.quiver(ref[:, 0], ref[:, 1], e[:, 0], e[:, 1], np.linalg.norm(e, axis=1), cmap="viridis")
+    fig.colorbar(q, ax=ax1, label="|e| (µm)")
+    ax1.set_xlabel("x (mm)")
+    ax1.set_ylabel("y (mm)")
+    ax1.set_title("volumetric errors at the fiducials (x–y)", fontsize=10)
+    ax2.bar(np.arange(len(e)), np.linalg.norm(e, axis=1))
+    ax2.set_xlabel("fiducial")
+    ax2.set_ylabel("Ev (µm)")
+    ax2.set_title(title, fontsize=10)
+    return fig
+
+
+class FiducialsStep(Step):
+    id = "fiducials"
+    title = "Fiducial calibration (transform, GUM, GP)"
+    summary = "Ball centres → 12-parameter transform with GUM uncertainty → GP volumetric model."
+    Params = FiducialsParams
+
+    def run(self, cloud, params: FiducialsParams, ctx: Context) -> StepResult:
+        import json
+
+        from pointspro.core.calibration import volumetric_model as vm
+        from pointspro.core.calibration.fiducials import count_study, fit_affine, monte_carlo
+        from pointspro.core.calibration.gp import fit_gp
+        from pointspro.core.figures import png_artifact
+        from pointspro.core.io.text import read_table
+        from pointspro.plugins.dynamic_id import resolve
+
+        if "fiducial" not in cloud.channels:
+            raise StepError("the cloud has no 'fiducial' channel (ball id of each probe point)")
+        ctx.progress.check()
+        p = resolve(params.reference, ctx)
+        ref_cols = read_table(p, ("fiducial", "x", "y", "z"))
+        ref_ids = ref_cols["fiducial"].astype(int).tolist()
+        centres = fit_centres(cloud, params.diameter)
+        missing = sorted(set(centres) - set(ref_ids))
+        if missing:
+            raise InputError(f"{p}: fiducial(s) {missing} are measured but not in the reference")
+        absent = sorted(set(ref_ids) - set(centres))
+        warnings = []
+        if absent:
+            warnings.append(f"fiducial(s) {absent} of the reference were not measured")
+        ids = sorted(centres)
+        ref = np.array([[ref_cols[a][ref_ids.index(i)] for a in "xyz"] for i in ids])
+        meas = np.array([centres[i][0] for i in ids])
+        sm = params.sigma_measured * 1e-3 if params.sigma_measured else float(
+            np.sqrt(np.mean([np.trace(centres[i][1]) / 3 for i in ids])))
+        sm = max(sm, 1e-7)
+        sr = params.sigma_reference * 1e-3
+        ctx.progress.update(0.2, "transform")
+        fit = fit_affine(ref, meas, sm, sr)
+        warnings += fit.warnings
+        e = fit.volumetric_errors
+        ev = np.linalg.norm(e, axis=1)
+        # the GP and the workspace live in the machine frame: that is where `volumetric` applies them
+        lo, hi = meas.min(axis=0), meas.max(axis=0)
+        rc = 0.5 * (ref.min(axis=0) + ref.max(axis=0))
+        centre = rc
+        u_prop = fit.point_sigma(centre[None, :])[0]
+        mc = None
+        if params.monte_carlo_runs:
+            ctx.progress.update(0.3, "Monte Carlo")
+            mc = monte_carlo(ref, meas, sm, sr, centre[None, :], params.monte_carlo_runs)[0]
+        ctx.progress.update(0.45, "Gaussian process")
+        gps, gp_specs, loo = {}, {}, {}
+        for k, name in enumerate(("ex", "ey", "ez")):
+            ctx.progress.check()
+            gp, info = fit_gp(meas, e[:, k], Q=params.Q)
+            gps[name] = gp
+            gp_specs[name] = vm.encode_gp(gp, info["chosen"], meas, e[:, k])
+            loo[name] = {kk: v * 1e3 for kk, v in info["loo_rms"].items()} | {"chosen": info["chosen"]}
+        ctx.progress.update(0.85, "grid")
+        axes = [np.linspace(lo[d], hi[d], params.grid) for d in range(3)]
+        G = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        pred = np.column_stack([gps[n].predict(G, return_std=True)[0] for n in ("ex", "ey", "ez")])
+        std = np.column_stack([gps[n].predict(G, return_std=True)[1] for n in ("ex", "ey", "ez")])
+        grid_csv = "x,y,z,ex,ey,ez,ux,uy,uz\n" + "".join(
+            ",".join(repr(float(v)) for v in row) + "\n" for row in np.column_stack([G, pred, std]))
+        model_text = vm.dumps({"transform": fit.to_dict(), "workspace": np.column_stack([lo, hi]).tolist(),
+                               "gp": gp_specs, "loo_rms_um": loo})
+        counts = list(range(4, len(ids) + 1, max((len(ids) - 4) // 8, 1)))
+        report = {
+            "fiducials": len(ids), "sigma_measured_um": sm * 1e3, "sigma_reference_um": sr * 1e3,
+            "transform": dict(zip(("D1", "D2", "D3", "D4", "D5", "D6", "D7", "D8", "D9", "Ax", "Ay", "Az"),
+                                  fit.theta.tolist())),
+            "uncertainty": dict(zip(("D1", "D2", "D3", "D4", "D5", "D6", "D7", "D8", "D9", "Ax", "Ay", "Az"),
+                                    np.sqrt(np.diag(fit.cov)).tolist())),
+            "chi2": fit.chi2, "dof": fit.dof, "chi2_reduced": fit.chi2 / max(fit.dof, 1),
+            "condition_number": fit.cond,
+            "ev_um": (ev * 1e3).tolist(), "ev_rms_um": float(np.sqrt(np.mean(ev**2)) * 1e3),
+            "centre_uncertainty_gum_um": (u_prop * 1e3).tolist(),
+            "centre_uncertainty_monte_carlo_um": None if mc is None else (mc * 1e3).tolist(),
+            "gum_vs_monte_carlo": None if mc is None else (u_prop / mc).tolist(),
+            "fiducial_count_study": count_study(ref, meas, sm, counts, runs=50),
+            "gp_loo_rms_um": loo, "warnings": warnings,
+        }
+        arts = {"volumetric_model.json": model_text, "volumetric_grid.csv": grid_csv,
+                "fiducial_errors.png": png_artifact(arrows_figure, meas, e, f"Ev RMS {report['ev_rms_um']:.3g} µm")}
+        json.dumps(report)
+        return StepResult(cloud.replace(), report, arts)
+
+
+def ball_points(centres, diameter=9.997, per_ball=20, patch=6.0, noise=0.0, seed=0):
+    """Probe points on the top caps of balls (a 6 × 6 mm patch, as 000), with a `fiducial` channel."""
+    rng = np.random.default_rng(seed)
+    R = diameter / 2
+    k = int(np.ceil(np.sqrt(per_ball)))
+    u = (np.arange(k) / max(k - 1, 1) - 0.5) * patch
+    U, V = [a.ravel()[:per_ball] for a in np.meshgrid(u, u)]
+    pts, ids = [], []
+    for i, c in enumerate(np.asarray(centres, float)):
+        w = np.sqrt(R * R - U * U - V * V)
+        p = c + np.column_stack([U, V, w])
+        p = p + rng.normal(0, noise, p.shape)
+        pts.append(p)
+        ids.append(np.full(len(p), i + 1))
+    return np.vstack(pts), np.concatenate(ids)
+
+
+def _example_layout():
+    g = np.array([[x, y, z] for x in (-90.0, 90.0) for y in (-15.0, 15.0) for z in (5.0, 45.0)])
+    return np.vstack([g, [[0.0, 0.0, 25.0], [40.0, -10.0, 15.0]]])
+
+
+FiducialsStep.example_cloud = classmethod(lambda cls, cloud: _example_cloud())
+FiducialsStep.example_params = classmethod(lambda cls: _example_params())
+
+
+def _example_cloud():
+    from pointspro.core import PointCloud
+
+    ref = _example_layout()
+    meas = ref @ np.array([[1, 2e-5, 0], [-2e-5, 1, 1e-5], [0, 0, 1.00001]]).T + [0.5, -0.2, 0.1]
+    pts, ids = ball_points(meas)
+    return PointCloud.from_xyz(*pts.T, fiducial=ids)
+
+
+def _example_params():
+    import tempfile
+    from pathlib import Path
+
+    d = Path(tempfile.mkdtemp(prefix="pointspro-fid-"))
+    ref = _example_layout()
+    np.savetxt(d / "reference.csv", np.column_stack([np.arange(1, len(ref) + 1), ref]), delimiter=",",
+               header="fiducial,x,y,z", comments="", fmt="%.10g")
+    return {"reference": str(d / "reference.csv"), "monte_carlo_runs": 100, "Q": 2}
