@@ -65,6 +65,37 @@ def arrows_figure(ref, errors, title):
     return fig
 
 
+def field_figure(G, pred, std, study, n_grid):
+    """Predicted |e| on the middle z slice of the grid, its uncertainty, and the count study."""
+    from pointspro.core.figures import _figure
+
+    fig = _figure(14, 4.4)
+    ax1, ax2, ax3 = fig.subplots(1, 3)
+    g = G.reshape(n_grid, n_grid, n_grid, 3)
+    k = n_grid // 2
+    mag = np.linalg.norm(pred, axis=1).reshape(n_grid, n_grid, n_grid)[:, :, k] * 1e3
+    unc = np.linalg.norm(std, axis=1).reshape(n_grid, n_grid, n_grid)[:, :, k] * 1e3
+    ext = (g[0, 0, k, 0], g[-1, 0, k, 0], g[0, 0, k, 1], g[0, -1, k, 1])
+    im = ax1.imshow(mag.T, origin="lower", extent=ext, aspect="auto", cmap="viridis")
+    fig.colorbar(im, ax=ax1, label="|e| predicted (µm)")
+    ax1.set_title(f"predicted error, z = {g[0, 0, k, 2]:.4g} mm", fontsize=10)
+    im = ax2.imshow(unc.T, origin="lower", extent=ext, aspect="auto", cmap="magma")
+    fig.colorbar(im, ax=ax2, label="σ (µm)")
+    ax2.set_title("its standard uncertainty", fontsize=10)
+    for ax in (ax1, ax2):
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+    if study:
+        n = [s["fiducials"] for s in study]
+        m = np.array([s["ev_mean_um"] for s in study])
+        sd = np.array([s["ev_std_um"] for s in study])
+        ax3.errorbar(n, m, yerr=sd, marker="o", capsize=3)
+    ax3.set_xlabel("fiducials used")
+    ax3.set_ylabel("Ev over all fiducials (µm)")
+    ax3.set_title("fiducial-count study (000 Fig. 3)", fontsize=10)
+    return fig
+
+
 class FiducialsStep(Step):
     id = "fiducials"
     title = "Fiducial calibration (transform, GUM, GP)"
@@ -150,7 +181,9 @@ class FiducialsStep(Step):
             "gp_loo_rms_um": loo, "warnings": warnings,
         }
         arts = {"volumetric_model.json": model_text, "volumetric_grid.csv": grid_csv,
-                "fiducial_errors.png": png_artifact(arrows_figure, meas, e, f"Ev RMS {report['ev_rms_um']:.3g} µm")}
+                "fiducial_errors.png": png_artifact(arrows_figure, meas, e, f"Ev RMS {report['ev_rms_um']:.3g} µm"),
+                "volumetric_field.png": png_artifact(field_figure, G, pred, std, report["fiducial_count_study"],
+                                                     params.grid)}
         json.dumps(report)
         return StepResult(cloud.replace(), report, arts)
 

@@ -63,7 +63,9 @@ class VolumetricStep(Step):
                             f"{ws.tolist()} mm: their correction is extrapolated (flag outside_workspace)")
         out = cloud.replace(xyz=corr, channels={"u_x": u[:, 0], "u_y": u[:, 1], "u_z": u[:, 2],
                                                 "outside_workspace": outside.astype(np.int64)},
-                            meta={"frame": "reference" if params.frame == "reference" else cloud.frame})
+                            # the calibrated reference frame is the one the part's (fiducial-aided) CAD is in
+                            meta={"frame": "part" if params.frame == "reference" else cloud.frame,
+                                  "coordinates": params.frame})
         report = {"frame": params.frame, "correction_rms_um": (np.sqrt(np.mean(e**2, axis=0)) * 1e3).tolist(),
                   "uncertainty_max_um": (u.max(axis=0) * 1e3).tolist(), "outside_workspace": int(outside.sum()),
                   "kernels": {k: v.kind for k, v in spec.gp.items()}, "warnings": warnings}
