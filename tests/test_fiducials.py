@@ -140,3 +140,22 @@ def test_bad_inputs(tmp_path):
     (tmp_path / "other.json").write_text(json.dumps(d))
     with pytest.raises(InputError, match="not a PointsPro volumetric model of format 1"):
         VolumetricStep().run(cloud, VolumetricStep.Params(model="other.json"), Context(base_dir=tmp_path))
+
+
+def test_spectral_mixture_gradients_match_finite_differences():
+    from pointspro.core.calibration.gp import SpectralMixture
+
+    rng = np.random.default_rng(0)
+    X = rng.uniform(0, 1, (7, 3))
+    k = SpectralMixture([1.0, 0.5, 0.2], rng.uniform(0.1, 1, 9), rng.uniform(0.1, 1, 9))
+    K, G = k(X, eval_gradient=True)
+    assert np.allclose(K, K.T) and np.all(np.linalg.eigvalsh(K) > -1e-10)
+    th, h = k.theta, 1e-6
+    num = np.stack([(k.clone_with_theta(th + h * e)(X) - k.clone_with_theta(th - h * e)(X)) / (2 * h)
+                    for e in np.eye(th.size)], axis=-1)
+    assert np.allclose(G, num, atol=1e-8)
+    # Wilson's form at τ = 0 is the sum of the weights; one component is a damped cosine
+    assert np.allclose(np.diag(K), 1.7)
+    k1 = SpectralMixture([1.0], [0.3, 0, 0], [0.05, 0.05, 0.05])
+    tau = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    assert k1(tau)[0, 1] == pytest.approx(np.exp(-2 * np.pi**2 * 0.05) * np.cos(2 * np.pi * 0.3))
