@@ -66,18 +66,15 @@ def build_window(files: list[Path]):
     fig_dock.setVisible(False)
 
     clouds = []
-    for f in files:
-        try:
-            clouds.append(read_cloud(f))
-            log.appendPlainText(f"read {f}: {clouds[-1].n} points, channels {sorted(clouds[-1].channels)}")
-        except PointsProError as e:
-            log.appendPlainText(f"error: {e}")
+    win.log_widget = log
 
     def show(name: str):
         import pyvista as pv
 
         plotter.clear()
         for c in clouds:
+            if name not in ("x", "y", "z") and name not in c.channels:
+                continue
             vals, title, diverging = _scalars(c, name)
             # display only: VTK draws in float32; the exaggerated z makes form error visible
             pts = np.asarray(c.xyz - c.xyz.mean(axis=0)).astype(np.float32)
@@ -119,14 +116,38 @@ def build_window(files: list[Path]):
         win.resizeDocks([fig_dock], [480], QtCore.Qt.Horizontal)
         win.figure_canvas = canvas
 
-    if clouds:
-        rest = [n for n in clouds[0].column_names if n not in ("x", "y", "z", "index")]
+    def names_of(cloud):
+        rest = [n for n in cloud.column_names if n not in ("x", "y", "z", "index")]
         # a form-error map is what an optician opens a processed cloud for: residual first when present
-        names = (["residual"] if "residual" in rest else []) + ["z"] + [n for n in rest if n != "residual"] \
+        return (["residual"] if "residual" in rest else []) + ["z"] + [n for n in rest if n != "residual"] \
             + ["x", "y"]
+
+    def plotter_show(cloud):
+        """Show the session's current cloud (called on every model event)."""
+        clouds[:] = [] if cloud is None else [cloud]
+        if cloud is None:
+            return
+        names = names_of(cloud)
+        cur = combo.currentText()
+        combo.blockSignals(True)
+        combo.clear()
         combo.addItems(names)
-        combo.currentTextChanged.connect(show)
-        show(names[0])
+        combo.setCurrentText(cur if cur in names else names[0])
+        combo.blockSignals(False)
+        show(combo.currentText())
+
+    combo.currentTextChanged.connect(lambda name: name and clouds and show(name))
+    from .workbench import install
+
+    install(win, plotter_show)
+    win.tabifyDockWidget(fig_dock, win.map)
+    for f in files[:1]:
+        win.open_any(str(f))
+        if win.session.shown is not None:
+            log.appendPlainText(f"read {f}: {win.session.shown.n} points, channels "
+                                f"{sorted(win.session.shown.channels)}")
+    for f in files[1:]:
+        log.appendPlainText(f"{f}: one measurement at a time — open it after this one")
     win.plotter = plotter  # keep a reference for tests and screenshots
     return win
 
@@ -135,6 +156,10 @@ def run_window(files: list[Path], screenshot: str | None = None) -> int:
     from PySide6 import QtWidgets
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    if screenshot:
+        import os
+
+        os.environ["POINTSPRO_NO_DIALOGS"] = "1"  # a render for a picture never waits for a click
     win = build_window(files)
     win.show()
     if screenshot:

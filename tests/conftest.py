@@ -11,6 +11,11 @@ from pointspro.core import PointCloud
 from pointspro.core.surfaces import EvenAsphere
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# the window's tests: errors go to the log, not to modal dialogs; autosave into a scratch folder
+os.environ.setdefault("POINTSPRO_NO_DIALOGS", "1")
+import tempfile as _tempfile  # noqa: E402
+
+os.environ.setdefault("POINTSPRO_AUTOSAVE_DIR", _tempfile.mkdtemp(prefix="pointspro-autosave-"))
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "resources" / "example"
