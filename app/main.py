@@ -71,7 +71,7 @@ def build_window(files: list[Path]):
     def show(name: str):
         import pyvista as pv
 
-        plotter.clear()
+        plotter.clear_actors()
         for c in clouds:
             if name not in ("x", "y", "z") and name not in c.channels:
                 continue
@@ -86,13 +86,18 @@ def build_window(files: list[Path]):
                 lo, hi = np.percentile(vals, [0.5, 99.5])
                 m = float(max(abs(lo), abs(hi))) or 1.0
                 clim = (-m, m)
+            big = c.n > 200_000  # spheres cost ~1 s a frame per 10⁶ points in software GL
             plotter.add_mesh(poly, scalars=title, cmap="RdBu_r" if diverging else "viridis", clim=clim,
-                             point_size=6, render_points_as_spheres=True,
-                             scalar_bar_args={"title": title, "vertical": True})
-        plotter.add_axes()
-        plotter.view_xy()  # optics are looked at along their axis
+                             point_size=2 if big else 6, render_points_as_spheres=not big,
+                             scalar_bar_args={"title": title, "vertical": True}, render=False,
+                             reset_camera=False)
+        if not getattr(plotter, "_pp_axes", False):
+            plotter.add_axes()
+            plotter._pp_axes = True
         show_figure(name)
-        plotter.reset_camera()
+        plotter.view_xy(render=False)  # optics are looked at along their axis
+        plotter.reset_camera(render=False)
+        plotter.render()
         if clouds:
             info.setText(f"{sum(c.n for c in clouds)} points")
 

@@ -59,13 +59,14 @@ class PipelineDock(QtWidgets.QDockWidget):
         from pointspro.core.registry import Registry
 
         self.win = win
+        self.registry = Registry()  # reading the entry points costs ~0.2 s: once
         w = QtWidgets.QWidget()
         lay = QtWidgets.QVBoxLayout(w)
         self.list = QtWidgets.QListWidget()
         lay.addWidget(self.list, 1)
         row = QtWidgets.QHBoxLayout()
         self.add_combo = QtWidgets.QComboBox()
-        self.add_combo.addItems(Registry().ids())
+        self.add_combo.addItems(self.registry.ids())
         add = QtWidgets.QPushButton("Add")
         add.clicked.connect(lambda: win.act(lambda: win.session.add_step(self.add_combo.currentText())))
         row.addWidget(self.add_combo, 1)
@@ -122,7 +123,6 @@ class PipelineDock(QtWidgets.QDockWidget):
         import yaml
 
         from pointspro.core.forms import form_fields
-        from pointspro.core.registry import Registry
 
         while self.form.rowCount():
             self.form.removeRow(0)
@@ -131,11 +131,16 @@ class PipelineDock(QtWidgets.QDockWidget):
             return
         entry = self.win.session.steps[i]
         sid = next(k for k in entry if k != "enabled")
-        cls = Registry().load(sid)
+        cls = self.registry.load(sid)
         values = entry[sid] or {}
         for f in form_fields(cls.Params):
             edit = QtWidgets.QLineEdit()
-            if f.key in values:
+            if f.key in values and isinstance(values[f.key], list) and len(values[f.key]) > 50:
+                # thousands of deleted rows are not for a text field: shown, kept, not edited here
+                edit.setPlaceholderText(f"{len(values[f.key]):,} values (kept; edit the recipe file)")
+                edit.setEnabled(False)
+                edit.setProperty("keep", values[f.key])
+            elif f.key in values:
                 edit.setText(yaml.safe_dump(values[f.key], default_flow_style=True).strip().removesuffix("..."
                                                                                                        ).strip())
             else:
@@ -154,6 +159,9 @@ class PipelineDock(QtWidgets.QDockWidget):
         params = {}
         for k, edit in self.fields.items():
             edit.setStyleSheet("")
+            if not edit.isEnabled():
+                params[k] = edit.property("keep")
+                continue
             t = edit.text().strip()
             if t:
                 params[k] = yaml.safe_load(t)
