@@ -67,6 +67,11 @@ class Context:
     #: folder the recipe came from (relative paths in parameters are relative to it)
     base_dir: Path | None = None
 
+    def resolve(self, path: str | Path) -> Path:
+        """A parameter's file path: relative paths are relative to the recipe's folder."""
+        p = Path(path)
+        return p if p.is_absolute() or self.base_dir is None else Path(self.base_dir) / p
+
     def require_surface(self, step_id: str) -> NominalSurface:
         from .errors import StepError
 

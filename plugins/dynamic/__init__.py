@@ -75,7 +75,7 @@ class DynamicStep(Step):
         from pointspro.core.dynamics.vibration import (advice, aliased_frequency, dominant_peaks,
                                                        phase_lag_hilbert_deg, psd_time)
         from pointspro.core.figures import png_artifact
-        from pointspro.plugins.dynamic_id import identify_from_file, model_report, resolve
+        from pointspro.plugins.dynamic_id import identify_from_file, model_report
 
         missing = [c for c in (params.t, params.xd, params.xc) if c not in cloud.channels]
         if missing:
@@ -85,12 +85,12 @@ class DynamicStep(Step):
         fs = sampling_rate(cloud[params.t], src, row_offset=2)
         arts = {}
         if params.model is not None:
-            p = resolve(params.model, ctx)
+            p = ctx.resolve(params.model)
             if not p.is_file():
                 raise InputError(f"{p}: dynamic model file not found")
             model = LoopModel.from_json(p.read_text(encoding="utf-8"), str(p))
         else:
-            p = resolve(params.calibration, ctx)
+            p = ctx.resolve(params.calibration)
             model, _ = identify_from_file(p, ("t", "xd", "ref"), params.order, 5, ctx)
             arts["dynamic_model.json"] = model.to_json()
         if abs(model.fs - fs) > 0.01 * fs:

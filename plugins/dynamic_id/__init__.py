@@ -24,15 +24,6 @@ class DynamicIdParams(Params):
     max_order: int = param(5, ge=1, le=8, help="largest order tried when the order is chosen")
 
 
-def resolve(path: str, ctx: Context):
-    from pathlib import Path
-
-    p = Path(path)
-    if not p.is_absolute() and ctx.base_dir is not None:
-        p = Path(ctx.base_dir) / p
-    return p
-
-
 def identify_from_file(path, names, order, max_order, ctx):
     from pointspro.core.dynamics.identify import identify
     from pointspro.core.io.text import read_table
@@ -92,7 +83,7 @@ class DynamicIdStep(Step):
     def run(self, cloud, params: DynamicIdParams, ctx: Context) -> StepResult:
         from pointspro.core.figures import png_artifact
 
-        path = resolve(params.calibration, ctx)
+        path = ctx.resolve(params.calibration)
         names = (params.t, params.xd, params.ref)
         model, cols = identify_from_file(path, names, params.order, params.max_order, ctx)
         report = {"calibration": str(path), **model_report(model), "warnings": []}

@@ -110,12 +110,10 @@ class FiducialsStep(Step):
         from pointspro.core.calibration.gp import fit_gp
         from pointspro.core.figures import png_artifact
         from pointspro.core.io.text import read_table
-        from pointspro.plugins.dynamic_id import resolve
-
         if "fiducial" not in cloud.channels:
             raise StepError("the cloud has no 'fiducial' channel (ball id of each probe point)")
         ctx.progress.check()
-        p = resolve(params.reference, ctx)
+        p = ctx.resolve(params.reference)
         ref_cols = read_table(p, ("fiducial", "x", "y", "z"))
         ref_ids = ref_cols["fiducial"].astype(int).tolist()
         centres = fit_centres(cloud, params.diameter)

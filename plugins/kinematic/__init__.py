@@ -34,12 +34,10 @@ class KinematicStep(Step):
 
     def run(self, cloud, params: KinematicParams, ctx: Context) -> StepResult:
         from pointspro.core.kinematics.errormap import KinematicMap
-        from pointspro.plugins.dynamic_id import resolve
-
         ctx.progress.check()
         if params.c not in cloud.channels:
             raise StepError(f"the scan has no spindle-angle channel '{params.c}' (deg)")
-        p = resolve(params.map, ctx)
+        p = ctx.resolve(params.map)
         if not p.is_file():
             raise InputError(f"{p}: kinematic map file not found")
         m = KinematicMap.from_json(p.read_text(encoding="utf-8"), str(p))

@@ -54,17 +54,15 @@ class KinematicMapStep(Step):
         from pointspro.core.kinematics.errormap import ARCSEC, build_map, periodic, undulations_per_rev
         from pointspro.core.kinematics.reversal import (facial_reversal, squareness_reversal,
                                                         straightness_reversal)
-        from pointspro.plugins.dynamic_id import resolve
-
         ctx.progress.check()
-        st = read_table(resolve(params.straightness, ctx), ("x", "m1", "m2"))
+        st = read_table(ctx.resolve(params.straightness), ("x", "m1", "m2"))
         ezx, flat_s = straightness_reversal(st["m1"], st["m2"])
-        fa = read_table(resolve(params.facial, ctx), ("c", "m1", "m2", "m3", "m4"))
+        fa = read_table(ctx.resolve(params.facial), ("c", "m1", "m2", "m3", "m4"))
         ezc, ebc, flat_f = facial_reversal(fa["m1"], fa["m2"], fa["m3"], fa["m4"], params.probe_distance)
         ctx.progress.update(0.4, "squareness")
         eb0c = 0.0
         if params.squareness is not None:
-            sq = read_table(resolve(params.squareness, ctx), ("x", "m1", "m2"))
+            sq = read_table(ctx.resolve(params.squareness), ("x", "m1", "m2"))
             ebc_at = periodic(fa["c"], ebc)
             ezx_at = np.interp(sq["x"], np.sort(st["x"]), ezx[np.argsort(st["x"])])
             eb0c = squareness_reversal(sq["x"], sq["m1"], sq["m2"], float(ebc_at(0.0)),

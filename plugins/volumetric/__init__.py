@@ -31,10 +31,8 @@ class VolumetricStep(Step):
     def run(self, cloud, params: VolumetricParams, ctx: Context) -> StepResult:
         from pointspro.core.calibration import volumetric_model as vm
         from pointspro.core.calibration.fiducials import AffineFit
-        from pointspro.plugins.dynamic_id import resolve
-
         ctx.progress.check()
-        p = resolve(params.model, ctx)
+        p = ctx.resolve(params.model)
         if not p.is_file():
             raise InputError(f"{p}: volumetric model file not found")
         spec = vm.loads(p.read_text(encoding="utf-8"), str(p))

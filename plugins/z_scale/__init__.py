@@ -44,9 +44,8 @@ class ZScaleStep(Step):
         if params.calibration is not None:
             from pointspro.core.calibration.zscale import calibrate
             from pointspro.core.io.text import read_table
-            from pointspro.plugins.dynamic_id import resolve
 
-            p = resolve(params.calibration, ctx)
+            p = ctx.resolve(params.calibration)
             cols = read_table(p, ("x", "z"))
             scan = cols.get("scan", np.zeros(cols["x"].size))
             cal = calibrate(cols["x"], cols["z"], scan, np.asarray(params.heights) * 1e-3)
