@@ -59,17 +59,30 @@ text-align:left;vertical-align:top} td.num{text-align:right;font-variant-numeric
 def _fmt(v) -> str:
     if isinstance(v, float):
         return f"{v:.6g}"
-    if isinstance(v, list) and len(v) > 12:
-        return html.escape(f"[{len(v)} values: {', '.join(_fmt(x) for x in v[:6])}, …]")
+    if isinstance(v, list) and len(v) > 12:  # the items are escaped by _fmt already
+        return f"[{len(v)} values: {', '.join(_fmt(x) for x in v[:6])}, …]"
     if isinstance(v, (list, dict)):
         return html.escape(json.dumps(v))
     return html.escape(str(v))
+
+
+def _records(v: list) -> str:
+    """A list of same-keyed mappings (e.g. Zernike coefficients) as a table of its own."""
+    keys = list(v[0])
+    head = "".join(f"<th>{html.escape(str(k))}</th>" for k in keys)
+    body = "".join("<tr>" + "".join(f"<td>{_fmt(r.get(k))}</td>" for k in keys) + "</tr>" for r in v)
+    return f"<table><tr>{head}</tr>{body}</table>"
 
 
 def _table(d: dict) -> str:
     rows = []
     for k, v in d.items():
         if k in ("warnings",):
+            continue
+        if (isinstance(v, list) and v and all(isinstance(r, dict) for r in v)
+                and all(r.keys() == v[0].keys() for r in v)
+                and all(not isinstance(x, (dict, list)) for r in v for x in r.values())):
+            rows.append(f"<tr><th>{html.escape(k)}</th><td>{_records(v)}</td></tr>")
             continue
         if isinstance(v, dict) and v and all(not isinstance(x, (dict, list)) for x in v.values()):
             inner = ", ".join(f"{html.escape(str(a))} = {_fmt(b)}" for a, b in v.items())

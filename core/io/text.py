@@ -177,14 +177,8 @@ def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dic
             raise InputError(f"{path}, line {header[0] + 1}: duplicate column name(s) {sorted(dup)}")
         missing = [a for a in "xyz" if a not in names]
         if not need_xyz:
-            cols = {n: data[:, j] for j, n in enumerate(names)}
-            bad = ~np.isfinite(data)
-            if bad.any():
-                row, col = np.argwhere(bad)[0]
-                ln = _data_line_number(lines.all(), first_data, int(row))
-                raise InputError(f"{path}, line {ln}, column {col + 1} ({names[col]}): "
-                                 f"{float(data[row, col])!r} is not a finite number")
-            return None, cols, meta
+            _check_finite(path, lines, first_data, data, names)
+            return None, {n: data[:, j] for j, n in enumerate(names)}, meta
         if missing:
             raise InputError(f"{path}, line {header[0] + 1}: no {'/'.join(missing)} column in the header "
                              f"(columns: {', '.join(header[1])})")
@@ -204,13 +198,7 @@ def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dic
             xyz[:, "xyz".index(a)] *= scales[j]
     meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in "xyz"}
 
-    # --- values must be measurements ----------------------------------------------------------
-    bad = ~np.isfinite(data)
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
-        ln = _data_line_number(lines.all(), first_data, int(row))
-        raise InputError(f"{path}, line {ln}, column {col + 1} ({names[col]}): "
-                         f"{float(data[row, col])!r} is not a finite number (NaN/inf is not a measurement)")
+    _check_finite(path, lines, first_data, data, names)
     if "index" in cols:
         idx = cols["index"]
         if np.any(idx != np.round(idx)) or np.any(idx < 0):
@@ -218,6 +206,16 @@ def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dic
         if len(np.unique(idx)) != len(idx):
             raise InputError(f"{path}: the index column has repeated values")
     return xyz, cols, meta
+
+
+def _check_finite(path, lines, first_data, data, names) -> None:
+    """Values must be measurements: the first NaN/inf named by line and column."""
+    bad = ~np.isfinite(data)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        ln = _data_line_number(lines.all(), first_data, int(row))
+        raise InputError(f"{path}, line {ln}, column {col + 1} ({names[col]}): "
+                         f"{float(data[row, col])!r} is not a finite number (NaN/inf is not a measurement)")
 
 
 class _LazyLines:

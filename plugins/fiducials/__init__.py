@@ -103,8 +103,6 @@ class FiducialsStep(Step):
     Params = FiducialsParams
 
     def run(self, cloud, params: FiducialsParams, ctx: Context) -> StepResult:
-        import json
-
         from pointspro.core.calibration import volumetric_model as vm
         from pointspro.core.calibration.fiducials import count_study, fit_affine, monte_carlo
         from pointspro.core.calibration.gp import fit_gp
@@ -138,8 +136,7 @@ class FiducialsStep(Step):
         ev = np.linalg.norm(e, axis=1)
         # the GP and the workspace live in the machine frame: that is where `volumetric` applies them
         lo, hi = meas.min(axis=0), meas.max(axis=0)
-        rc = 0.5 * (ref.min(axis=0) + ref.max(axis=0))
-        centre = rc
+        centre = 0.5 * (ref.min(axis=0) + ref.max(axis=0))  # the reference layout's centre
         u_prop = fit.point_sigma(centre[None, :])[0]
         mc = None
         if params.monte_carlo_runs:
@@ -182,7 +179,6 @@ class FiducialsStep(Step):
                 "fiducial_errors.png": png_artifact(arrows_figure, meas, e, f"Ev RMS {report['ev_rms_um']:.3g} µm"),
                 "volumetric_field.png": png_artifact(field_figure, G, pred, std, report["fiducial_count_study"],
                                                      params.grid)}
-        json.dumps(report)
         return StepResult(cloud.replace(), report, arts)
 
 
