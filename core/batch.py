@@ -68,6 +68,26 @@ def write_artifact(folder: Path, name: str, art) -> None:
         target.write_text(str(art), encoding="utf-8")
 
 
+def write_outputs(folder: Path, input_path: str, recipe: Recipe, result) -> dict:
+    """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
+    artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
+    and the window's File → Export report."""
+    report = build_report(input_path, recipe, result)
+    with atomic_dir(folder) as tmp:
+        write_csv(result.cloud, tmp / "cloud.csv")
+        for name, art in result.artifacts.items():
+            write_artifact(tmp, name, art)
+        if "residual" in result.cloud.channels and result.cloud.n:
+            from .figures import save_png, scattered_map
+
+            c = result.cloud
+            save_png(scattered_map(c.x, c.y, c["residual"], title="Form error (residual) after "
+                                   "all steps"), tmp / "form_error.png")
+        (tmp / "report.json").write_text(dumps(report), encoding="utf-8")
+        (tmp / "report.html").write_text(render_html(report, tmp), encoding="utf-8")
+    return report
+
+
 def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                   sink: Callable[[float, str], None] | None = None, token: CancelToken | None = None,
                   surface=None, log: logging.Logger | None = None) -> InputOutcome:
@@ -79,19 +99,7 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
         progress.update(0.05, "read")
         result = run_pipeline(cloud, recipe, progress=progress.sub(0.05, 0.9), surface=surface,
                               log=log)
-        report = build_report(str(path), recipe, result)
-        with atomic_dir(out_dir / stem) as tmp:
-            write_csv(result.cloud, tmp / "cloud.csv")
-            for name, art in result.artifacts.items():
-                write_artifact(tmp, name, art)
-            if "residual" in result.cloud.channels and result.cloud.n:
-                from .figures import save_png, scattered_map
-
-                c = result.cloud
-                save_png(scattered_map(c.x, c.y, c["residual"], title="Form error (residual) after "
-                                       "all steps"), tmp / "form_error.png")
-            (tmp / "report.json").write_text(dumps(report), encoding="utf-8")
-            (tmp / "report.html").write_text(render_html(report, tmp), encoding="utf-8")
+        report = write_outputs(out_dir / stem, str(path), recipe, result)
         progress.update(1.0, "written")
         return InputOutcome(str(path), True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"])

@@ -50,15 +50,18 @@ def robust_limits(v, symmetric=True):
     return (lo, hi) if hi > lo else (lo - 1e-12, hi + 1e-12)
 
 
-def _binned(x, y, v, bins=None):
+def binned_image(x, y, v, bins=None, ext=None):
     """Mean of v in square bins: the image of a scattered map (fast for millions of points). By
-    default ~1.2 √N bins across (60…400), so sparse patterns still read as a surface."""
+    default ~1.2 √N bins across (60…400), so sparse patterns still read as a surface. Returns
+    (image bins×bins with NaN where empty, extent (x0, x1, y0, y1), flat bin of each point)."""
     x, y, v = (np.asarray(a, dtype=np.float64) for a in (x, y, v))
     if bins is None:
         bins = int(np.clip(1.2 * np.sqrt(len(x)), 60, 400))
-    span = max(np.ptp(x), np.ptp(y)) or 1.0
-    cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
-    ext = (cx - span / 2, cx + span / 2, cy - span / 2, cy + span / 2)
+    if ext is None:
+        span = (max(np.ptp(x), np.ptp(y)) or 1.0) if len(x) else 1.0
+        cx, cy = (0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())) if len(x) else (0.0, 0.0)
+        ext = (cx - span / 2, cx + span / 2, cy - span / 2, cy + span / 2)
+    span = ext[1] - ext[0]
     ix = np.clip(((x - ext[0]) / span * bins).astype(np.intp), 0, bins - 1)
     iy = np.clip(((y - ext[2]) / span * bins).astype(np.intp), 0, bins - 1)
     k = iy * bins + ix
@@ -66,6 +69,11 @@ def _binned(x, y, v, bins=None):
     s = np.bincount(k, weights=v, minlength=bins * bins)
     with np.errstate(invalid="ignore", divide="ignore"):
         img = np.where(n > 0, s / n, np.nan).reshape(bins, bins)
+    return img, ext, k
+
+
+def _binned(x, y, v, bins=None):
+    img, ext, _ = binned_image(x, y, v, bins)
     return img, ext
 
 

@@ -46,8 +46,13 @@ class PipelineResult:
             out.update(rec.artifacts)
         return out
 
+    _summary: dict | None = field(default=None, init=False, repr=False)
+
     def summary(self) -> dict:
-        return summarize(self.input_cloud, self.cloud)
+        """summarize() of input and output, computed once (PVr and slope RMS fit a map)."""
+        if self._summary is None:
+            self._summary = summarize(self.input_cloud, self.cloud)
+        return dict(self._summary)
 
 
 def summarize(cloud_in: PointCloud, cloud_out: PointCloud) -> dict:

@@ -74,7 +74,7 @@ def _records(v: list) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def _table(d: dict) -> str:
+def table_html(d: dict) -> str:
     rows = []
     for k, v in d.items():
         if k in ("warnings",):
@@ -114,16 +114,16 @@ def render_html(report: dict, folder=None) -> str:
              f"{html.escape(report['input'])}</title><style>{_CSS}</style></head><body>",
              f"<h1>PointsPro report</h1><p class='muted'>PointsPro {html.escape(report['pointspro'])}, "
              f"{html.escape(report.get('created', ''))}</p>",
-             "<h2>Input</h2>", _table({"file": report["input"], "points in": s.get("points_in"),
+             "<h2>Input</h2>", table_html({"file": report["input"], "points in": s.get("points_in"),
                                        "points out": s.get("points_out")})]
     summary = {"RMS (µm)": s.get("rms_um"), "PV (µm)": s.get("pv_um"),
                "PVr (µm, Evans: Zernike Z1–Z36 PV + 3·RMS of the rest)": s.get("pvr_um"),
                "slope RMS (µrad, tilt removed)": s.get("slope_rms_urad")}
     if any(v is not None for v in summary.values()):
-        parts += ["<h2>Form error</h2>", _table(summary), _img(folder, "form_error.png")]
+        parts += ["<h2>Form error</h2>", table_html(summary), _img(folder, "form_error.png")]
     surf = report.get("recipe", {}).get("surface")
     if surf:
-        parts += ["<h2>Nominal surface</h2>", _table(surf)]
+        parts += ["<h2>Nominal surface</h2>", table_html(surf)]
     parts.append("<h2>Steps</h2>")
     if not report["steps"]:
         parts.append("<p class='muted'>The recipe has no steps: the cloud was read and written.</p>")
@@ -133,7 +133,7 @@ def render_html(report: dict, folder=None) -> str:
                      "points</p>")
         for w in st["report"].get("warnings", []) or []:
             parts.append(f"<p class='warn'>⚠ {html.escape(str(w))}</p>")
-        parts.append(_table(st["report"]))
+        parts.append(table_html(st["report"]))
         for a in st.get("artifacts", []):
             if a.endswith(".png"):
                 parts.append(_img(folder, a))

@@ -3,7 +3,8 @@
 Qt-free (napari's rule: the model never imports Qt; the window subscribes to its events), so every
 interaction is tested headless. Each deletion the optician makes is recorded as a `manual_edit` step
 (indices of the input rows), so the saved recipe replays the same cleanup in `pointspro --batch`.
-Undo/redo keep snapshots of (recipe, displayed cloud) — cheap, since clouds share their arrays.
+Undo/redo keep snapshots of (recipe, displayed cloud) by reference — cheap: every edit builds a new
+recipe mapping instead of changing the old one in place, and clouds are immutable.
 
 Project file (YAML text): {pointspro_project: 1, input: <data file, relative to the project>,
 recipe: <the recipe mapping>}.
@@ -46,9 +47,7 @@ class Session:
             f(what)
 
     def _push(self) -> None:
-        import copy
-
-        self._undo.append(_State(copy.deepcopy(self.recipe), self.shown))
+        self._undo.append(_State(self.recipe, self.shown))
         del self._undo[:-100]
         self._redo.clear()
 
@@ -62,18 +61,14 @@ class Session:
 
     def undo(self) -> None:
         if self._undo:
-            import copy
-
-            self._redo.append(_State(copy.deepcopy(self.recipe), self.shown))
+            self._redo.append(_State(self.recipe, self.shown))
             s = self._undo.pop()
             self.recipe, self.shown = s.recipe, s.shown
             self._emit("undo")
 
     def redo(self) -> None:
         if self._redo:
-            import copy
-
-            self._undo.append(_State(copy.deepcopy(self.recipe), self.shown))
+            self._undo.append(_State(self.recipe, self.shown))
             s = self._redo.pop()
             self.recipe, self.shown = s.recipe, s.shown
             self._emit("redo")
@@ -159,18 +154,28 @@ class Session:
         self._edit(steps, "steps")
 
     # -- running ------------------------------------------------------------------------------------
-    def run(self, upto: int | None = None, progress=None):
-        """Run the recipe (steps before ``upto``) on the input; the result becomes what is shown."""
+    def compute(self, upto: int | None = None, progress=None):
+        """Run the recipe (steps before ``upto``) on the input and return the result without changing
+        the session — safe in a worker thread (it reads one snapshot of the recipe and the input)."""
         from .pipeline import run_pipeline
 
-        if self.input_cloud is None:
+        recipe_data, cloud = self.recipe, self.input_cloud
+        if cloud is None:
             raise InputError("open a measurement first")
-        recipe = self._validate(self.recipe)
-        result = run_pipeline(self.input_cloud, recipe, progress=progress, upto=upto)
+        recipe = self._validate(recipe_data)
+        return run_pipeline(cloud, recipe, progress=progress, upto=upto)
+
+    def accept(self, result) -> None:
+        """Show a computed result (undoable)."""
         self._push()
         self.last_result = result
         self.shown = result.cloud
         self._emit("ran")
+
+    def run(self, upto: int | None = None, progress=None):
+        """Run the recipe on the input; the result becomes what is shown."""
+        result = self.compute(upto, progress)
+        self.accept(result)
         return result
 
     # -- selection and cleanup ----------------------------------------------------------------------
@@ -209,28 +214,27 @@ class Session:
     def restore_all(self) -> None:
         """Drop every manual_edit step (undoable)."""
         steps = [s for s in self.steps if "manual_edit" not in s]
-        self._edit(steps, "steps")
-        self.shown = self.input_cloud
+        data = {**self.recipe, "steps": steps}
+        self._validate(data)
+        self._push()
+        self.recipe, self.shown = data, self.input_cloud
+        self._emit("restored")
 
     # -- projects -----------------------------------------------------------------------------------
     def project_text(self, project_path: Path) -> str:
-        import yaml
-
-        inp = None
-        if self.input_path is not None:
-            try:
-                inp = os.path.relpath(self.input_path.resolve(), Path(project_path).resolve().parent)
-            except ValueError:  # another drive
-                inp = str(self.input_path.resolve())
-        return yaml.safe_dump({"pointspro_project": PROJECT_VERSION, "input": inp, "recipe": self.recipe},
-                              sort_keys=False)
+        return project_text(self.recipe, self.input_path, project_path)
 
     def save_project(self, path) -> None:
+        write_project(Path(path), self.recipe, self.input_path)
+
+    def save_recipe(self, path) -> None:
+        """The recipe alone (what `pointspro --batch` replays), written atomically."""
+        import yaml
+
         from .io.atomic import atomic_path
 
-        path = Path(path)
-        with atomic_path(path) as tmp:
-            Path(tmp).write_text(self.project_text(path), encoding="utf-8")
+        with atomic_path(Path(path)) as tmp:
+            Path(tmp).write_text(yaml.dump(self.recipe, Dumper=_dumper(), sort_keys=False), encoding="utf-8")
 
     def open_project(self, path) -> None:
         """Open a project; a moved data file or a broken recipe is an error and nothing changes."""
@@ -280,3 +284,35 @@ class Session:
         if self.shown is None:
             raise InputError("nothing to export")
         write_cloud(self.shown, Path(path))
+
+
+def _dumper():
+    import yaml
+
+    return getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml: 20× faster on long edit lists
+
+
+def project_text(recipe: dict, input_path: Path | None, project_path: Path) -> str:
+    """The project file's text: the data file relative to the project (absolute on another drive)."""
+    import yaml
+
+    inp = None
+    if input_path is not None:
+        try:
+            inp = os.path.relpath(Path(input_path).resolve(), Path(project_path).resolve().parent)
+        except ValueError:  # another drive
+            inp = str(Path(input_path).resolve())
+    return yaml.dump({"pointspro_project": PROJECT_VERSION, "input": inp, "recipe": recipe},
+                     Dumper=_dumper(), sort_keys=False)
+
+
+def write_project(path: Path, recipe: dict, input_path: Path | None) -> None:
+    """Write a project atomically (a crash mid-write never leaves half a file). Used by save and by the
+    window's autosave thread."""
+    from .io.atomic import atomic_path
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = project_text(recipe, input_path, path)
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")

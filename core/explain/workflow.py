@@ -253,7 +253,7 @@ def _figures(folder, ctx, gap, after, found, order):
 def _html(report: dict, folder: Path) -> str:
     import html
 
-    from ..report import _CSS, _img, _table
+    from ..report import _CSS, _img, table_html as _table
 
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>PointsPro explain</title><style>{_CSS}"
              "</style></head><body><h1>Explain: where simulation and measurement disagree</h1>",

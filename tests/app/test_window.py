@@ -1,6 +1,10 @@
-"""The window opens the example, colours by every channel, and renders a screenshot (pytest-qt)."""
+"""The window (pytest-qt, offscreen): open, colour, select in both views, delete, undo/redo, run in a
+worker, report and Explain panels, profile cuts, projects, autosave and restore, bad input."""
 from __future__ import annotations
 
+import time
+
+import numpy as np
 import pytest
 
 from ..conftest import EXAMPLE
@@ -8,70 +12,73 @@ from ..conftest import EXAMPLE
 pytest.importorskip("pytestqt")
 
 
-def test_window_shows_example_and_switches_channels(qtbot):
-    from PySide6.QtWidgets import QComboBox
-
+def _window(qtbot, files=()):
     from pointspro.app.main import build_window
 
-    win = build_window([EXAMPLE / "asphere_cmm.csv"])
+    win = build_window(list(files))
     qtbot.addWidget(win)
-    combo = win.findChild(QComboBox)
-    items = [combo.itemText(i) for i in range(combo.count())]
-    assert items[0] == "z" and "line" in items
-    combo.setCurrentText("line")
-    assert "line" in win.plotter.mesh.array_names
-    win.plotter.close()
-
-
-def test_screenshot_command_writes_png(tmp_path, run_cli):
-    png = tmp_path / "shot.png"
-    code, _, err = run_cli("--screenshot", png, EXAMPLE / "asphere_cmm.csv")
-    assert code == 0, err
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
-
-
-def test_residual_map_dock_shows_the_report_figure(qtbot, tmp_path):
-    """A processed cloud opens on its residual, with the report's form-error figure beside the 3D view
-    (the same core.figures function the batch report uses); z has no such figure."""
-    import numpy as np
-    from PySide6.QtWidgets import QComboBox, QDockWidget
-
-    from pointspro.app.main import build_window
-    from pointspro.core import PointCloud
-    from pointspro.core.io import write_csv
-
-    rng = np.random.default_rng(0)
-    x, y = rng.uniform(-50, 50, (2, 2000))
-    write_csv(PointCloud.from_xyz(x, y, np.zeros(2000), residual=1e-4 * np.sin(x / 10)), tmp_path / "c.csv")
-    win = build_window([tmp_path / "c.csv"])
-    qtbot.addWidget(win)
-    win.show()
-    dock = [d for d in win.findChildren(QDockWidget) if d.windowTitle().startswith("Form-error map")][0]
-    assert dock.isVisible()
-    ax = win.figure_canvas.figure.axes[0]
-    assert ax.get_xlabel() == "x (mm)" and "µm" in win.figure_canvas.figure.axes[1].get_ylabel()
-    img = ax.images[0].get_array()
-    assert np.nanmax(np.abs(img)) == pytest.approx(0.1, rel=0.05)  # 1e-4 mm·sin → ±0.1 µm
-    win.findChild(QComboBox).setCurrentText("z")
-    assert not dock.isVisible()
-    win.plotter.close()
-
-
-def _example_window(qtbot):
-    from pointspro.app.main import build_window
-    from pointspro.core.recipe import load_yaml
-
-    win = build_window([EXAMPLE / "asphere_cmm.csv"])
-    qtbot.addWidget(win)
-    data = load_yaml((EXAMPLE / "recipe.yaml").read_text(), "recipe")
-    win.session.set_recipe({**data, "steps": list(data["steps"])[:5]})
     return win
 
 
-def test_run_in_worker_keeps_the_window_responsive(qtbot):
-    """The pipeline runs in a thread: the event loop never stalls above 100 ms meanwhile."""
-    import time
+def _example_window(qtbot, steps=5):
+    from pointspro.core.recipe import load_yaml
 
+    win = _window(qtbot, [EXAMPLE / "asphere_cmm.csv"])
+    data = load_yaml((EXAMPLE / "recipe.yaml").read_text(), "recipe")
+    win.session.set_recipe({**data, "steps": list(data["steps"])[:steps]})
+    return win
+
+
+def _scattered(tmp_path, n=2000, seed=0):
+    from pointspro.core import PointCloud
+    from pointspro.core.io import write_csv
+
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(-50, 50, (2, n))
+    write_csv(PointCloud.from_xyz(x, y, (x * x + y * y) / 2000, residual=1e-4 * np.sin(x / 10)),
+              tmp_path / "c.csv")
+    return tmp_path / "c.csv"
+
+
+def test_window_shows_example_and_switches_channels(qtbot):
+    win = _window(qtbot, [EXAMPLE / "asphere_cmm.csv"])
+    items = [win.channel.itemText(i) for i in range(win.channel.count())]
+    assert items[0] == "z" and "line" in items
+    win.channel.setCurrentText("line")
+    assert "line" in win.view3d.mesh.array_names
+    assert win.map.cbar.ax.get_ylabel() == "line"
+    assert "4,680 points" in win.view3d.info.text()
+
+
+def test_screenshot_command_writes_png(tmp_path, run_cli):
+    from PySide6.QtGui import QImage
+
+    png = tmp_path / "shot.png"
+    code, _, err = run_cli("--screenshot", png, EXAMPLE / "asphere_cmm.csv")
+    assert code == 0, err
+    img = QImage(str(png))
+    assert not img.isNull() and img.width() > 800
+    # not blank: the window has many distinct colours (map, colour bars, widgets)
+    colours = {img.pixel(x, y) for x in range(0, img.width(), 7) for y in range(0, img.height(), 7)}
+    assert len(colours) > 50
+
+
+def test_residual_opens_diverging_in_micrometres(qtbot, tmp_path):
+    """A processed cloud opens on its residual: µm, diverging map centred on zero, in both views."""
+    win = _window(qtbot, [_scattered(tmp_path)])
+    assert win.channel.currentText() == "residual"
+    img = win.map.im.get_array()
+    assert np.nanmax(np.abs(img)) == pytest.approx(0.1, rel=0.05)  # 1e-4 mm·sin → ±0.1 µm
+    lo, hi = win.map.im.get_clim()
+    assert lo == -hi and win.map.im.get_cmap().name == "RdBu_r"
+    assert win.map.cbar.ax.get_ylabel() == "residual (µm)"
+    assert "residual (µm)" in win.view3d.mesh.array_names
+    win.channel.setCurrentText("z")
+    assert win.map.cbar.ax.get_ylabel() == "z − mean (mm)" and win.map.im.get_cmap().name == "viridis"
+
+
+def test_run_in_worker_keeps_the_window_responsive_and_fills_the_report(qtbot):
+    """The pipeline runs in a thread: the event loop never stalls above 100 ms meanwhile."""
     from PySide6 import QtCore
 
     win = _example_window(qtbot)
@@ -79,7 +86,8 @@ def test_run_in_worker_keeps_the_window_responsive(qtbot):
 
     def tick():
         now = time.perf_counter()
-        gaps.append(now - last[0])
+        if win.runner.busy:  # while the steps run (showing the result afterwards is measured apart)
+            gaps.append(now - last[0])
         last[0] = now
 
     timer = QtCore.QTimer()
@@ -87,26 +95,50 @@ def test_run_in_worker_keeps_the_window_responsive(qtbot):
     timer.timeout.connect(tick)
     timer.start()
     win.pipeline.run_all.click()
-    assert win._thread is not None
-    qtbot.waitUntil(lambda: win._thread is None, timeout=120_000)
+    assert win.runner.busy
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
     timer.stop()
     assert "residual" in win.session.shown.channels and win.session.shown.n == 4640
     assert max(gaps[1:]) < 0.1, max(gaps)
     assert win.pipeline.list.count() == 5 and win.pipeline.bar.value() == 1000
-    win.plotter.close()
+    # the report panel: summary, then each step with its numbers and (drawn on demand) figures
+    assert win.report.list.count() == 6
+    assert "RMS (µm)" in win.report.html_for(0)
+    row = next(i for i in range(1, 6) if win.report.figures_of(i))
+    win.report.list.setCurrentRow(row)
+    qtbot.waitUntil(lambda: not win.report.worker.busy, timeout=30_000)
+    page = win.report.html_for(row)
+    assert page.count("<img") == len(win.report.figures_of(row)) and "drawing" not in page
+    assert "ran 5 step(s): 4,640 points, residual RMS" in win.log_widget.toPlainText()
 
 
-def test_select_delete_undo_redo_and_project(qtbot, tmp_path):
+def test_cancel_stops_a_run_and_keeps_the_cloud(qtbot):
+    win = _example_window(qtbot)
+    before = win.session.shown
+    win.start_run(None)
+    win.cancel_run()
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=60_000)
+    log = win.log_widget.toPlainText()
+    if "cancelled" in log:  # a fast machine may finish first; then it ran
+        assert win.session.shown is before
+    else:
+        assert "ran 5 step(s)" in log
+
+
+def test_select_delete_undo_redo_project_and_batch_replay(qtbot, tmp_path, run_cli):
     win = _example_window(qtbot)
     win.session.run()
     n0 = win.session.shown.n
-    win.map.set_mask(win.session.select_rectangle(-150, 150, -150, 150))
-    k = int(win.map.mask.sum())
+    c = win.session.shown
+    win.set_selection((np.abs(c.x) < 150) & (np.abs(c.y) < 150))
+    k = int(win.selection.sum())
+    assert k > 0 and f"{k:,} point(s) selected" in win.sel_label.text()
+    assert win.view3d._sel_actor is not None  # highlighted in 3D
     win.delete_selection()
     assert win.session.shown.n == n0 - k and "manual_edit" in win.session.steps[-1]
-    assert "residual" in win.plotter.mesh.array_names[0] or win.plotter.mesh.n_points == n0 - k
+    assert win.view3d.mesh.n_points == n0 - k and win.selection is None
     win.undo_action.trigger()
-    assert win.session.shown.n == n0
+    assert win.session.shown.n == n0 and win.view3d.mesh.n_points == n0
     win.redo_action.trigger()
     assert win.session.shown.n == n0 - k
     # the pipeline form marks an invalid value and keeps the old one
@@ -117,15 +149,149 @@ def test_select_delete_undo_redo_and_project(qtbot, tmp_path):
     assert win.session.steps[4] == {"aperture": {"diameter": 1290}}
     # save, reopen in a new window: the same cloud
     win.session.save_project(tmp_path / "p.pointspro.yaml")
-    from pointspro.app.main import build_window
-
-    w2 = build_window([])
-    qtbot.addWidget(w2)
+    w2 = _window(qtbot)
     w2.open_any(str(tmp_path / "p.pointspro.yaml"))
     assert w2.session.shown.equals(win.session.shown)
+    # the saved recipe replays identically in the batch
+    win.session.save_recipe(tmp_path / "r.yaml")
+    code, _, err = run_cli("--batch", tmp_path / "r.yaml", EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o")
+    assert code == 0, err
+    from pointspro.core.io import read_cloud
+
+    out = read_cloud(tmp_path / "o" / "asphere_cmm" / "cloud.csv")
+    shown = win.session.shown
+    assert np.array_equal(out.index, shown.index)
+    assert np.allclose(out["residual"], shown["residual"], rtol=0, atol=1e-12)
     # a corrupt file: a message, and the window keeps what it had
     (tmp_path / "bad.csv").write_text("x,y,z\n1,2\n")
     w2.open_any(str(tmp_path / "bad.csv"))
-    assert "error:" in w2.log_widget.toPlainText() and w2.session.shown.equals(win.session.shown)
-    win.plotter.close()
-    w2.plotter.close()
+    assert "error:" in w2.log_widget.toPlainText() and "bad.csv" in w2.log_widget.toPlainText()
+    assert w2.session.shown.equals(win.session.shown)
+
+
+def test_rectangle_and_lasso_through_the_3d_view(qtbot, tmp_path):
+    """Drag a rectangle in the 3D view (looking along z): the points under it are selected; a lasso
+    around the centre selects the centre."""
+    from PySide6 import QtCore
+
+    win = _window(qtbot, [_scattered(tmp_path, 4000)])
+    win.show()
+    qtbot.waitExposed(win)
+    w = win.view3d.plotter.interactor
+    cx, cy = w.width() // 2, w.height() // 2
+    win.view3d.mode.setCurrentText("select rectangle")
+    qtbot.mousePress(w, QtCore.Qt.LeftButton, pos=QtCore.QPoint(cx - 30, cy - 30))
+    qtbot.mouseMove(w, QtCore.QPoint(cx + 30, cy + 30))
+    qtbot.mouseRelease(w, QtCore.Qt.LeftButton, pos=QtCore.QPoint(cx + 30, cy + 30))
+    sel = win.selection
+    c = win.session.shown
+    assert sel is not None and 0 < sel.sum() < c.n / 2
+    # the view centre is the cloud centre: selected points surround it, a square in x, y
+    xs, ys = c.x[sel] - c.x.mean(), c.y[sel] - c.y.mean()
+    half = max(np.abs(xs).max(), np.abs(ys).max())
+    assert np.abs(xs).max() == pytest.approx(np.abs(ys).max(), rel=0.15)
+    inner = (np.abs(c.x - c.x.mean()) < 0.8 * half) & (np.abs(c.y - c.y.mean()) < 0.8 * half)
+    assert np.all(sel[inner])
+    # lasso: a diamond around the centre
+    win.view3d.mode.setCurrentText("select lasso")
+    pts = [(cx, cy - 40), (cx + 40, cy), (cx, cy + 40), (cx - 40, cy), (cx, cy - 40)]
+    qtbot.mousePress(w, QtCore.Qt.LeftButton, pos=QtCore.QPoint(*pts[0]))
+    for p in pts[1:]:
+        qtbot.mouseMove(w, QtCore.QPoint(*p))
+    qtbot.mouseRelease(w, QtCore.Qt.LeftButton, pos=QtCore.QPoint(*pts[-1]))
+    sel = win.selection
+    d1 = np.abs(c.x[sel] - c.x.mean()) + np.abs(c.y[sel] - c.y.mean())
+    assert sel.sum() > 0 and d1.max() < 1.15 * np.quantile(d1, 0.99)
+    win.delete_selection()
+    assert win.session.shown.n == c.n - sel.sum()
+
+
+def test_map_rectangle_lasso_threshold_and_profile(qtbot, tmp_path):
+    win = _window(qtbot, [_scattered(tmp_path)])
+    m, c = win.map, win.session.shown
+
+    class Ev:
+        def __init__(self, x, y):
+            self.xdata, self.ydata = x, y
+    m._on_rect(Ev(-10, -20), Ev(30, 5))
+    expect = (c.x >= -10) & (c.x <= 30) & (c.y >= -20) & (c.y <= 5)
+    assert np.array_equal(win.selection, expect)
+    assert np.any(m.sel_im.get_array()[..., 3] > 0)  # bins highlighted
+    m._on_lasso([(0, 0), (40, 0), (0, 40)])
+    assert np.array_equal(win.selection, (c.x > 0) & (c.y > 0) & (c.x + c.y < 40))
+    # threshold: the slider at the 90 % quantile of the residual selects the top 10 %
+    m.th_channel.setCurrentText("residual")
+    m.slider.setValue(900)
+    assert win.selection.sum() == pytest.approx(0.1 * c.n, abs=2)
+    assert "points: residual > " in m.th_info.text() and "µm" in m.th_info.text()
+    # a profile cut along x through y = 0: the points near the line, in µm, sorted along the cut
+    s, v = m.cut((-50, 0), (50, 0))
+    near = np.abs(c.y) <= 1.5 * (m.ext[1] - m.ext[0]) / m._bins
+    assert s.size == near.sum() and np.all(np.diff(s) >= 0)
+    order = np.argsort(c.x[near])
+    assert np.allclose(v, c["residual"][near][order] * 1e3)
+    assert m.pax.lines and "profile:" in m.pax.get_title()
+
+
+def test_autosave_restores_an_unsaved_session(qtbot, tmp_path):
+    from pointspro.app.window import autosave_path
+
+    win = _window(qtbot, [_scattered(tmp_path)])
+    win.session.add_step("aperture", {"diameter": 80})
+    win.autosave_now()
+    win._autosave_thread.join()
+    assert autosave_path().is_file()
+    # the "crash": the window never closed; a new one offers the session back
+    w2 = _window(qtbot)
+    assert not w2.banner.isHidden() and "unsaved session" in w2.banner_text.text()
+    w2.restore_autosave()
+    assert w2.session.steps == [{"aperture": {"diameter": 80}}]
+    assert w2.session.input_path.resolve() == (tmp_path / "c.csv").resolve()
+    w2.close()  # a normal close leaves nothing to restore
+    assert not autosave_path().exists()
+
+
+def test_bad_recipe_and_moved_data_leave_the_window_usable(qtbot, tmp_path):
+    win = _window(qtbot, [_scattered(tmp_path)])
+    (tmp_path / "r.yaml").write_text("pointspro: 1\nsteps:\n  - frobnicate: {}\n")
+    win.open_any(str(tmp_path / "r.yaml"))
+    assert "frobnicate" in win.log_widget.toPlainText() and win.session.steps == []
+    win.session.save_project(tmp_path / "p.pointspro.yaml")
+    (tmp_path / "c.csv").rename(tmp_path / "moved.csv")
+    w2 = _window(qtbot, [tmp_path / "p.pointspro.yaml"])
+    assert "moved or deleted" in w2.log_widget.toPlainText() and w2.session.shown is None
+    w2.open_any(str(tmp_path / "moved.csv"))
+    assert w2.session.shown.n == 2000
+
+
+def test_exports(qtbot, tmp_path):
+    from pointspro.core.io import read_cloud
+
+    win = _example_window(qtbot, steps=7)
+    win.session.run()
+    win._ran(win.session.last_result)
+    win.export_cloud(tmp_path / "cloud.csv")
+    assert read_cloud(tmp_path / "cloud.csv").n == win.session.shown.n
+    win.export_map(tmp_path / "map.png")
+    win.export_map(tmp_path / "map.x3p")
+    assert (tmp_path / "map.png").stat().st_size > 5000 and (tmp_path / "map.x3p").is_file()
+    win.export_report(tmp_path / "rep")
+    qtbot.waitUntil(lambda: not win.exporter.busy, timeout=60_000)
+    assert (tmp_path / "rep" / "report.html").is_file() and (tmp_path / "rep" / "map.csv").is_file()
+
+
+def test_explain_panel_names_the_missing_effects(qtbot, tmp_path, run_cli):
+    code, _, err = run_cli("simulate", EXAMPLE / "spiral_truth.yaml", "--out", tmp_path / "meas.csv")
+    assert code == 0, err
+    win = _window(qtbot, [tmp_path / "meas.csv"])
+    win.explain.path.setText(str(EXAMPLE / "spiral_model.yaml"))
+    win.explain.bootstrap.setValue(2)
+    assert win.explain.start()
+    qtbot.waitUntil(lambda: not win.explain.worker.busy, timeout=120_000)
+    rep = win.explain.report
+    found = {f["effect"] for f in rep["found"]}
+    assert {"spindle_tilt", "vibration"} <= found
+    assert rep["gap_after"]["rms_um"] < 0.5 * rep["gap_before"]["rms_um"]
+    assert "Verdict" in win.explain.view.toHtml() and "explain:" in win.log_widget.toPlainText()
+    win.explain.save_model(tmp_path / "updated.yaml")
+    assert "spindle_tilt" in (tmp_path / "updated.yaml").read_text()

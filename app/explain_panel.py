@@ -1,0 +1,122 @@
+"""The Explain panel: compare the open measurement with a simulation of it (a model YAML, or a
+simulated cloud), name the physical effects the model is missing, add them and show the gap shrink —
+core.explain.workflow.explain, the same as `pointspro explain`, run in a worker thread.
+
+The page shown is the workflow's explain.html (verdict, gap before/after, found effects with their
+evidence, ambiguities, unexplained regions, checks); the updated model can be saved from here.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+from PySide6 import QtCore, QtWidgets
+
+from .worker import Worker
+
+
+class ExplainPanel(QtWidgets.QWidget):
+    log = QtCore.Signal(str)
+
+    def __init__(self, session, parent=None):
+        super().__init__(parent)
+        self.session = session
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.setContentsMargins(2, 2, 2, 2)
+        form = QtWidgets.QFormLayout()
+        self.kind = QtWidgets.QComboBox()
+        self.kind.addItems(["model (YAML)", "simulated cloud"])
+        self.kind.setToolTip("what the measurement is compared with: a model evaluated at the measured "
+                             "positions, or a simulated cloud (matched by row or by position)")
+        form.addRow("Compare with", self.kind)
+        row = QtWidgets.QHBoxLayout()
+        self.path = QtWidgets.QLineEdit()
+        self.path.setPlaceholderText("model.yaml or simulated cloud")
+        browse = QtWidgets.QPushButton("…")
+        browse.clicked.connect(self._browse)
+        row.addWidget(self.path, 1)
+        row.addWidget(browse)
+        form.addRow("File", row)
+        self.bootstrap = QtWidgets.QSpinBox()
+        self.bootstrap.setRange(0, 200)
+        self.bootstrap.setValue(10)
+        self.bootstrap.setToolTip("bootstrap resamples for the stability of each found effect")
+        form.addRow("Bootstrap", self.bootstrap)
+        lay.addLayout(form)
+        row = QtWidgets.QHBoxLayout()
+        self.run = QtWidgets.QPushButton("Explain the gap")
+        self.run.clicked.connect(self.start)
+        self.save = QtWidgets.QPushButton("Save updated model…")
+        self.save.setEnabled(False)
+        self.save.clicked.connect(self._save_model)
+        row.addWidget(self.run)
+        row.addWidget(self.save)
+        lay.addLayout(row)
+        self.view = QtWidgets.QTextBrowser()
+        self.view.setHtml("<p style='color:#777'>Open a measurement, choose the model of its simulation "
+                          "and press <i>Explain the gap</i>.</p>")
+        lay.addWidget(self.view, 1)
+        self.worker = Worker(self)
+        self.worker.done.connect(self._done)
+        self.worker.failed.connect(self._failed)
+        self._dir = QtCore.QTemporaryDir()
+        self._runs = 0
+        self.report = None
+        self.folder = None
+
+    def _browse(self):
+        filt = "Models (*.yaml *.yml)" if self.kind.currentIndex() == 0 else "Clouds (*.csv *.txt *.ply *.xyz)"
+        p = QtWidgets.QFileDialog.getOpenFileName(self, "Compare with", "", filt)[0]
+        if p:
+            self.path.setText(p)
+
+    def start(self) -> bool:
+        from pointspro.core.explain.workflow import explain
+
+        s = self.session
+        if s.input_path is None:
+            self.log.emit("explain: open a measurement first")
+            return False
+        other = self.path.text().strip()
+        if not other:
+            self.log.emit("explain: choose a model YAML or a simulated cloud to compare with")
+            return False
+        self._runs += 1
+        out = Path(self._dir.path()) / f"explain_{self._runs}"
+        model = Path(other) if self.kind.currentIndex() == 0 else None
+        sim = Path(other) if model is None else None
+        measured, boot = s.input_path, self.bootstrap.value()
+        self.folder = out
+        self.run.setEnabled(False)
+        self.view.setHtml("<p>comparing…</p>")
+        return self.worker.start(lambda _p: explain(measured, out, model, sim, bootstrap=boot))
+
+    def _done(self, report):
+        self.report = report
+        self.run.setEnabled(True)
+        self.save.setEnabled(True)
+        self.view.setHtml((self.folder / "explain.html").read_text(encoding="utf-8"))
+        names = ", ".join(f["effect"] for f in report["found"]) or "nothing"
+        self.log.emit(f"explain: {report['verdict']} — found {names}; gap RMS "
+                      f"{report['gap_before']['rms_um']:.4g} → {report['gap_after']['rms_um']:.4g} µm")
+
+    def _failed(self, msg):
+        self.run.setEnabled(True)
+        self.view.setHtml(f"<p style='color:#a40000'>{msg}</p>")
+        self.log.emit(f"explain: {msg}")
+
+    def save_model(self, target) -> None:
+        shutil.copyfile(self.folder / "model.updated.yaml", target)
+        self.log.emit(f"saved the updated model to {target}")
+
+    def _save_model(self):
+        if os.environ.get("POINTSPRO_NO_DIALOGS"):
+            return
+        p = QtWidgets.QFileDialog.getSaveFileName(self, "Save updated model", "model.updated.yaml",
+                                                  "Models (*.yaml)")[0]
+        if p:
+            try:
+                self.save_model(p)
+            except OSError as e:
+                self.log.emit(f"error: {p}: {e.strerror}")

@@ -1,0 +1,282 @@
+"""The 2D map: the channel binned on a square grid (the reports' figure, core.figures.binned_image),
+rectangle and lasso selection, profile cuts, and selection by threshold with a slider.
+
+The figure is built once and updated in place. While the optician edits one input in one channel
+(deletions, undo, redo) the colour limits stay fixed — the same colour means the same height before
+and after a deletion — and only the image is redrawn over a cached background (matplotlib blitting):
+~20 ms on a million points instead of ~100 ms for a full figure draw.
+"""
+from __future__ import annotations
+
+import numpy as np
+from PySide6 import QtCore, QtWidgets
+
+from . import display
+
+MODES = ("select rectangle", "select lasso", "profile cut")
+
+
+class MapView(QtWidgets.QWidget):
+    """``selected(mask)`` is emitted with a boolean mask over the shown cloud."""
+
+    selected = QtCore.Signal(object)
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+        from matplotlib.figure import Figure
+        from matplotlib.widgets import LassoSelector, RectangleSelector
+
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.setContentsMargins(2, 2, 2, 2)
+        tools = QtWidgets.QHBoxLayout()
+        tools.addWidget(QtWidgets.QLabel("2D:"))
+        self.mode = QtWidgets.QComboBox()
+        self.mode.addItems(MODES)
+        self.mode.currentTextChanged.connect(self._mode_changed)
+        tools.addWidget(self.mode)
+        self.info = QtWidgets.QLabel("")
+        tools.addWidget(self.info, 1)
+        lay.addLayout(tools)
+        self.figure = Figure(figsize=(5.2, 6.0), dpi=90)
+        gs = self.figure.add_gridspec(2, 2, height_ratios=(3.2, 1), width_ratios=(1, 0.04),
+                                      left=0.14, right=0.86, bottom=0.08, top=0.95, hspace=0.32,
+                                      wspace=0.05)
+        self.ax = self.figure.add_subplot(gs[0, 0])
+        self.cax = self.figure.add_subplot(gs[0, 1])
+        self.pax = self.figure.add_subplot(gs[1, :])
+        self.ax.set_xlabel("x (mm)")
+        self.ax.set_ylabel("y (mm)")
+        self.pax.set_xlabel("along the cut (mm)")
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas.setMinimumSize(360, 420)
+        lay.addWidget(self.canvas, 1)
+        th = QtWidgets.QHBoxLayout()
+        th.addWidget(QtWidgets.QLabel("Select above"))
+        self.th_channel = QtWidgets.QComboBox()
+        self.th_channel.setToolTip("select the points whose value of this channel is above the slider's")
+        th.addWidget(self.th_channel)
+        self.slider = QtWidgets.QSlider(QtCore.Qt.Horizontal)
+        self.slider.setRange(0, 1000)
+        self.slider.setValue(1000)
+        self.slider.setToolTip("quantile of the channel: move left to select more points")
+        self.slider.valueChanged.connect(self._threshold)
+        th.addWidget(self.slider, 1)
+        self.th_info = QtWidgets.QLabel("")
+        th.addWidget(self.th_info)
+        lay.addLayout(th)
+        self.cloud = None
+        self.channel = None
+        self.values = None
+        self.im = self.sel_im = self.cbar = None
+        self.ext = None
+        self._k = None
+        self.profile = None        # (distance along the cut mm, value in display units)
+        self.profile_line = None   # ((x0, y0), (x1, y1)) mm
+        self._line_artist = None
+        self._press = None
+        self._rect = RectangleSelector(self.ax, self._on_rect, useblit=False, interactive=False)
+        self._lasso = LassoSelector(self.ax, self._on_lasso)
+        self._bg = None
+        self.canvas.mpl_connect("draw_event", self._on_draw)
+        self.canvas.mpl_connect("button_press_event", self._on_press)
+        self.canvas.mpl_connect("button_release_event", self._on_release)
+        self._mode_changed(self.mode.currentText())
+
+    # -- drawing ------------------------------------------------------------------------------------
+    def set_cloud(self, cloud, channel: str, new_input: bool = False, keep_limits: bool = False):
+        """Show ``cloud`` in ``channel``; ``keep_limits`` (an edit of the same input in the same
+        channel) keeps the extent and colour limits and redraws only the image."""
+        from pointspro.core.figures import binned_image
+
+        same = keep_limits and not new_input and self.im is not None and channel == self.channel
+        self.cloud, self.channel = cloud, channel
+        if cloud is None or cloud.n == 0:
+            self.values = self._k = None
+            if self.im is not None:
+                self.im.set_data(np.full((2, 2), np.nan))
+                self.canvas.draw_idle()
+            return
+        vals, title, diverging = display.channel_values(cloud, channel)
+        self.values = vals
+        if new_input:
+            self.ext = None  # else the input's extent, kept through deletions so the map does not jump
+        bins = self._bins if same else int(np.clip(1.2 * np.sqrt(cloud.n), 60, 400))
+        img, ext, self._k = binned_image(cloud.x, cloud.y, vals, ext=self.ext, bins=bins)
+        self.ext = ext
+        self._bins = img.shape[0]
+        self.info.setText(f"{cloud.n:,} points")
+        if same:
+            self.im.set_data(img)
+            self.sel_im.set_data(np.zeros(img.shape + (4,)))
+            if self.profile_line is not None:
+                self.cut(*self.profile_line, draw=False)
+                self.canvas.draw_idle()
+            else:
+                self._blit()
+            return
+        lo, hi = display.colour_limits(img, diverging)
+        cmap = "RdBu_r" if diverging else "viridis"
+        if self.im is None:
+            self.im = self.ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,
+                                     interpolation="nearest", animated=True)
+            self.cbar = self.figure.colorbar(self.im, cax=self.cax)
+            self.sel_im = self.ax.imshow(np.zeros(img.shape + (4,)), origin="lower", extent=ext,
+                                         interpolation="nearest", animated=True)
+        else:
+            self.im.set_data(img)
+            self.im.set_extent(ext)
+            self.im.set_cmap(cmap)
+            self.im.set_clim(lo, hi)
+            self.sel_im.set_extent(ext)
+        self.sel_im.set_data(np.zeros(img.shape + (4,)))
+        self.cbar.set_label(title)
+        self.ax.set_xlim(ext[0], ext[1])
+        self.ax.set_ylim(ext[2], ext[3])
+        self.ax.set_title(title, fontsize=9)
+        self._fill_threshold_channels()
+        if self.profile_line is not None:
+            self.cut(*self.profile_line, draw=False)
+        self.canvas.draw_idle()
+
+    # -- fast redraws: the map's images over a cached background ------------------------------------
+    def _on_draw(self, _ev):
+        self._bg = self.canvas.copy_from_bbox(self.ax.bbox)
+        self._draw_animated()
+
+    def _draw_animated(self):
+        for a in (self.im, self.sel_im, self._line_artist):
+            if a is not None:
+                self.ax.draw_artist(a)
+
+    def _blit(self):
+        if self._bg is None:
+            self.canvas.draw_idle()
+            return
+        self.canvas.restore_region(self._bg)
+        self._draw_animated()
+        self.canvas.blit(self.ax.bbox)
+
+    def save_png(self, path, dpi=150):
+        """The map as shown (the animated images are drawn too)."""
+        arts = [a for a in (self.im, self.sel_im, self._line_artist) if a is not None]
+        for a in arts:
+            a.set_animated(False)
+        try:
+            self.figure.savefig(path, dpi=dpi)
+        finally:
+            for a in arts:
+                a.set_animated(True)
+            self.canvas.draw_idle()
+
+    def highlight(self, mask):
+        """Bins holding selected points turn yellow."""
+        if self.sel_im is None or self._k is None:
+            return
+        b = self._bins
+        rgba = np.zeros((b * b, 4))
+        if mask is not None and np.any(mask):
+            hit = np.bincount(self._k[mask], minlength=b * b) > 0
+            rgba[hit] = (1.0, 0.8, 0.0, 0.85)
+            self.info.setText(f"{self.cloud.n:,} points, {int(np.sum(mask)):,} selected")
+        else:
+            self.info.setText(f"{self.cloud.n:,} points" if self.cloud is not None else "")
+        self.sel_im.set_data(rgba.reshape(b, b, 4))
+        self._blit()
+
+    # -- profile cuts -------------------------------------------------------------------------------
+    def cut(self, p0, p1, draw: bool = True):
+        """Profile of the shown channel along p0→p1 (mm): the points within 1.5 map bins of the line,
+        their values against the distance along the cut, and their mean per bin."""
+        if self.cloud is None:
+            return None
+        self.profile_line = (tuple(map(float, p0)), tuple(map(float, p1)))
+        binw = (self.ext[1] - self.ext[0]) / self._bins
+        s, v = display.profile_along(self.cloud.x, self.cloud.y, self.values, p0, p1, 1.5 * binw)
+        self.profile = (s, v)
+        if self._line_artist is not None:
+            self._line_artist.remove()
+        (self._line_artist,) = self.ax.plot([p0[0], p1[0]], [p0[1], p1[1]], color="k", lw=1.2,
+                                            animated=True)
+        pax = self.pax
+        pax.clear()
+        pax.set_xlabel("along the cut (mm)")
+        pax.set_ylabel(self.cbar.ax.get_ylabel() if self.cbar else "")
+        if s.size:
+            pax.plot(s, v, ".", ms=2, color="#999999")
+            edges = np.arange(0.0, s[-1] + binw, binw)
+            j = np.digitize(s, edges)
+            n = np.bincount(j, minlength=edges.size + 1)
+            m = np.bincount(j, weights=v, minlength=edges.size + 1)
+            ok = n > 0
+            centres = np.append(edges, edges[-1] + binw) - binw / 2
+            pax.plot(centres[ok], m[ok] / n[ok], color="#2c6fbb", lw=1.2)
+            pax.set_title(f"profile: {s.size:,} points, PV {np.ptp(v):.4g}", fontsize=8)
+        else:
+            pax.set_title("profile: no points near the cut", fontsize=8)
+        if draw:
+            self.canvas.draw_idle()
+        return self.profile
+
+    # -- interaction --------------------------------------------------------------------------------
+    def _mode_changed(self, mode):
+        self._rect.set_active(mode == "select rectangle")
+        self._lasso.set_active(mode == "select lasso")
+
+    def _on_rect(self, press, release):
+        if self.cloud is not None:
+            x0, x1 = sorted((press.xdata, release.xdata))
+            y0, y1 = sorted((press.ydata, release.ydata))
+            c = self.cloud
+            self.selected.emit((c.x >= x0) & (c.x <= x1) & (c.y >= y0) & (c.y <= y1))
+
+    def _on_lasso(self, verts):
+        from pointspro.plugins.aperture import points_in_polygon
+
+        if self.cloud is not None and len(verts) >= 3:
+            self.selected.emit(points_in_polygon(self.cloud.x, self.cloud.y,
+                                                 np.asarray(verts, dtype=np.float64)))
+
+    def _on_press(self, ev):
+        if self.mode.currentText() == "profile cut" and ev.inaxes is self.ax:
+            self._press = (ev.xdata, ev.ydata)
+
+    def _on_release(self, ev):
+        if self._press is not None and ev.inaxes is self.ax:
+            self.cut(self._press, (ev.xdata, ev.ydata))
+        self._press = None
+
+    # -- threshold ----------------------------------------------------------------------------------
+    def _fill_threshold_channels(self):
+        names = [n for n in self.cloud.column_names if n not in ("x", "y", "index")]
+        cur = self.th_channel.currentText()
+        self.th_channel.blockSignals(True)
+        self.th_channel.clear()
+        self.th_channel.addItems(names)
+        if cur in names:
+            self.th_channel.setCurrentText(cur)
+        elif "omega" in names:
+            self.th_channel.setCurrentText("omega")
+        self.th_channel.blockSignals(False)
+        self.slider.blockSignals(True)
+        self.slider.setValue(1000)
+        self.slider.blockSignals(False)
+        self.th_info.setText("")
+
+    def threshold_mask(self, name: str, pos: int):
+        """Points above the ``pos``/1000 quantile of the channel, and the threshold in display units."""
+        vals, title, _ = display.channel_values(self.cloud, name)
+        value = float(np.quantile(vals, pos / 1000.0))
+        return vals > value, f"{title.split(' (')[0]} > {value:.4g}{title[len(title.split(' (')[0]):]}"
+
+    def _threshold(self, pos):
+        name = self.th_channel.currentText()
+        if self.cloud is None or not name:
+            return
+        if pos >= 1000:
+            self.th_info.setText("")
+            self.selected.emit(None)
+            return
+        mask, text = self.threshold_mask(name, pos)
+        self.th_info.setText(f"{int(mask.sum()):,} points: {text}")
+        self.selected.emit(mask)

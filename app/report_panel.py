@@ -1,0 +1,104 @@
+"""The report panel: after a run, the form-error summary and each step's numbers and figures — the
+same tables (core.report.table_html) and the same figure writers as the batch's report.html.
+
+Figures are drawn only when a step is looked at, in a worker thread (matplotlib's Agg canvas with the
+object API is safe off the GUI thread), into a folder that lives as long as the panel.
+"""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+from PySide6 import QtCore, QtWidgets
+
+from .worker import Worker
+
+
+class ReportPanel(QtWidgets.QWidget):
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        lay = QtWidgets.QHBoxLayout(self)
+        lay.setContentsMargins(2, 2, 2, 2)
+        self.list = QtWidgets.QListWidget()
+        self.list.setMaximumWidth(260)
+        lay.addWidget(self.list)
+        self.view = QtWidgets.QTextBrowser()
+        self.view.setOpenExternalLinks(True)
+        lay.addWidget(self.view, 1)
+        self.result = None
+        self._dir = QtCore.QTemporaryDir()
+        self._drawn: set = set()
+        self._serial = 0
+        self.worker = Worker(self)
+        self.worker.done.connect(lambda _: self._select(self.list.currentRow()))
+        self.worker.failed.connect(lambda msg: self.view.append(f"<p>figures: {html.escape(msg)}</p>"))
+        self.list.currentRowChanged.connect(self._select)
+        self.view.setHtml("<p style='color:#777'>Run the pipeline: each step's numbers and figures "
+                          "appear here.</p>")
+
+    def set_result(self, result) -> None:
+        self.result = result
+        self._serial += 1
+        self._drawn.clear()
+        self.list.blockSignals(True)
+        self.list.clear()
+        self.list.addItem("Summary")
+        for i, rec in enumerate(result.steps, 1):
+            self.list.addItem(f"{i}. {rec.title} — {rec.seconds:.2f} s — {rec.points_in:,} → "
+                              f"{rec.points_out:,}")
+        self.list.blockSignals(False)
+        self.list.setCurrentRow(0)
+        self._select(0)
+
+    def html_for(self, row: int) -> str:
+        """The panel's page for row 0 (summary) or a step (1…), figures as far as drawn."""
+        from pointspro.core.report import table_html
+
+        r = self.result
+        if r is None:
+            return ""
+        if row <= 0:
+            s = r.summary()
+            return ("<h3>Form error after all steps</h3>" + table_html({
+                "points in": s["points_in"], "points out": s["points_out"], "RMS (µm)": s["rms_um"],
+                "PV (µm)": s["pv_um"], "PVr (µm)": s["pvr_um"], "slope RMS (µrad)": s["slope_rms_urad"]}))
+        rec = r.steps[row - 1]
+        warn = "".join(f"<p style='color:#a45200'>⚠ {html.escape(str(w))}</p>"
+                       for w in rec.report.get("warnings", []) or [])
+        parts = [f"<h3>{html.escape(rec.title)} <small>({html.escape(rec.id)})</small></h3>", warn,
+                 table_html(rec.report)]
+        for name in self.figures_of(row):
+            p = self._path(name)
+            if p.is_file():
+                parts.append(f"<p><img src='{QtCore.QUrl.fromLocalFile(str(p)).toString()}' width='560'>"
+                             f"<br><small>{html.escape(name)}</small></p>")
+            else:
+                parts.append(f"<p style='color:#777'>drawing {html.escape(name)}…</p>")
+        return "".join(parts)
+
+    def figures_of(self, row: int) -> list[str]:
+        if self.result is None or row <= 0:
+            return []
+        return sorted(n for n in self.result.steps[row - 1].artifacts if n.endswith(".png"))
+
+    def _path(self, name: str) -> Path:
+        return Path(self._dir.path()) / f"{self._serial}_{name}"
+
+    def _select(self, row: int) -> None:
+        self._show(row)
+        key = (self._serial, row)
+        todo = [(self._path(n).name, self.result.steps[row - 1].artifacts[n]) for n in self.figures_of(row)
+                if not self._path(n).is_file()]
+        if todo and not self.worker.busy and key not in self._drawn:
+            from pointspro.core.batch import write_artifact
+
+            self._drawn.add(key)  # tried once: a figure that fails is said, not retried forever
+            folder = Path(self._dir.path())
+
+            def draw(_progress):
+                for name, art in todo:
+                    write_artifact(folder, name, art)
+            self.worker.start(draw)
+
+    def _show(self, row: int) -> None:
+        self.view.setHtml(self.html_for(row))

@@ -1,0 +1,454 @@
+"""The main window: composes the views and panels around core.session.Session (the model) and turns
+the optician's actions into session calls. It computes nothing itself.
+
+Layout: the 3D view in the centre; the 2D map (selection, profile cuts, threshold) on the right; the
+pipeline on the left; log, report and Explain tabbed at the bottom. Selection is shared by the two
+views (a mask over the shown cloud); Delete records it as a `manual_edit` step.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from pointspro.core.errors import PointsProError
+from pointspro.core.session import Session
+
+from . import display
+from .explain_panel import ExplainPanel
+from .mapview import MapView
+from .pipeline_dock import PipelineDock
+from .report_panel import ReportPanel
+from .view3d import View3D
+from .worker import Worker
+
+DATA_FILTER = "Measurements (*.csv *.txt *.xyz *.asc *.dat *.ply *.pcd *.pts *.datx *.sur *.sdf *.x3p)"
+AUTOSAVE_DELAY_MS = 1500
+
+
+def autosave_path() -> Path:
+    base = os.environ.get("POINTSPRO_AUTOSAVE_DIR") or QtCore.QStandardPaths.writableLocation(
+        QtCore.QStandardPaths.AppDataLocation) or str(Path.home() / ".pointspro")
+    return Path(base) / "autosave.pointspro.yaml"
+
+
+def _dialogs() -> bool:
+    return not os.environ.get("POINTSPRO_NO_DIALOGS")
+
+
+class MainWindow(QtWidgets.QMainWindow):
+    def __init__(self):
+        super().__init__()
+        self.setWindowTitle("PointsPro")
+        self.resize(1400, 860)
+        self.setAcceptDrops(True)
+        self.session = Session()
+        self.selection = None
+        self.last_report = None
+        self._shown = None
+        self.settings = QtCore.QSettings("PointsPro", "PointsPro")
+
+        # colour-by, shared by both views
+        bar = self.addToolBar("View")
+        bar.setObjectName("view_toolbar")
+        bar.addWidget(QtWidgets.QLabel(" Colour by: "))
+        self.channel = QtWidgets.QComboBox()
+        self.channel.setMinimumWidth(140)
+        self.channel.currentTextChanged.connect(self._channel_changed)
+        bar.addWidget(self.channel)
+        self.sel_label = QtWidgets.QLabel("")
+        bar.addWidget(self.sel_label)
+
+        # restore banner (an unsaved session found at start-up)
+        central = QtWidgets.QWidget()
+        clay = QtWidgets.QVBoxLayout(central)
+        clay.setContentsMargins(0, 0, 0, 0)
+        self.banner = QtWidgets.QFrame()
+        self.banner.setStyleSheet("QFrame{background:#fff4cc}")
+        blay = QtWidgets.QHBoxLayout(self.banner)
+        self.banner_text = QtWidgets.QLabel()
+        blay.addWidget(self.banner_text, 1)
+        b = QtWidgets.QPushButton("Restore")
+        b.clicked.connect(self.restore_autosave)
+        blay.addWidget(b)
+        b = QtWidgets.QPushButton("Discard")
+        b.clicked.connect(self.discard_autosave)
+        blay.addWidget(b)
+        self.banner.hide()
+        clay.addWidget(self.banner)
+        self.view3d = View3D(central)
+        clay.addWidget(self.view3d, 1)
+        self.setCentralWidget(central)
+        self.plotter = self.view3d.plotter
+
+        self.map = MapView()
+        self.map_dock = self._dock("2D map", self.map, QtCore.Qt.RightDockWidgetArea)
+        self.pipeline = PipelineDock(self)
+        self.addDockWidget(QtCore.Qt.LeftDockWidgetArea, self.pipeline)
+        self.log_widget = QtWidgets.QPlainTextEdit(readOnly=True)
+        log_dock = self._dock("Log", self.log_widget, QtCore.Qt.BottomDockWidgetArea)
+        self.report = ReportPanel()
+        self.report_dock = self._dock("Report", self.report, QtCore.Qt.BottomDockWidgetArea)
+        self.explain = ExplainPanel(self.session)
+        self.explain.log.connect(self.log)
+        self.explain_dock = self._dock("Explain", self.explain, QtCore.Qt.BottomDockWidgetArea)
+        self.tabifyDockWidget(log_dock, self.report_dock)
+        self.tabifyDockWidget(self.report_dock, self.explain_dock)
+        log_dock.raise_()
+        self.resizeDocks([log_dock], [230], QtCore.Qt.Vertical)
+        self.resizeDocks([self.map_dock, self.pipeline], [460, 330], QtCore.Qt.Horizontal)
+
+        self.view3d.selected.connect(self.set_selection)
+        self.map.selected.connect(self.set_selection)
+        self.runner = Worker(self)
+        self.runner.progressed.connect(self._progress)
+        self.runner.done.connect(self._ran)
+        self.runner.failed.connect(self._run_failed)
+        self.exporter = Worker(self)
+        self.exporter.done.connect(lambda msg: self.log(msg))
+        self.exporter.failed.connect(lambda msg: self.log(f"error: {msg}"))
+        self._autosave_timer = QtCore.QTimer(self, singleShot=True, interval=AUTOSAVE_DELAY_MS)
+        self._autosave_timer.timeout.connect(self.autosave_now)
+        self._autosave_thread = None
+        self.session.listeners.append(self._on_session)
+        self._menus()
+        self._offer_restore()
+
+    def _dock(self, title, widget, area):
+        d = QtWidgets.QDockWidget(title, self)
+        d.setObjectName(title)
+        d.setWidget(widget)
+        self.addDockWidget(area, d)
+        return d
+
+    # -- messages -----------------------------------------------------------------------------------
+    def log(self, msg: str) -> None:
+        self.log_widget.appendPlainText(msg)
+        self.statusBar().showMessage(msg.splitlines()[0] if msg else "", 8000)
+
+    def act(self, fn):
+        """Run a model action; a PointsProError becomes one message (log, status bar and, outside
+        tests, a dialog) and the session is left as it was."""
+        try:
+            return fn()
+        except PointsProError as e:
+            self.log(f"error: {e}")
+            if _dialogs():
+                QtWidgets.QMessageBox.warning(self, "PointsPro", str(e))
+        except OSError as e:
+            self.log(f"error: {e.filename or ''}: {e.strerror or e}")
+            if _dialogs():
+                QtWidgets.QMessageBox.warning(self, "PointsPro", f"{e.filename or ''}: {e.strerror or e}")
+        return None
+
+    # -- the model changed ----------------------------------------------------------------------------
+    def _on_session(self, what: str) -> None:
+        s = self.session
+        self.pipeline.refresh()
+        if s.shown is not self._shown:
+            self._show_cloud(new_input=what == "opened", edit=what in ("deleted", "undo", "redo"))
+        self.undo_action.setEnabled(s.can_undo)
+        self.redo_action.setEnabled(s.can_redo)
+        if what == "opened" and s.input_path is not None:
+            self.setWindowTitle(f"PointsPro — {s.input_path.name}")
+        if what != "opened" or s.steps:
+            self._autosave_timer.start()
+
+    def _show_cloud(self, new_input: bool, edit: bool = False) -> None:
+        s = self.session
+        c = self._shown = s.shown
+        self.selection = None
+        self.sel_label.setText("")
+        if c is None:
+            return
+        names = display.channel_order(c)
+        cur = self.channel.currentText()
+        self.channel.blockSignals(True)
+        self.channel.clear()
+        self.channel.addItems(names)
+        self.channel.setCurrentText(cur if cur in names and not new_input else names[0])
+        self.channel.blockSignals(False)
+        ch = self.channel.currentText()
+        n_input = s.input_cloud.n if s.input_cloud is not None else c.n
+        self.map.set_cloud(c, ch, new_input=new_input, keep_limits=edit)
+        self.view3d.set_cloud(c, ch, n_input=n_input, new_input=new_input, keep_limits=edit)
+
+    def _channel_changed(self, name: str) -> None:
+        if name and self._shown is not None:
+            self.map.set_cloud(self._shown, name)
+            self.view3d.set_channel(name)
+            self.set_selection(self.selection)
+
+    # -- selection and cleanup ------------------------------------------------------------------------
+    def set_selection(self, mask) -> None:
+        if mask is not None:
+            mask = np.asarray(mask, dtype=bool)
+            if self._shown is None or mask.shape != (self._shown.n,):
+                return
+            if not mask.any():
+                mask = None
+        self.selection = mask
+        n = 0 if mask is None else int(mask.sum())
+        self.sel_label.setText(f"   {n:,} point(s) selected — Delete removes them" if n else "")
+        self.view3d.highlight(mask)
+        self.map.highlight(mask)
+
+    def delete_selection(self) -> None:
+        m = self.selection
+        if m is None or not np.any(m):
+            self.log("nothing selected")
+            return
+        n = self.act(lambda: self.session.delete(m))
+        if n:
+            self.log(f"deleted {n:,} point(s) (recorded as a manual_edit step)")
+
+    # -- running ------------------------------------------------------------------------------------
+    def start_run(self, upto):
+        if self.runner.busy:
+            return
+        if self.session.input_cloud is None:
+            self.log("run: open a measurement first")
+            return
+        session = self.session
+        self.pipeline.cancel.setEnabled(True)
+        self.pipeline.run_all.setEnabled(False)
+        self.pipeline.run_to.setEnabled(False)
+
+        def job(progress):
+            res = session.compute(upto, progress=progress)
+            res.summary()  # the metrics fit a map: in the worker, not in the GUI thread
+            return res
+        self.runner.start(job)
+
+    def cancel_run(self):
+        self.runner.cancel()
+
+    @property
+    def _thread(self):  # for tests: a run is under way
+        return self.runner._thread
+
+    def _progress(self, f, m):
+        self.pipeline.bar.setValue(int(f * 1000))
+        self.pipeline.bar.setFormat(f"{m} %p%")
+
+    def _run_ended(self):
+        self.pipeline.cancel.setEnabled(False)
+        self.pipeline.run_all.setEnabled(True)
+        self.pipeline.run_to.setEnabled(True)
+
+    def _ran(self, res):
+        self._run_ended()
+        self.session.accept(res)  # back in the GUI thread: the model changes and the views follow
+        self.last_report = res
+        self.report.set_result(res)
+        s = res.summary()
+        rms = f", residual RMS {s['rms_um']:.4g} µm, PV {s['pv_um']:.4g} µm" if s["rms_um"] is not None else ""
+        self.log(f"ran {len(res.steps)} step(s): {res.cloud.n:,} points{rms}")
+        for rec in res.steps:
+            for w in rec.report.get("warnings", []) or []:
+                self.log(f"  {rec.id}: {w}")
+
+    def _run_failed(self, msg):
+        self._run_ended()
+        self.log(f"run: {msg}")
+
+    # -- files ----------------------------------------------------------------------------------------
+    def open_any(self, path: str) -> None:
+        p = Path(path)
+        if p.name.endswith((".pointspro.yaml", ".pointspro")):
+            ok = self.act(lambda: self.session.open_project(p) or True)
+        elif p.suffix.lower() in (".yaml", ".yml"):
+            ok = self.act(lambda: self.session.load_recipe(p) or True)
+        else:
+            t0 = time.perf_counter()
+            ok = self.act(lambda: self.session.open(p) or True)
+            if ok:
+                c = self.session.shown
+                self.log(f"read {p}: {c.n:,} points, channels {sorted(c.channels)} "
+                         f"({time.perf_counter() - t0:.2f} s)")
+        if ok:
+            recent = self.settings.value("recent", []) or []
+            recent = [str(p)] + [r for r in recent if r != str(p)]
+            self.settings.setValue("recent", recent[:10])
+            QtCore.QTimer.singleShot(0, self._warm)
+
+    def _warm(self):
+        """Load the step classes while the optician looks at the data, so the first edit is quick."""
+        try:
+            self.pipeline.registry.load("manual_edit")
+        except PointsProError:
+            pass
+
+    def export_cloud(self, path) -> None:
+        self.act(lambda: self.session.export_cloud(path))
+        self.log(f"exported the cloud to {path}")
+
+    def export_map(self, path) -> None:
+        """The map as shown (.png), or the gridded form-error map of the last run's bspline_map step
+        (.x3p, .csv, .asc)."""
+        path = Path(path)
+        if path.suffix.lower() == ".png":
+            self.map.save_png(path)
+            self.log(f"exported the map view to {path}")
+            return
+        arts = self.last_report.artifacts if self.last_report is not None else {}
+        name = "map" + path.suffix.lower()
+        if name not in arts:
+            self.log(f"error: {path}: a gridded map ({path.suffix}) comes from a bspline_map step — add "
+                     "one and run, or export the view as .png")
+            return
+        from pointspro.core.batch import write_artifact
+        from pointspro.core.io.atomic import atomic_path
+
+        with atomic_path(path) as tmp:
+            write_artifact(Path(tmp).parent, Path(tmp).name, arts[name])
+        self.log(f"exported the map to {path}")
+
+    def export_report(self, folder) -> None:
+        """The batch's outputs for the last run (cloud.csv, artifacts, report.json, report.html), drawn
+        in a worker thread."""
+        res, s = self.last_report, self.session
+        if res is None:
+            self.log("export report: run the pipeline first")
+            return
+        from pointspro.core.batch import write_outputs
+
+        recipe = s._validate(s.recipe)
+        inp = str(s.input_path)
+
+        def write(_p):
+            write_outputs(Path(folder), inp, recipe, res)
+            return f"exported the report to {folder}"
+        self.exporter.start(write)
+
+    # -- autosave and restore -------------------------------------------------------------------------
+    def autosave_now(self) -> None:
+        """Write the project text off the GUI thread (a recipe with thousands of deleted rows takes
+        a while to dump); the recipe is never mutated in place, so the thread's snapshot is safe."""
+        s = self.session
+        if s.input_path is None:
+            return
+        target = autosave_path()
+        snap = (s.recipe, s.input_path)
+
+        def write():
+            from pointspro.core.session import write_project
+
+            try:
+                write_project(target, *snap)
+            except OSError:
+                pass
+        if self._autosave_thread is not None:
+            self._autosave_thread.join()
+        self._autosave_thread = threading.Thread(target=write, daemon=True)
+        self._autosave_thread.start()
+
+    def _offer_restore(self) -> None:
+        p = autosave_path()
+        if not p.is_file():
+            return
+        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(p.stat().st_mtime))
+        self.banner_text.setText(f"An unsaved session from {when} was found (the window did not close "
+                                 "normally). Restore it?")
+        self.banner.show()
+
+    def restore_autosave(self) -> None:
+        self.banner.hide()
+        self.open_any(str(autosave_path()))
+
+    def discard_autosave(self) -> None:
+        self.banner.hide()
+        autosave_path().unlink(missing_ok=True)
+
+    def closeEvent(self, ev):
+        if self.runner.busy:
+            self.runner.cancel()
+        self._autosave_timer.stop()
+        if self._autosave_thread is not None:
+            self._autosave_thread.join()
+        autosave_path().unlink(missing_ok=True)  # a normal close: nothing to restore
+        self.plotter.close()
+        super().closeEvent(ev)
+
+    # -- drag and drop --------------------------------------------------------------------------------
+    def dragEnterEvent(self, e):
+        if e.mimeData().hasUrls():
+            e.acceptProposedAction()
+
+    def dropEvent(self, e):
+        for u in e.mimeData().urls():
+            self.open_any(u.toLocalFile())
+
+    # -- menus ----------------------------------------------------------------------------------------
+    def _ask_open(self, title, filt):
+        return QtWidgets.QFileDialog.getOpenFileName(self, title, "", filt)[0]
+
+    def _ask_save(self, title, filt, fn):
+        p = QtWidgets.QFileDialog.getSaveFileName(self, title, "", filt)[0]
+        if p:
+            fn(p)
+
+    def _menus(self):
+        mb = self.menuBar()
+        fm = mb.addMenu("&File")
+        for text, filt, key in (("Open data…", DATA_FILTER, QtGui.QKeySequence.Open),
+                                ("Open recipe…", "Recipes (*.yaml *.yml)", None),
+                                ("Open project…", "Projects (*.pointspro.yaml)", None)):
+            a = fm.addAction(text)
+            if key is not None:
+                a.setShortcut(key)
+            a.triggered.connect(lambda _=False, t=text, f=filt: (lambda p: p and self.open_any(p))(
+                self._ask_open(t, f)))
+        recent = fm.addMenu("Recent files")
+        recent.aboutToShow.connect(lambda: (recent.clear(), [recent.addAction(
+            r, lambda r=r: self.open_any(r)) for r in (self.settings.value("recent", []) or [])]))
+        fm.addSeparator()
+        a = fm.addAction("Save project…")
+        a.setShortcut(QtGui.QKeySequence.Save)
+        a.triggered.connect(lambda: self._ask_save("Save project", "Projects (*.pointspro.yaml)",
+                                                   lambda p: self.act(lambda: self.session.save_project(p))))
+        fm.addAction("Save recipe…").triggered.connect(lambda: self._ask_save(
+            "Save recipe", "Recipes (*.yaml)", lambda p: self.act(lambda: self.session.save_recipe(p))))
+        fm.addSeparator()
+        fm.addAction("Export cloud…").triggered.connect(lambda: self._ask_save(
+            "Export cloud", "Clouds (*.csv *.ply)", self.export_cloud))
+        fm.addAction("Export map…").triggered.connect(lambda: self._ask_save(
+            "Export map", "Maps (*.png *.x3p *.csv *.asc)", self.export_map))
+        fm.addAction("Export report…").triggered.connect(lambda: (lambda d: d and self.export_report(d))(
+            QtWidgets.QFileDialog.getExistingDirectory(self, "Export report into (a new folder)")))
+        fm.addSeparator()
+        fm.addAction("Restore autosaved session", self.restore_autosave)
+        fm.addAction("Quit", self.close).setShortcut(QtGui.QKeySequence.Quit)
+        em = mb.addMenu("&Edit")
+        self.undo_action = em.addAction("Undo", self.session.undo)
+        self.undo_action.setShortcut(QtGui.QKeySequence("Ctrl+Z"))
+        self.redo_action = em.addAction("Redo", self.session.redo)
+        self.redo_action.setShortcut(QtGui.QKeySequence("Ctrl+Shift+Z"))
+        em.addSeparator()
+        d = em.addAction("Delete selection", self.delete_selection)
+        d.setShortcut(QtGui.QKeySequence(QtCore.Qt.Key_Delete))
+        em.addAction("Clear selection", lambda: self.set_selection(None)).setShortcut(
+            QtGui.QKeySequence(QtCore.Qt.Key_Escape))
+        em.addAction("Restore all deleted points", lambda: self.act(self.session.restore_all))
+        vm = mb.addMenu("&View")
+        lod = vm.addMenu("Points drawn in 3D")
+        group = QtGui.QActionGroup(self)
+        for n in (200_000, 500_000, 1_000_000, 10**9):
+            a = lod.addAction("all" if n == 10**9 else f"{n:,}")
+            a.setCheckable(True)
+            a.setChecked(n == self.view3d.budget)
+            group.addAction(a)
+            a.triggered.connect(lambda _=False, n=n: self.set_3d_budget(n))
+        for dock in (self.pipeline, self.map_dock, self.report_dock, self.explain_dock):
+            vm.addAction(dock.toggleViewAction())
+
+    def set_3d_budget(self, n: int) -> None:
+        self.view3d.budget = n
+        if self._shown is not None:
+            self.view3d.set_cloud(self._shown, self.channel.currentText(),
+                                  n_input=self.session.input_cloud.n)
+            self.view3d.highlight(self.selection)
