@@ -40,7 +40,7 @@ class MapView(QtWidgets.QWidget):
         lay.addLayout(tools)
         self.figure = Figure(figsize=(5.2, 6.0), dpi=90)
         gs = self.figure.add_gridspec(2, 2, height_ratios=(3.2, 1), width_ratios=(1, 0.04),
-                                      left=0.14, right=0.86, bottom=0.08, top=0.95, hspace=0.32,
+                                      left=0.14, right=0.86, bottom=0.1, top=0.95, hspace=0.35,
                                       wspace=0.05)
         self.ax = self.figure.add_subplot(gs[0, 0])
         self.cax = self.figure.add_subplot(gs[0, 1])
@@ -49,7 +49,7 @@ class MapView(QtWidgets.QWidget):
         self.ax.set_ylabel("y (mm)")
         self.pax.set_xlabel("along the cut (mm)")
         self.canvas = FigureCanvasQTAgg(self.figure)
-        self.canvas.setMinimumSize(360, 420)
+        self.canvas.setMinimumSize(320, 360)
         lay.addWidget(self.canvas, 1)
         th = QtWidgets.QHBoxLayout()
         th.addWidget(QtWidgets.QLabel("Select above"))
@@ -101,6 +101,7 @@ class MapView(QtWidgets.QWidget):
         self.values = vals
         if new_input:
             self.ext = None  # else the input's extent, kept through deletions so the map does not jump
+            self.profile_line = None
         bins = self._bins if same else int(np.clip(1.2 * np.sqrt(cloud.n), 60, 400))
         img, ext, self._k = binned_image(cloud.x, cloud.y, vals, ext=self.ext, bins=bins)
         self.ext = ext
@@ -135,8 +136,10 @@ class MapView(QtWidgets.QWidget):
         self.ax.set_ylim(ext[2], ext[3])
         self.ax.set_title(title, fontsize=9)
         self._fill_threshold_channels()
-        if self.profile_line is not None:
-            self.cut(*self.profile_line, draw=False)
+        if self.profile_line is None:  # the opening cut: along x through the middle of the part
+            cy = 0.5 * (ext[2] + ext[3])
+            self.profile_line = ((ext[0], cy), (ext[1], cy))
+        self.cut(*self.profile_line, draw=False)
         self.canvas.draw_idle()
 
     # -- fast redraws: the map's images over a cached background ------------------------------------
@@ -211,7 +214,9 @@ class MapView(QtWidgets.QWidget):
             ok = n > 0
             centres = np.append(edges, edges[-1] + binw) - binw / 2
             pax.plot(centres[ok], m[ok] / n[ok], color="#2c6fbb", lw=1.2)
-            pax.set_title(f"profile: {s.size:,} points, PV {np.ptp(v):.4g}", fontsize=8)
+            label = self.cbar.ax.get_ylabel() if self.cbar else ""
+            unit = label[label.rfind("(") + 1:-1] if label.endswith(")") else ""
+            pax.set_title(f"profile: {s.size:,} points, PV {np.ptp(v):.4g} {unit}".rstrip(), fontsize=8)
         else:
             pax.set_title("profile: no points near the cut", fontsize=8)
         if draw:

@@ -26,7 +26,7 @@ class PipelineDock(QtWidgets.QDockWidget):
         row = QtWidgets.QHBoxLayout()
         self.add_combo = QtWidgets.QComboBox()
         self.add_combo.addItems(self.registry.ids())
-        add = QtWidgets.QPushButton("Add")
+        add = self.add_button = QtWidgets.QPushButton("Add")
         add.clicked.connect(lambda: win.act(lambda: win.session.add_step(self.add_combo.currentText())))
         row.addWidget(self.add_combo, 1)
         row.addWidget(add)

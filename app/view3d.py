@@ -128,7 +128,10 @@ class View3D(QtWidgets.QWidget):
             self._actor = p.add_mesh(poly, scalars=title, cmap="RdBu_r" if diverging else "viridis",
                                      clim=clim, point_size=2 if big else 5,
                                      render_points_as_spheres=not big, render=False, reset_camera=False,
-                                     scalar_bar_args={"title": title, "vertical": True})
+                                     scalar_bar_args={"title": title, "vertical": True, "position_x": 0.82,
+                                                      "position_y": 0.1, "width": 0.07, "height": 0.8,
+                                                      "title_font_size": 14, "label_font_size": 12,
+                                                      "fmt": "%.3g"})
             if not self._axes:
                 p.add_axes()
                 self._axes = True

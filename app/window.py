@@ -44,7 +44,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def __init__(self):
         super().__init__()
         self.setWindowTitle("PointsPro")
-        self.resize(1400, 860)
+        self.resize(1280, 800)
         self.setAcceptDrops(True)
         self.session = Session()
         self.selection = None
@@ -99,8 +99,11 @@ class MainWindow(QtWidgets.QMainWindow):
         self.tabifyDockWidget(log_dock, self.report_dock)
         self.tabifyDockWidget(self.report_dock, self.explain_dock)
         log_dock.raise_()
-        self.resizeDocks([log_dock], [230], QtCore.Qt.Vertical)
-        self.resizeDocks([self.map_dock, self.pipeline], [460, 330], QtCore.Qt.Horizontal)
+        # the side docks run the full height; log/report/Explain sit under the 3D view
+        self.setCorner(QtCore.Qt.BottomRightCorner, QtCore.Qt.RightDockWidgetArea)
+        self.setCorner(QtCore.Qt.BottomLeftCorner, QtCore.Qt.LeftDockWidgetArea)
+        self._log_dock = log_dock
+        self._sized = False
 
         self.view3d.selected.connect(self.set_selection)
         self.map.selected.connect(self.set_selection)
@@ -363,6 +366,16 @@ class MainWindow(QtWidgets.QMainWindow):
     def discard_autosave(self) -> None:
         self.banner.hide()
         autosave_path().unlink(missing_ok=True)
+
+    def showEvent(self, ev):
+        super().showEvent(ev)
+        if not self._sized:  # dock sizes only take once the window has its size
+            self._sized = True
+            QtCore.QTimer.singleShot(0, self._size_docks)
+
+    def _size_docks(self):
+        self.resizeDocks([self._log_dock], [190], QtCore.Qt.Vertical)
+        self.resizeDocks([self.map_dock, self.pipeline], [430, 290], QtCore.Qt.Horizontal)
 
     def closeEvent(self, ev):
         if self.runner.busy:

@@ -81,7 +81,14 @@ def test_run_in_worker_keeps_the_window_responsive_and_fills_the_report(qtbot):
     """The pipeline runs in a thread: the event loop never stalls above 100 ms meanwhile."""
     from PySide6 import QtCore
 
-    win = _example_window(qtbot)
+    win = _example_window(qtbot, steps=4)
+    win.pipeline.add_combo.setCurrentText("aperture")  # add a step from the installed list
+    win.pipeline.add_button.click()
+    assert win.session.steps[-1] == {"aperture": {}} and win.pipeline.list.count() == 5
+    win.pipeline.list.setCurrentRow(4)
+    win.pipeline.fields["diameter"].setText("1290")
+    win.pipeline._apply()
+    assert win.session.steps[-1] == {"aperture": {"diameter": 1290}}
     gaps, last = [], [time.perf_counter()]
 
     def tick():
