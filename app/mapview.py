@@ -40,7 +40,7 @@ class MapView(QtWidgets.QWidget):
         lay.addLayout(tools)
         self.figure = Figure(figsize=(5.2, 6.0), dpi=90)
         gs = self.figure.add_gridspec(2, 2, height_ratios=(3.2, 1), width_ratios=(1, 0.04),
-                                      left=0.14, right=0.86, bottom=0.1, top=0.95, hspace=0.35,
+                                      left=0.15, right=0.8, bottom=0.1, top=0.95, hspace=0.35,
                                       wspace=0.05)
         self.ax = self.figure.add_subplot(gs[0, 0])
         self.cax = self.figure.add_subplot(gs[0, 1])
@@ -51,6 +51,8 @@ class MapView(QtWidgets.QWidget):
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.canvas.setMinimumSize(320, 360)
         lay.addWidget(self.canvas, 1)
+        self.profile_info = QtWidgets.QLabel("")
+        lay.addWidget(self.profile_info)
         th = QtWidgets.QHBoxLayout()
         th.addWidget(QtWidgets.QLabel("Select above"))
         self.th_channel = QtWidgets.QComboBox()
@@ -74,6 +76,7 @@ class MapView(QtWidgets.QWidget):
         self.profile = None        # (distance along the cut mm, value in display units)
         self.profile_line = None   # ((x0, y0), (x1, y1)) mm
         self._line_artist = None
+        self._profile_artists = []
         self._press = None
         self._rect = RectangleSelector(self.ax, self._on_rect, useblit=False, interactive=False)
         self._lasso = LassoSelector(self.ax, self._on_lasso)
@@ -111,10 +114,8 @@ class MapView(QtWidgets.QWidget):
             self.im.set_data(img)
             self.sel_im.set_data(np.zeros(img.shape + (4,)))
             if self.profile_line is not None:
-                self.cut(*self.profile_line, draw=False)
-                self.canvas.draw_idle()
-            else:
-                self._blit()
+                self.cut(*self.profile_line, draw=False, fast=True)
+            self._blit()
             return
         lo, hi = display.colour_limits(img, diverging)
         cmap = "RdBu_r" if diverging else "viridis"
@@ -144,25 +145,29 @@ class MapView(QtWidgets.QWidget):
 
     # -- fast redraws: the map's images over a cached background ------------------------------------
     def _on_draw(self, _ev):
-        self._bg = self.canvas.copy_from_bbox(self.ax.bbox)
+        self._bg = (self.canvas.copy_from_bbox(self.ax.bbox), self.canvas.copy_from_bbox(self.pax.bbox))
         self._draw_animated()
 
     def _draw_animated(self):
         for a in (self.im, self.sel_im, self._line_artist):
             if a is not None:
                 self.ax.draw_artist(a)
+        for a in self._profile_artists:
+            self.pax.draw_artist(a)
 
     def _blit(self):
         if self._bg is None:
             self.canvas.draw_idle()
             return
-        self.canvas.restore_region(self._bg)
+        for bg in self._bg:
+            self.canvas.restore_region(bg)
         self._draw_animated()
         self.canvas.blit(self.ax.bbox)
+        self.canvas.blit(self.pax.bbox)
 
     def save_png(self, path, dpi=150):
         """The map as shown (the animated images are drawn too)."""
-        arts = [a for a in (self.im, self.sel_im, self._line_artist) if a is not None]
+        arts = [a for a in (self.im, self.sel_im, self._line_artist) if a is not None] + self._profile_artists
         for a in arts:
             a.set_animated(False)
         try:
@@ -188,15 +193,33 @@ class MapView(QtWidgets.QWidget):
         self._blit()
 
     # -- profile cuts -------------------------------------------------------------------------------
-    def cut(self, p0, p1, draw: bool = True):
+    def cut(self, p0, p1, draw: bool = True, fast: bool = False):
         """Profile of the shown channel along p0→p1 (mm): the points within 1.5 map bins of the line,
-        their values against the distance along the cut, and their mean per bin."""
+        their values against the distance along the cut, and their mean per bin. ``fast`` (an edit
+        of the same cut): new data in the same axes limits, blitted with the map."""
         if self.cloud is None:
             return None
         self.profile_line = (tuple(map(float, p0)), tuple(map(float, p1)))
         binw = (self.ext[1] - self.ext[0]) / self._bins
         s, v = display.profile_along(self.cloud.x, self.cloud.y, self.values, p0, p1, 1.5 * binw)
         self.profile = (s, v)
+        mean_s, mean_v = np.empty(0), np.empty(0)
+        if s.size:
+            edges = np.arange(0.0, s[-1] + binw, binw)
+            j = np.digitize(s, edges)
+            n = np.bincount(j, minlength=edges.size + 1)
+            m = np.bincount(j, weights=v, minlength=edges.size + 1)
+            ok = n > 0
+            centres = np.append(edges, edges[-1] + binw) - binw / 2
+            mean_s, mean_v = centres[ok], m[ok] / n[ok]
+        label = self.cbar.ax.get_ylabel() if self.cbar else ""
+        unit = label[label.rfind("(") + 1:-1] if label.endswith(")") else ""
+        self.profile_info.setText(f"profile: {s.size:,} points, PV {np.ptp(v):.4g} {unit}".rstrip()
+                                  if s.size else "profile: no points near the cut")
+        if fast and self._profile_artists:
+            self._profile_artists[0].set_data(s, v)
+            self._profile_artists[1].set_data(mean_s, mean_v)
+            return self.profile
         if self._line_artist is not None:
             self._line_artist.remove()
         (self._line_artist,) = self.ax.plot([p0[0], p1[0]], [p0[1], p1[1]], color="k", lw=1.2,
@@ -204,21 +227,14 @@ class MapView(QtWidgets.QWidget):
         pax = self.pax
         pax.clear()
         pax.set_xlabel("along the cut (mm)")
-        pax.set_ylabel(self.cbar.ax.get_ylabel() if self.cbar else "")
+        pax.set_ylabel(label)
+        dots, = pax.plot(s, v, ".", ms=2, color="#999999", animated=True)
+        mean, = pax.plot(mean_s, mean_v, color="#2c6fbb", lw=1.2, animated=True)
+        self._profile_artists = [dots, mean]
         if s.size:
-            pax.plot(s, v, ".", ms=2, color="#999999")
-            edges = np.arange(0.0, s[-1] + binw, binw)
-            j = np.digitize(s, edges)
-            n = np.bincount(j, minlength=edges.size + 1)
-            m = np.bincount(j, weights=v, minlength=edges.size + 1)
-            ok = n > 0
-            centres = np.append(edges, edges[-1] + binw) - binw / 2
-            pax.plot(centres[ok], m[ok] / n[ok], color="#2c6fbb", lw=1.2)
-            label = self.cbar.ax.get_ylabel() if self.cbar else ""
-            unit = label[label.rfind("(") + 1:-1] if label.endswith(")") else ""
-            pax.set_title(f"profile: {s.size:,} points, PV {np.ptp(v):.4g} {unit}".rstrip(), fontsize=8)
-        else:
-            pax.set_title("profile: no points near the cut", fontsize=8)
+            pad = 0.05 * (np.ptp(v) or 1.0)
+            pax.set_xlim(0, max(s[-1], binw))
+            pax.set_ylim(v.min() - pad, v.max() + pad)
         if draw:
             self.canvas.draw_idle()
         return self.profile

@@ -50,7 +50,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.selection = None
         self.last_report = None
         self._shown = None
-        self.settings = QtCore.QSettings("PointsPro", "PointsPro")
+        ini = os.environ.get("POINTSPRO_SETTINGS")  # tests keep their recent-files list apart
+        self.settings = QtCore.QSettings(ini, QtCore.QSettings.IniFormat) if ini else \
+            QtCore.QSettings("PointsPro", "PointsPro")
 
         # colour-by, shared by both views
         bar = self.addToolBar("View")

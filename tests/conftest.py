@@ -16,6 +16,7 @@ os.environ.setdefault("POINTSPRO_NO_DIALOGS", "1")
 import tempfile as _tempfile  # noqa: E402
 
 os.environ.setdefault("POINTSPRO_AUTOSAVE_DIR", _tempfile.mkdtemp(prefix="pointspro-autosave-"))
+os.environ.setdefault("POINTSPRO_SETTINGS", os.path.join(os.environ["POINTSPRO_AUTOSAVE_DIR"], "settings.ini"))
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "resources" / "example"

@@ -237,7 +237,13 @@ def test_map_rectangle_lasso_threshold_and_profile(qtbot, tmp_path):
     assert s.size == near.sum() and np.all(np.diff(s) >= 0)
     order = np.argsort(c.x[near])
     assert np.allclose(v, c["residual"][near][order] * 1e3)
-    assert m.pax.lines and "profile:" in m.pax.get_title()
+    assert m.pax.lines and m.profile_info.text().startswith(f"profile: {s.size:,} points, PV")
+    assert m.profile_info.text().endswith("µm")
+    # a deletion updates the cut (same limits, new points)
+    win.set_selection(near & (c.x > 0))
+    win.delete_selection()
+    s2, _ = m.profile
+    assert s2.size == near.sum() - (near & (c.x > 0)).sum()
 
 
 def test_autosave_restores_an_unsaved_session(qtbot, tmp_path):
@@ -267,8 +273,16 @@ def test_bad_recipe_and_moved_data_leave_the_window_usable(qtbot, tmp_path):
     (tmp_path / "c.csv").rename(tmp_path / "moved.csv")
     w2 = _window(qtbot, [tmp_path / "p.pointspro.yaml"])
     assert "moved or deleted" in w2.log_widget.toPlainText() and w2.session.shown is None
-    w2.open_any(str(tmp_path / "moved.csv"))
+    # drag and drop of a data file; it joins the recent files
+    from PySide6 import QtCore, QtGui
+
+    mime = QtCore.QMimeData()
+    mime.setUrls([QtCore.QUrl.fromLocalFile(str(tmp_path / "moved.csv"))])
+    ev = QtGui.QDropEvent(QtCore.QPointF(10, 10), QtCore.Qt.CopyAction, mime, QtCore.Qt.LeftButton,
+                          QtCore.Qt.NoModifier)
+    w2.dropEvent(ev)
     assert w2.session.shown.n == 2000
+    assert w2.settings.value("recent")[0] == str(tmp_path / "moved.csv")
 
 
 def test_exports(qtbot, tmp_path):
