@@ -149,7 +149,8 @@ def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dic
     usecols = range(ncols) if trailing_empty else None
     data = None
     if len(raw) > _FAST_BYTES:
-        data = _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, encoding)
+        data = _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, trailing_empty,
+                           encoding)
     try:
         if data is not None:
             pass
@@ -216,7 +217,7 @@ def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dic
 _FAST_BYTES = 4_000_000
 
 
-def _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, encoding):
+def _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, trailing_empty, encoding):
     """pandas' C reader (already installed with SurfaceTopography), ~12× faster than np.loadtxt on
     big exports (10⁶ rows: 0.14 s against 1.7 s) and exact (round-trip float64 tested). Any doubt —
     a parse error, an empty or missing field (NaN), a multi-character comment marker — returns None
@@ -229,12 +230,13 @@ def _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, encodin
         return None
     try:
         df = pd.read_csv(path, sep=delim if delim else r"\s+", header=None, skiprows=first_data,
-                         comment=comments, decimal="," if decimal_comma else ".", usecols=range(ncols),
-                         dtype=np.float64, engine="c", skipinitialspace=True, encoding=encoding,
+                         comment=comments, decimal="," if decimal_comma else ".", dtype=np.float64, engine="c", skipinitialspace=True, encoding=encoding,
                          skip_blank_lines=True)
     except Exception:  # noqa: BLE001 - any failure: the numpy path parses and diagnoses
         return None
     data = df.to_numpy(dtype=np.float64)
+    if trailing_empty and data.ndim == 2 and data.shape[1] == ncols + 1 and np.isnan(data[:, -1]).all():
+        data = data[:, :ncols]  # "1,2,3," rows: the empty field after the last delimiter
     if data.ndim != 2 or data.shape[1] != ncols or not np.isfinite(data).all():
         return None
     return data

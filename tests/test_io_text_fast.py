@@ -1,0 +1,54 @@
+"""Big text files go through pandas' C reader first: the same arrays as numpy's, the same messages."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pointspro.core.io.text as text
+from pointspro.core.errors import InputError
+from pointspro.core.io import read_cloud
+
+CASES = {
+    "comma.csv": "x,y,z,w\n1.5,2.25,3.125,7\n-4,5e-3,6,8\n",
+    "semicolon_decimal_comma.txt": "X [µm];Y [µm];Z [µm]\n1,5;2,5;3,25\n4;5;6\n",
+    "whitespace_comments.xyz": "# CMM export\n 1 2 3\n\n4  5\t6 \n# end\n7 8 9\n",
+    "tab.txt": "x\ty\tz\n1\t2\t3\n4\t5\t6\n",
+    "trailing_delimiter.csv": "x,y,z,\n1,2,3,\n4,5,6,\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_fast_path_reads_what_numpy_reads(tmp_path, monkeypatch, name):
+    p = tmp_path / name
+    p.write_text(CASES[name], encoding="utf-8")
+    slow = read_cloud(p)
+    monkeypatch.setattr(text, "_FAST_BYTES", 0)
+    calls = []
+    real = text._fast_parse
+    monkeypatch.setattr(text, "_fast_parse", lambda *a: calls.append(1) or real(*a))
+    fast = read_cloud(p)
+    assert calls and fast.equals(slow)
+    assert np.array_equal(fast.xyz, slow.xyz)
+
+
+def test_fast_path_round_trips_full_precision(tmp_path, monkeypatch):
+    from pointspro.core import PointCloud
+    from pointspro.core.io import write_csv
+
+    rng = np.random.default_rng(3)
+    c = PointCloud.from_xyz(*rng.normal(0, 300, (3, 20000)), residual=rng.normal(0, 1e-3, 20000))
+    write_csv(c, tmp_path / "c.csv")
+    monkeypatch.setattr(text, "_FAST_BYTES", 0)
+    back = read_cloud(tmp_path / "c.csv")
+    assert np.array_equal(back.xyz, c.xyz) and np.array_equal(back["residual"], c["residual"])
+
+
+@pytest.mark.parametrize("body, where", [("1,2,3\n4,,6\n", "line 3, column 2"),
+                                         ("1,2,3\n4,5,6,7\n", "line 3"),
+                                         ("1,2,3\n4,abc,6\n", "line 3, column 2")])
+def test_bad_rows_in_big_files_are_still_named(tmp_path, monkeypatch, body, where):
+    monkeypatch.setattr(text, "_FAST_BYTES", 0)
+    p = tmp_path / "bad.csv"
+    p.write_text("x,y,z\n" + body)
+    with pytest.raises(InputError, match=where):
+        read_cloud(p)
