@@ -20,10 +20,12 @@ class ReportPanel(QtWidgets.QWidget):
         lay = QtWidgets.QHBoxLayout(self)
         lay.setContentsMargins(2, 2, 2, 2)
         self.list = QtWidgets.QListWidget()
-        self.list.setMaximumWidth(260)
+        self.list.setMaximumWidth(230)
         lay.addWidget(self.list)
         self.view = QtWidgets.QTextBrowser()
         self.view.setOpenExternalLinks(True)
+        self.view.document().setDefaultStyleSheet(
+            "th{white-space:nowrap;text-align:left;padding-right:8px} td{padding-right:8px}")
         lay.addWidget(self.view, 1)
         self.result = None
         self._dir = QtCore.QTemporaryDir()

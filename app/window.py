@@ -171,11 +171,15 @@ class MainWindow(QtWidgets.QMainWindow):
         if c is None:
             return
         names = display.channel_order(c)
+        before = {self.channel.itemText(i) for i in range(self.channel.count())}
         cur = self.channel.currentText()
+        # a run that produced the first residual shows it: the form error is what the run was for
+        fresh_residual = "residual" in names and "residual" not in before
+        keep = cur in names and not new_input and not fresh_residual
         self.channel.blockSignals(True)
         self.channel.clear()
         self.channel.addItems(names)
-        self.channel.setCurrentText(cur if cur in names and not new_input else names[0])
+        self.channel.setCurrentText(cur if keep else names[0])
         self.channel.blockSignals(False)
         ch = self.channel.currentText()
         n_input = s.input_cloud.n if s.input_cloud is not None else c.n

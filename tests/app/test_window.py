@@ -107,6 +107,7 @@ def test_run_in_worker_keeps_the_window_responsive_and_fills_the_report(qtbot):
     timer.stop()
     assert "residual" in win.session.shown.channels and win.session.shown.n == 4640
     assert max(gaps[1:]) < 0.1, max(gaps)
+    assert win.channel.currentText() == "residual"  # the first residual is shown when it appears
     assert win.pipeline.list.count() == 5 and win.pipeline.bar.value() == 1000
     # the report panel: summary, then each step with its numbers and (drawn on demand) figures
     assert win.report.list.count() == 6
