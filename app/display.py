@@ -67,12 +67,6 @@ def to_screen(xyz: np.ndarray, matrix: np.ndarray, width: int, height: int) -> t
     return (ndc_x + 1.0) * 0.5 * width, (1.0 - (ndc_y + 1.0) * 0.5) * height
 
 
-def in_screen_rectangle(sx, sy, x0, y0, x1, y1) -> np.ndarray:
-    lo_x, hi_x = sorted((x0, x1))
-    lo_y, hi_y = sorted((y0, y1))
-    return (sx >= lo_x) & (sx <= hi_x) & (sy >= lo_y) & (sy <= hi_y)
-
-
 def profile_along(x, y, v, p0, p1, half_width: float) -> tuple[np.ndarray, np.ndarray]:
     """A profile cut: the points within ``half_width`` (mm) of the segment p0→p1, as (distance
     along the cut from p0 in mm, value), sorted along the cut."""

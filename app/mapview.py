@@ -245,11 +245,11 @@ class MapView(QtWidgets.QWidget):
         self._lasso.set_active(mode == "select lasso")
 
     def _on_rect(self, press, release):
+        from pointspro.core.session import in_rectangle
+
         if self.cloud is not None:
-            x0, x1 = sorted((press.xdata, release.xdata))
-            y0, y1 = sorted((press.ydata, release.ydata))
-            c = self.cloud
-            self.selected.emit((c.x >= x0) & (c.x <= x1) & (c.y >= y0) & (c.y <= y1))
+            self.selected.emit(in_rectangle(self.cloud.x, self.cloud.y, press.xdata, release.xdata,
+                                            press.ydata, release.ydata))
 
     def _on_lasso(self, verts):
         from pointspro.plugins.aperture import points_in_polygon

@@ -179,8 +179,10 @@ class View3D(QtWidgets.QWidget):
     def select_rectangle(self, x0, y0, x1, y1) -> np.ndarray:
         """Mask of the shown cloud's points whose projection falls in the screen rectangle (pixels
         of the render widget, origin top-left)."""
+        from pointspro.core.session import in_rectangle
+
         sx, sy = self._screen()
-        return display.in_screen_rectangle(sx, sy, x0, y0, x1, y1)
+        return in_rectangle(sx, sy, x0, x1, y0, y1)
 
     def select_lasso(self, polygon) -> np.ndarray:
         from pointspro.plugins.aperture import points_in_polygon

@@ -180,10 +180,7 @@ class Session:
 
     # -- selection and cleanup ----------------------------------------------------------------------
     def select_rectangle(self, x0, x1, y0, y1) -> np.ndarray:
-        c = self.shown
-        lo_x, hi_x = sorted((x0, x1))
-        lo_y, hi_y = sorted((y0, y1))
-        return (c.x >= lo_x) & (c.x <= hi_x) & (c.y >= lo_y) & (c.y <= hi_y)
+        return in_rectangle(self.shown.x, self.shown.y, x0, x1, y0, y1)
 
     def select_lasso(self, polygon) -> np.ndarray:
         from pointspro.plugins.aperture import points_in_polygon
@@ -273,17 +270,20 @@ class Session:
             except PointsProError:
                 pass
 
-    def autosave(self, path) -> None:
-        """Write the session where a crash can be recovered from (the window calls it on each change)."""
-        if self.input_path is not None:
-            self.save_project(path)
-
     def export_cloud(self, path) -> None:
         from .io import write_cloud
 
         if self.shown is None:
             raise InputError("nothing to export")
         write_cloud(self.shown, Path(path))
+
+
+def in_rectangle(x, y, x0, x1, y0, y1) -> np.ndarray:
+    """Mask of the points inside the axis-aligned rectangle (corners in any order, edges included):
+    the map's rectangle in mm and the 3D view's in screen pixels."""
+    lo_x, hi_x = sorted((x0, x1))
+    lo_y, hi_y = sorted((y0, y1))
+    return (x >= lo_x) & (x <= hi_x) & (y >= lo_y) & (y <= hi_y)
 
 
 def _dumper():
