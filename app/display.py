@@ -1,8 +1,9 @@
 """What the views show, in numpy only (no Qt, no VTK): the channel's values and colour scale, the
 3D level of detail, and selection in screen space. Tested headless.
 
-Channels that are deviations (mm in the cloud) are shown in µm: signed ones on a diverging map centred
-on zero, non-negative ones (ω, uncertainties) on a sequential map; x, y, z about their mean in mm.
+Channels that are lengths (mm in the cloud) are shown in the unit their spread asks for (mm, µm or
+nm): deviations signed on a diverging map centred on zero, non-negative ones (ω, uncertainties) on a
+sequential map; x, y, z about their mean.
 """
 from __future__ import annotations
 
@@ -27,14 +28,48 @@ def channel_order(cloud) -> list[str]:
         + ["x", "y"]
 
 
-def channel_values(cloud, name: str) -> tuple[np.ndarray, str, bool]:
+#: units a length channel can be shown in (mm in the cloud): the one its spread asks for
+_DISPLAY_UNITS = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
+
+
+def display_unit(v_mm) -> str:
+    """The unit a length channel's values (mm) read best in: that of its robust spread (0.5–99.5 %),
+    so a 44 nm PV reads "43.9 nm", not "4.39e-05 mm" (core.units; mm above 1 mm)."""
+    from pointspro.core.units import length_unit
+
+    v = np.asarray(v_mm, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return "mm"
+    lo, hi = np.percentile(v, [0.5, 99.5]) if v.size > 200 else (v.min(), v.max())
+    span = float(hi - lo) or float(np.max(np.abs(v)))
+    unit = length_unit(span)[1]
+    return unit if unit in _DISPLAY_UNITS else ("mm" if unit == "m" else "nm")
+
+
+def channel_display(cloud, name: str, unit: str | None = None):
+    """(values in display units float64, colour-bar title with the unit, unit, diverging?).
+
+    Length channels — deviations, magnitudes, and x, y, z about their mean — are shown in the unit
+    their spread asks for (``display_unit``), or in ``unit`` when given: a view that keeps its colour
+    limits through edits keeps its unit too."""
+    if name in DEVIATION_CHANNELS or name in MAGNITUDE_CHANNELS or name in ("x", "y", "z"):
+        if name in ("x", "y", "z"):
+            v = np.asarray(getattr(cloud, name), dtype=np.float64)
+            v = v - v.mean()
+            label = f"{name} − mean"
+        else:
+            v = np.asarray(cloud[name], dtype=np.float64)
+            label = name
+        unit = unit if unit in _DISPLAY_UNITS else display_unit(v)
+        return v / _DISPLAY_UNITS[unit], f"{label} ({unit})", unit, name in DEVIATION_CHANNELS
+    return np.asarray(cloud[name], dtype=np.float64), name, None, False
+
+
+def channel_values(cloud, name: str, unit: str | None = None) -> tuple[np.ndarray, str, bool]:
     """(values in display units float64, colour-bar title with the unit, diverging?)."""
-    if name in DEVIATION_CHANNELS or name in MAGNITUDE_CHANNELS:
-        return np.asarray(cloud[name], dtype=np.float64) * 1e3, f"{name} (µm)", name in DEVIATION_CHANNELS
-    if name in ("x", "y", "z"):
-        v = np.asarray(getattr(cloud, name), dtype=np.float64)
-        return v - v.mean(), f"{name} − mean (mm)", False
-    return np.asarray(cloud[name], dtype=np.float64), name, False
+    v, title, _, diverging = channel_display(cloud, name, unit)
+    return v, title, diverging
 
 
 def colour_limits(v: np.ndarray, diverging: bool) -> tuple[float, float]:

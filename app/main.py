@@ -27,7 +27,7 @@ def build_window(files: list[Path]):
     return win
 
 
-def run_window(files: list[Path], screenshot: str | None = None) -> int:
+def run_window(files: list[Path], screenshot: str | None = None, run: bool = False) -> int:
     from PySide6 import QtWidgets
 
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
@@ -39,6 +39,14 @@ def run_window(files: list[Path], screenshot: str | None = None) -> int:
     if screenshot:
         win.banner.hide()  # a picture of the data, not of a leftover autosave
     win.show()
+    if run:  # the recipe's steps, as Run all does, before the picture or the user's first look
+        import time
+
+        win.pipeline.run_all.click()
+        t0 = time.perf_counter()
+        while win.runner.busy and time.perf_counter() - t0 < 600:
+            app.processEvents()
+            time.sleep(0.01)
     if not screenshot:
         return app.exec()
     for _ in range(5):

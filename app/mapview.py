@@ -71,6 +71,7 @@ class MapView(QtWidgets.QWidget):
         self.channel = None
         self.values = None
         self.im = self.sel_im = self.cbar = None
+        self._unit = None  # display unit of the drawn channel (kept with the colour limits)
         self.ext = None
         self._k = None
         self.profile = None        # (distance along the cut mm, value in display units)
@@ -100,7 +101,8 @@ class MapView(QtWidgets.QWidget):
                 self.im.set_data(np.full((2, 2), np.nan))
                 self.canvas.draw_idle()
             return
-        vals, title, diverging = display.channel_values(cloud, channel)
+        vals, title, self._unit, diverging = display.channel_display(
+            cloud, channel, self._unit if same else None)  # an edit keeps the unit with the limits
         self.values = vals
         if new_input:
             self.ext = None  # else the input's extent, kept through deletions so the map does not jump

@@ -70,7 +70,7 @@ class ReportPanel(QtWidgets.QWidget):
         parts = [f"<h3>{html.escape(rec.title)} <small>({html.escape(rec.id)})</small></h3>", warn,
                  table_html(rec.report)]
         for name in self.figures_of(row):
-            p = self._path(name)
+            p = self._path(name, row)
             if p.is_file():
                 parts.append(f"<p><img src='{QtCore.QUrl.fromLocalFile(str(p)).toString()}' width='560'>"
                              f"<br><small>{html.escape(name)}</small></p>")
@@ -83,14 +83,15 @@ class ReportPanel(QtWidgets.QWidget):
             return []
         return sorted(n for n in self.result.steps[row - 1].artifacts if n.endswith(".png"))
 
-    def _path(self, name: str) -> Path:
-        return Path(self._dir.path()) / f"{self._serial}_{name}"
+    def _path(self, name: str, row: int) -> Path:
+        # per run and per step: two steps of one kind draw figures of the same name
+        return Path(self._dir.path()) / f"{self._serial}_{row}_{name}"
 
     def _select(self, row: int) -> None:
         self._show(row)
         key = (self._serial, row)
-        todo = [(self._path(n).name, self.result.steps[row - 1].artifacts[n]) for n in self.figures_of(row)
-                if not self._path(n).is_file()]
+        todo = [(self._path(n, row).name, self.result.steps[row - 1].artifacts[n])
+                for n in self.figures_of(row) if not self._path(n, row).is_file()]
         if todo and not self.worker.busy and key not in self._drawn:
             from pointspro.core.batch import write_artifact
 

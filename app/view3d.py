@@ -77,6 +77,7 @@ class View3D(QtWidgets.QWidget):
         self._drag = None
         self._axes = False
         self._keep = False
+        self._unit = None  # display unit of the drawn channel (kept with the colour limits)
         self._clim = None
 
     # -- drawing ------------------------------------------------------------------------------------
@@ -107,9 +108,11 @@ class View3D(QtWidgets.QWidget):
         import pyvista as pv
 
         c, idx = self.cloud, self._shown_idx
-        vals, title, diverging = display.channel_values(c, self.channel)
+        keep = self._keep and self._clim is not None
+        vals, title, self._unit, diverging = display.channel_display(
+            c, self.channel, self._unit if keep else None)  # an edit keeps the unit with the limits
         vals = vals[idx]
-        if not (self._keep and self._clim is not None):
+        if not keep:
             self._clim = display.colour_limits(vals, diverging)  # of the drawn points: 5× fewer
         clim = self._clim
         # display only: VTK draws in float32, about the input's centre so mm detail survives

@@ -16,7 +16,8 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from pointspro.core.errors import PointsProError
-from pointspro.core.session import Session
+from pointspro.core.session import CHANGES, Session
+from pointspro.core.units import format_length
 
 from . import display
 from .explain_panel import ExplainPanel
@@ -26,7 +27,16 @@ from .report_panel import ReportPanel
 from .view3d import View3D
 from .worker import Worker
 
-DATA_FILTER = "Measurements (*.csv *.txt *.xyz *.asc *.dat *.ply *.pcd *.pts *.datx *.sur *.sdf *.x3p)"
+
+def _data_filter() -> str:
+    """Every extension the readers know (core.io.formats.READ_SUFFIXES: point clouds and every
+    SurfaceTopography map format), then all files — the reader goes by content, not by extension."""
+    from pointspro.core.io.formats import READ_SUFFIXES
+
+    return ("Measurements (" + " ".join(f"*{s}" for s in READ_SUFFIXES) + ");;All files (*)")
+
+
+DATA_FILTER = _data_filter()
 AUTOSAVE_DELAY_MS = 1500
 
 
@@ -119,7 +129,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self._autosave_timer = QtCore.QTimer(self, singleShot=True, interval=AUTOSAVE_DELAY_MS)
         self._autosave_timer.timeout.connect(self.autosave_now)
         self._autosave_thread = None
-        self.session.listeners.append(self._on_session)
+        for name in CHANGES:
+            self.session.events[name].connect(self._on_session)
+        self.session.events.warning.connect(self._session_warning)
         self._menus()
         self._offer_restore()
 
@@ -151,8 +163,16 @@ class MainWindow(QtWidgets.QMainWindow):
         return None
 
     # -- the model changed ----------------------------------------------------------------------------
-    def _on_session(self, what: str) -> None:
+    def _session_warning(self, event) -> None:
+        """The model says something that went wrong although the action did not fail (e.g. a project
+        that opened but whose recipe did not run): shown like an error of an action."""
+        self.log(f"warning: {event.value}")
+        if _dialogs():
+            QtWidgets.QMessageBox.warning(self, "PointsPro", str(event.value))
+
+    def _on_session(self, event) -> None:
         s = self.session
+        what = event.type
         self.pipeline.refresh()
         if s.shown is not self._shown:
             self._show_cloud(new_input=what == "opened", edit=what in ("deleted", "undo", "redo"))
@@ -255,7 +275,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.last_report = res
         self.report.set_result(res)
         s = res.summary()
-        rms = f", residual RMS {s['rms_um']:.4g} µm, PV {s['pv_um']:.4g} µm" if s["rms_um"] is not None else ""
+        rms = (f", {_what(s)} RMS {format_length(s['rms_um'] * 1e-3, 4)}, PV {format_length(s['pv_um'] * 1e-3, 4)}"
+               if s["rms_um"] is not None else "")
         self.log(f"ran {len(res.steps)} step(s): {res.cloud.n:,} points{rms}")
         for rec in res.steps:
             for w in rec.report.get("warnings", []) or []:
@@ -317,6 +338,28 @@ class MainWindow(QtWidgets.QMainWindow):
             write_artifact(Path(tmp).parent, Path(tmp).name, arts[name])
         self.log(f"exported the map to {path}")
 
+    def export_mesh(self, path) -> None:
+        """The last run's bspline_map map as a triangle mesh for CAD/FEA (.ply binary float64, .stl,
+        .obj; mm): the step's map_mesh artifact when it wrote one, else its error map triangulated
+        (core.io.mesh.map_mesh_of)."""
+        from pointspro.core.io.mesh import WRITE_MESH_SUFFIXES, map_mesh_of
+
+        path = Path(path)
+        fmt = path.suffix.lower()
+        if fmt not in WRITE_MESH_SUFFIXES:
+            self.log(f"error: {path}: a mesh is written as {', '.join(WRITE_MESH_SUFFIXES)}")
+            return
+        art = map_mesh_of(self.last_report.artifacts if self.last_report is not None else {})
+        if art is None:
+            self.log(f"error: {path}: the mesh is the map of a bspline_map step — add one and run")
+            return
+        from pointspro.core.io.atomic import atomic_path
+
+        with atomic_path(path) as tmp:
+            art(tmp, fmt.lstrip("."))
+        self.log(f"exported the map as a mesh to {path} ({len(art.vertices):,} vertices, "
+                 f"{len(art.faces):,} triangles)")
+
     def export_report(self, folder) -> None:
         """The batch's outputs for the last run (cloud.csv, artifacts, report.json, report.html), drawn
         in a worker thread."""
@@ -326,7 +369,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         from pointspro.core.batch import write_outputs
 
-        recipe = s._validate(s.recipe)
+        recipe = s.recipe  # typed and immutable: safe in the exporter's thread
         inp = str(s.input_path)
 
         def write(_p):
@@ -437,6 +480,8 @@ class MainWindow(QtWidgets.QMainWindow):
             "Export cloud", "Clouds (*.csv *.ply)", self.export_cloud))
         fm.addAction("Export map…").triggered.connect(lambda: self._ask_save(
             "Export map", "Maps (*.png *.x3p *.csv *.asc)", self.export_map))
+        fm.addAction("Export mesh…").triggered.connect(lambda: self._ask_save(
+            "Export the map as a mesh (CAD/FEA, mm)", "Meshes (*.ply *.stl *.obj)", self.export_mesh))
         fm.addAction("Export report…").triggered.connect(lambda: (lambda d: d and self.export_report(d))(
             QtWidgets.QFileDialog.getExistingDirectory(self, "Export report into (a new folder)")))
         fm.addSeparator()
@@ -471,3 +516,8 @@ class MainWindow(QtWidgets.QMainWindow):
             self.view3d.set_cloud(self._shown, self.channel.currentText(),
                                   n_input=self.session.input_cloud.n)
             self.view3d.highlight(self.selection)
+
+
+def _what(summary: dict) -> str:
+    """What the summary's figures are of, in a word or two (docs/conventions.md, Summary figures)."""
+    return "residual" if summary.get("figures_of", "residual") == "residual" else "height (piston, tilt removed)"

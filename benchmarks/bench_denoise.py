@@ -18,10 +18,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests.denoise_cases import injected  # noqa: E402
-
 from pointspro.core.step import Context  # noqa: E402
 from pointspro.plugins.knn_denoise import KnnDenoiseStep  # noqa: E402
+from tests.denoise_cases import injected  # noqa: E402
 
 
 def f1(found: set, truth: set) -> float:

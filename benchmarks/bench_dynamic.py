@@ -17,11 +17,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests import paper004 as p4  # noqa: E402
-
 from pointspro.core import PointCloud  # noqa: E402
 from pointspro.core.step import Context  # noqa: E402
 from pointspro.plugins.dynamic import DynamicStep  # noqa: E402
+from tests import paper004 as p4  # noqa: E402
 
 
 def best(fn, n=3):
@@ -49,7 +48,7 @@ def main():
                                 xc=s["xc"][:n])
     step = DynamicStep()
     sec_id, res = best(lambda: step.run(cloud, DynamicStep.Params(calibration="cal.csv"), Context(base_dir=d)))
-    (d / "m.json").write_text(res.artifacts["dynamic_model.json"])
+    (d / "m.json").write_text(res.artifacts["dynamic_model.json"], encoding="utf-8")
     sec, res2 = best(lambda: step.run(cloud, DynamicStep.Params(model="m.json"), Context(base_dir=d)))
     before = s["z"][:n] - s["h"][:n]
     after = res2.cloud.z - s["h"][:n]

@@ -38,11 +38,11 @@ def main():
     d = Path(tempfile.mkdtemp())
     sim = simulate(truth)
     write_csv(PointCloud.from_xyz(sim["x"], sim["y"], sim["z"], t=sim["t"], c=sim["c"]), d / "meas.csv")
-    (d / "base.yaml").write_text(spec(base, 2).to_yaml())
+    (d / "base.yaml").write_text(spec(base, 2).to_yaml(), encoding="utf-8")
     t0 = time.perf_counter()
     rep = explain(d / "meas.csv", d / "out", d / "base.yaml", bootstrap=args.bootstrap)
     sec = time.perf_counter() - t0
-    print(f"| points | bootstrap | seconds | verdict | found | gap before → after (nm RMS) |\n|---:|---:|---:|---|---|---|")
+    print("| points | bootstrap | seconds | verdict | found | gap before → after (nm RMS) |\n|---:|---:|---:|---|---|---|")
     print(f"| {len(sim['x']):,} | {args.bootstrap} | {sec:.1f} | {rep['verdict']} | "
           f"{', '.join(f['effect'] for f in rep['found'])} | {rep['gap_before']['rms_um'] * 1e3:.2f} → "
           f"{rep['gap_after']['rms_um'] * 1e3:.2f} |")

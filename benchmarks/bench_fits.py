@@ -20,14 +20,20 @@ import numpy as np
 from scipy.optimize import least_squares
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests.paper002 import (DATA2_POSE, DATA2_SURFACE, TABLE1_POSE, TABLE1_SURFACE,  # noqa: E402
-                            machining_marks, measured, raster)
-
 from pointspro.core import PointCloud  # noqa: E402
 from pointspro.core.geometry import Pose  # noqa: E402
 from pointspro.core.step import Context  # noqa: E402
 from pointspro.plugins.misalignment import MisalignmentStep  # noqa: E402
 from pointspro.plugins.probe_radius import ProbeRadiusStep  # noqa: E402
+from tests.paper002 import (  # noqa: E402
+    DATA2_POSE,
+    DATA2_SURFACE,
+    TABLE1_POSE,
+    TABLE1_SURFACE,
+    machining_marks,
+    measured,
+    raster,
+)
 
 
 def best(fn, n=3):

@@ -3,7 +3,8 @@
 Nothing here imports Qt (checked by import-linter in the test suite); heavy libraries (open3d,
 pymeshlab, pyvista) are imported lazily where they are used.
 """
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
 
 try:
     __version__ = _version("pointspro")

@@ -6,6 +6,7 @@ complete. Inputs are never modified. Never starts Qt.
 """
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import time
@@ -13,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from .errors import PointsProError, RecipeError
+from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
 from .pipeline import run_pipeline
 from .progress import CancelToken, Progress
@@ -68,58 +69,115 @@ def write_artifact(folder: Path, name: str, art) -> None:
         target.write_text(str(art), encoding="utf-8")
 
 
-def write_outputs(folder: Path, input_path: str, recipe: Recipe, result) -> dict:
+def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
+                  timings: dict | None = None) -> dict:
     """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
     artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
-    and the window's File → Export report."""
-    report = build_report(input_path, recipe, result)
+    and the window's File → Export report. ``figures``: "all", "summary" (form_error.png only) or
+    "none" — the report says which were not drawn. ``timings``, when given, receives the seconds
+    spent on each file (benchmarks/bench_input.py's stage table)."""
+    from .report import SUMMARY_FIGURE, skipped_figures
+
+    timings = {} if timings is None else timings
+    has_map = "residual" in result.cloud.channels and result.cloud.n
+    skipped = skipped_figures([*result.artifacts, *([SUMMARY_FIGURE] if has_map else [])], figures)
+
+    def timed(name, write):
+        t0 = time.perf_counter()
+        write()
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    report = build_report(input_path, recipe, result, figures, skipped)
+    timings["report (summary)"] = time.perf_counter() - t0
     with atomic_dir(folder) as tmp:
-        write_csv(result.cloud, tmp / "cloud.csv")
+        timed("cloud.csv", lambda: write_csv(result.cloud, tmp / "cloud.csv"))
         for name, art in result.artifacts.items():
-            write_artifact(tmp, name, art)
-        if "residual" in result.cloud.channels and result.cloud.n:
+            if name not in skipped:
+                timed(name, lambda: write_artifact(tmp, name, art))
+        if has_map and SUMMARY_FIGURE not in skipped:
             from .figures import save_png, scattered_map
 
             c = result.cloud
-            save_png(scattered_map(c.x, c.y, c["residual"], title="Form error (residual) after "
-                                   "all steps"), tmp / "form_error.png")
-        (tmp / "report.json").write_text(dumps(report), encoding="utf-8")
-        (tmp / "report.html").write_text(render_html(report, tmp), encoding="utf-8")
+            timed("form_error.png", lambda: save_png(scattered_map(
+                c.x, c.y, c["residual"], title="Form error (residual) after all steps"),
+                tmp / SUMMARY_FIGURE))
+        timed("report.json", lambda: (tmp / "report.json").write_text(dumps(report), encoding="utf-8"))
+        timed("report.html", lambda: (tmp / "report.html").write_text(render_html(report, tmp),
+                                                                       encoding="utf-8"))
     return report
 
 
 def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                   sink: Callable[[float, str], None] | None = None, token: CancelToken | None = None,
-                  surface=None, log: logging.Logger | None = None) -> InputOutcome:
-    """Read, run, write one input. PointsProError → a failed outcome; Cancelled propagates."""
+                  surface=None, log: logging.Logger | None = None,
+                  allowed_dirs=None, figures: str = "all") -> InputOutcome:
+    """Read, run, write one input. Any exception but Cancelled → a failed outcome for this input
+    alone (one line naming the input and the step or stage; the traceback kept for summary.json and
+    --debug); Cancelled propagates."""
     t0 = time.perf_counter()
+    stage = "reading"
     try:
         progress = Progress(sink, token)
-        cloud = read_cloud(path)
+        cloud = read_cloud(path, **recipe.input)  # the recipe's `input:` reader options
         progress.update(0.05, "read")
+        stage = "running the steps"
         result = run_pipeline(cloud, recipe, progress=progress.sub(0.05, 0.9), surface=surface,
-                              log=log)
-        report = write_outputs(out_dir / stem, str(path), recipe, result)
+                              log=log, allowed_dirs=allowed_dirs)
+        stage = "writing the outputs"
+        report = write_outputs(out_dir / stem, str(path), recipe, result, figures=figures)
         progress.update(1.0, "written")
         return InputOutcome(str(path), True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"])
-    except PointsProError as e:
+    except Cancelled:
+        raise
+    except Exception as e:  # noqa: BLE001 — isolation is the point: one bug must not sink the night
+        return failed_outcome(str(path), stage, e, time.perf_counter() - t0)
+
+
+def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0) -> InputOutcome:
+    """The outcome of an input that failed with ``e`` while ``stage``: a PointsProError's own line, or
+    "internal error … — please report" for a bug; prefixed with the input; traceback kept."""
+    import traceback
+
+    from .pipeline import internal_message
+
+    if isinstance(e, PointsProError):
         msg = str(e)
-        if not msg.startswith(str(path)):
-            msg = f"{path}: {msg}"
-        import traceback
+    elif isinstance(e, OSError):  # the machine, not a bug: disk full, permissions, a lost share
+        where = f" {e.filename}" if getattr(e, "filename", None) else ""
+        msg = f"{stage}:{where} {e.strerror or e}"
+    else:
+        msg = internal_message(stage, e)
+    if not msg.startswith(path):
+        msg = f"{path}: {msg}"
+    return InputOutcome(path, False, msg, seconds, traceback="".join(traceback.format_exception(e)))
 
-        return InputOutcome(str(path), False, msg, time.perf_counter() - t0,
-                            traceback="".join(traceback.format_exception(e)))
+
+def process_job(recipe_path: str, path: str, out_dir: str, stem: str,
+                allowed_dirs: list[str] | None = None, figures: str = "all") -> InputOutcome:
+    """One input in a worker (process pool or Dask): the recipe is read there from its file, so
+    only plain strings cross process and machine boundaries — once per worker and recipe version
+    (``worker_recipe``), not once per input."""
+    try:
+        st = os.stat(recipe_path)
+        recipe, surface = worker_recipe(recipe_path, st.st_mtime_ns, st.st_size)
+    except Exception as e:  # noqa: BLE001 — e.g. the recipe changed or vanished since the start
+        return failed_outcome(path, "reading the recipe in the worker", e)
+    return process_input(Path(path), recipe, Path(out_dir), stem, surface=surface, figures=figures,
+                         allowed_dirs=None if allowed_dirs is None else [Path(d) for d in allowed_dirs])
 
 
-def process_job(recipe_path: str, path: str, out_dir: str, stem: str) -> InputOutcome:
-    """One input in a worker (process pool or Dask): the recipe is re-read there from its file, so
-    only plain strings cross process and machine boundaries."""
+@functools.lru_cache(maxsize=4)
+def worker_recipe(recipe_path: str, mtime_ns: int, size: int):
+    """(Recipe, nominal surface) of a recipe file, parsed and built once per worker process for a
+    given version of the file (its modification time and size are part of the key, so an edited
+    recipe is read again). A cache, not state: the same key always gives the same recipe, and the
+    steps never modify either (a step's Params are frozen; surfaces are immutable)."""
     from .recipe import load_recipe
 
     recipe = load_recipe(recipe_path)
-    return process_input(Path(path), recipe, Path(out_dir), stem)
+    return recipe, (recipe.build_surface() if recipe.surface_spec is not None else None)
 
 
 def cleanup_partials(out_dir: Path) -> list[str]:

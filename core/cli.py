@@ -1,8 +1,10 @@
 """The one entry point `pointspro` (DESIGN "Command line").
 
     pointspro [FILE…]                                   open the window with the files
-    pointspro --screenshot PNG [FILE…]                  render the window to PNG and exit
+    pointspro [--run] --screenshot PNG [FILE…]          render the window to PNG and exit (--run:
+                                                        run the recipe first)
     pointspro --batch RECIPE INPUT… --out DIR [--workers N] [--scheduler ADDRESS] [--resume]
+                                        [--allow-path DIR]…
     pointspro steps                                     list the installed steps
 
 Exit codes: 0 all done; 1 some inputs failed (the others are complete); 2 usage, recipe or input
@@ -39,7 +41,16 @@ def _parser() -> argparse.ArgumentParser:
                    "or `local` for a LocalCluster on this machine")
     p.add_argument("--resume", action="store_true", help="skip inputs whose outputs are complete "
                    "(same input, same recipe)")
+    p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
+                   help="with --batch: let the recipe read parameter files (calibrations, models, "
+                   "meshes) in DIR; by default only the recipe's folder and the inputs' folders "
+                   "(repeatable)")
     p.add_argument("--screenshot", metavar="PNG", help="open the window, render, save PNG, exit")
+    p.add_argument("--run", action="store_true", help="with a data file and a recipe: run the "
+                   "recipe's steps in the window at once (before --screenshot's picture)")
+    p.add_argument("--figures", choices=["all", "summary", "none"], default="all",
+                   help="figures --batch draws: all (default), summary (form_error.png only) or none; "
+                        "report.json says which were not drawn")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--version", action="store_true", help="print the version and exit")
@@ -68,8 +79,8 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_OK
     if args.batch:
         return _guard(lambda: cmd_batch(args), args.debug)
-    if args.out or args.workers is not None or args.scheduler or args.resume:
-        print("pointspro: --out, --workers, --scheduler and --resume go with --batch "
+    if args.out or args.workers is not None or args.scheduler or args.resume or args.allow_path:
+        print("pointspro: --out, --workers, --scheduler, --resume and --allow-path go with --batch "
               "(see pointspro --help)", file=sys.stderr)
         return EXIT_USAGE
     return _guard(lambda: cmd_window(args), args.debug)
@@ -101,14 +112,42 @@ def _guard(fn, debug: bool) -> int:
 
 
 def cmd_batch(args) -> int:
-    import os
-    import signal
     import time
 
-    from .batch import check_output_folder, cleanup_partials, is_complete, output_stems
-    from .errors import RecipeError
+    from .batch import check_output_folder, output_stems
     from .recipe import load_recipe
     from .summary import entry, table, write_summary
+
+    _check_batch_args(args)
+    recipe_path = Path(args.files[0])
+    recipe = load_recipe(recipe_path)
+    inputs = [Path(f) for f in args.files[1:]]
+    allowed = _allowed_dirs(recipe_path, inputs, args.allow_path)
+    _check_recipe_files(recipe, allowed)  # before any file the recipe names is read
+    surface = recipe.build_surface()  # a missing mesh file is a recipe error: fail before any input
+    out = Path(args.out)
+    check_output_folder(out)
+    stems = output_stems(inputs)
+    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+    t0 = time.perf_counter()
+    workers = args.workers or _cores()
+
+    results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume)
+    # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
+    runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed)
+    interrupted = _drain(runner, _reporter(results, args), out)
+
+    entries = [results.get(str(p)) or entry(str(p), "not run") for p in inputs]
+    write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
+                  scheduler=args.scheduler, seconds=time.perf_counter() - t0, interrupted=interrupted)
+    if not args.quiet or interrupted:
+        print(table(entries), file=sys.stdout if not interrupted else sys.stderr)
+    return _batch_exit_code(entries, interrupted)
+
+
+def _check_batch_args(args) -> None:
+    """The usage errors of --batch, before anything is read."""
+    from .errors import RecipeError
 
     if len(args.files) < 2:
         raise RecipeError("--batch needs RECIPE and at least one INPUT (pointspro --batch RECIPE "
@@ -117,34 +156,84 @@ def cmd_batch(args) -> int:
         raise RecipeError("--batch needs --out DIR")
     if args.workers is not None and args.workers < 1:
         raise RecipeError("--workers must be ≥ 1")
-    recipe_path = Path(args.files[0])
-    recipe = load_recipe(recipe_path)
-    surface = recipe.build_surface()  # a missing mesh file is a recipe error: fail before any input
-    inputs = [Path(f) for f in args.files[1:]]
-    out = Path(args.out)
-    check_output_folder(out)
-    stems = output_stems(inputs)
-    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
-    t0 = time.perf_counter()
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    workers = args.workers or cores
+
+
+def _allowed_dirs(recipe_path: Path, inputs: list[Path], extra: list[str]) -> list[Path]:
+    """Where the recipe's parameter files may lie: its own folder, each input's, --allow-path's."""
+    from .errors import RecipeError
+
+    for d in extra:
+        if not Path(d).is_dir():
+            raise RecipeError(f"--allow-path {d}: not a folder")
+    dirs = [recipe_path.parent, *(p.parent for p in inputs), *(Path(d) for d in extra)]
+    return list(dict.fromkeys(d.resolve() for d in dirs))
+
+
+def _check_recipe_files(recipe, allowed: list[Path]) -> None:
+    """Every file the recipe names (steps' file parameters, ``inputs:``, a mesh surface) lies in
+    ``allowed``: RecipeError naming the line, the step and the parameter otherwise — so a shared
+    recipe cannot read files its user did not allow, on any executor."""
+    from .errors import RecipeError
+    from .step import file_parameters, outside_allowed
+
+    where = str(recipe.path)
+    base = recipe.base_dir
+    named = []  # (where in the recipe, path)
+    spec = recipe.surface_spec or {}
+    if spec.get("type") == "mesh" and isinstance(spec.get("path"), str):
+        named.append(("surface: key 'path'", spec["path"]))
+    named += [(f"inputs: key '{k}'", str(v)) for k, v in recipe.inputs.items()]
+    for i, rs in enumerate(recipe.steps, 1):
+        loc = f"line {rs.line}: " if rs.line else ""
+        named += [(f"{loc}step {i} '{rs.id}': parameter '{k}'", v)
+                  for k, v in file_parameters(rs.params).items()]
+    for what, value in named:
+        p = Path(value)
+        p = p if p.is_absolute() or base is None else base / p
+        why = outside_allowed(p, allowed)
+        if why:
+            raise RecipeError(f"{where}, {what}: {why}" if what.startswith("line") else
+                              f"{where}: {what}: {why}")
+
+
+def _cores() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: bool):
+    """(results of the inputs already complete, jobs (path, stem) left to run). With ``resume``,
+    what a killed run left behind is removed first and complete outputs are skipped."""
+    from .batch import cleanup_partials, is_complete
+    from .summary import entry
 
     results: dict[str, dict] = {}
     jobs = []
-    if args.resume:
+    if resume:
         cleanup_partials(out)  # what a killed run left behind
     for path, stem in zip(inputs, stems):
-        done = is_complete(out, stem, path, recipe) if args.resume else None
+        done = is_complete(out, stem, path, recipe) if resume else None
         if done is not None:
             results[str(path)] = entry(str(path), "skipped", report=done)
         else:
             jobs.append((path, stem))
+    return results, jobs
+
+
+def _reporter(results: dict, args):
+    """The callback for each finished input: records its summary entry and prints one line (ok on
+    stdout unless --quiet, failed on stderr, with the traceback under --debug)."""
+    from .summary import entry
+    from .units import format_length
 
     def report(oc):
         results[oc.input] = entry(oc.input, "ok" if oc.ok else "failed", oc)
         if oc.ok:
             s = oc.summary or {}
-            extra = (f", residual RMS {s['rms_um']:.4g} µm, PV {s['pv_um']:.4g} µm"
+            what = "residual" if s.get("figures_of", "residual") == "residual" else "height"
+            extra = (f", {what} RMS {format_length(s['rms_um'] * 1e-3, 4)}, "
+                     f"PV {format_length(s['pv_um'] * 1e-3, 4)}"
                      if s.get("rms_um") is not None else "")
             if not args.quiet:
                 print(f"{oc.input}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} "
@@ -154,51 +243,70 @@ def cmd_batch(args) -> int:
                 print(oc.traceback, file=sys.stderr, end="")
             print(f"pointspro: {oc.error}", file=sys.stderr, flush=True)
 
+    return report
+
+
+def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, workers: int,
+                   allowed: list[Path]):
+    """The executor: Dask with --scheduler, a process pool for several jobs and workers, else this
+    process (with a progress bar unless --quiet)."""
     from . import executors
 
     if args.scheduler:
-        runner = executors.run_dask(recipe_path, jobs, out, workers, args.scheduler)
-    elif min(workers, len(jobs)) > 1:
-        runner = executors.run_processes(recipe_path, jobs, out, min(workers, len(jobs)))
-    else:
-        from .terminal import TerminalProgress
+        return executors.run_dask(recipe_path, jobs, out, workers, args.scheduler, allowed, args.figures)
+    if min(workers, len(jobs)) > 1:
+        return executors.run_processes(recipe_path, jobs, out, min(workers, len(jobs)), allowed,
+                                       args.figures)
+    from .terminal import TerminalProgress
 
-        factory = None if args.quiet else (
-            lambda k, p: TerminalProgress(label=f"[{k}/{len(jobs)}] {p.name}"))
-        runner = executors.run_sequential(recipe, surface, jobs, out, factory)
+    factory = None if args.quiet else (
+        lambda k, p: TerminalProgress(label=f"[{k}/{len(jobs)}] {p.name}"))
+    return executors.run_sequential(recipe, surface, jobs, out, factory, allowed, args.figures)
+
+
+def _drain(runner, report, out: Path) -> bool:
+    """Report each outcome as it comes; SIGTERM stops like Ctrl-C: the workers are stopped and
+    their partial outputs removed. True when interrupted."""
+    import signal
+
+    from .batch import cleanup_partials
 
     def on_sigterm(signum, frame):  # SIGTERM stops the batch like Ctrl-C does
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_sigterm)
-    interrupted = False
     try:
         for oc in runner:
             report(oc)
     except KeyboardInterrupt:
-        interrupted = True
         runner.close()  # stops the workers
         cleanup_partials(out)
+        return True
     finally:
         signal.signal(signal.SIGTERM, previous)
+    return False
 
-    entries = [results.get(str(p)) or entry(str(p), "not run") for p in inputs]
-    write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
-                  scheduler=args.scheduler, seconds=time.perf_counter() - t0, interrupted=interrupted)
-    if not args.quiet or interrupted:
-        print(table(entries), file=sys.stdout if not interrupted else sys.stderr)
+
+def _batch_exit_code(entries: list[dict], interrupted: bool) -> int:
+    """130 interrupted, 0 all done, 1 some failed (2 when the only input failed), with the closing
+    line on stderr."""
+    n = len(entries)
     failed = [e for e in entries if e["status"] == "failed"]
     if interrupted:
         done = sum(e["status"] in ("ok", "skipped") for e in entries)
-        print(f"pointspro: interrupted — {done} of {len(inputs)} inputs complete, no partial output "
+        print(f"pointspro: interrupted — {done} of {n} inputs complete, no partial output "
               "left; run the same command with --resume to finish", file=sys.stderr)
         return 130
     if not failed:
         return EXIT_OK
-    if len(inputs) == 1:
+    if n == 1:
         return EXIT_USAGE
-    print(f"pointspro: {len(failed)} of {len(inputs)} inputs failed; the others are complete",
-          file=sys.stderr)
+    if len(failed) == n:
+        print(f"pointspro: all {n} inputs failed; nothing was written (see the lines above "
+              "and summary.json)", file=sys.stderr)
+    else:
+        print(f"pointspro: {len(failed)} of {n} inputs failed; the others are complete",
+              file=sys.stderr)
     return EXIT_SOME_FAILED
 
 
@@ -292,7 +400,7 @@ def cmd_window(args) -> int:
             raise InputError(f"{f}: file not found")
     from pointspro.app.main import run_window  # the only path that imports Qt
 
-    return run_window([Path(f) for f in args.files], screenshot=args.screenshot)
+    return run_window([Path(f) for f in args.files], screenshot=args.screenshot, run=args.run)
 
 
 def console() -> None:  # pragma: no cover - the console-script wrapper

@@ -24,5 +24,12 @@ class StepError(PointsProError):
     """A step that cannot process this cloud (too few points, ill-posed fit...)."""
 
 
+class InternalError(PointsProError):
+    """A bug — in a step (ours or a third party's) or a library under it — met while processing one
+    input. It fails that input alone, with one line naming the input and the step and "please
+    report"; the traceback is kept (``summary.json``, ``--debug``). Not the user's fault, but the
+    batch goes on exactly as for one."""
+
+
 class Cancelled(Exception):
     """Raised by ``ctx.progress.check()`` when the user cancelled. Not an error of the input."""

@@ -11,17 +11,36 @@ import signal
 from pathlib import Path
 from typing import Iterator
 
-from .batch import InputOutcome, process_input, process_job
+from .batch import InputOutcome, failed_outcome, process_input, process_job
 
 
-def run_sequential(recipe, surface, jobs, out_dir: Path, bar_factory=None) -> Iterator[InputOutcome]:
+def run_sequential(recipe, surface, jobs, out_dir: Path, bar_factory=None,
+                   allowed_dirs=None, figures: str = "all") -> Iterator[InputOutcome]:
     for k, (path, stem) in enumerate(jobs, 1):
         bar = bar_factory(k, path) if bar_factory else None
         try:
-            yield process_input(path, recipe, out_dir, stem, sink=bar, surface=surface)
+            yield process_input(path, recipe, out_dir, stem, sink=bar, surface=surface,
+                                allowed_dirs=allowed_dirs, figures=figures)
         finally:
             if bar is not None:
                 bar.done()
+
+
+def largest_first(jobs):
+    """The jobs (path, stem) by input file size, largest first (a missing file last: it fails fast)."""
+    import os
+
+    def size(job):
+        try:
+            return os.stat(job[0]).st_size
+        except OSError:
+            return -1
+    return sorted(jobs, key=size, reverse=True)
+
+
+def _strings(dirs) -> list[str] | None:
+    """Folders as plain strings: only strings cross process and machine boundaries."""
+    return None if dirs is None else [str(d) for d in dirs]
 
 
 def _ignore_sigint():  # workers leave Ctrl-C to the parent, which stops them
@@ -38,7 +57,8 @@ SINGLE_THREADED = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "
                                      "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
 
 
-def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int) -> Iterator[InputOutcome]:
+def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
+                  allowed_dirs=None, figures: str = "all") -> Iterator[InputOutcome]:
     """A pool of spawned processes (no inherited threads or locks); terminated on close."""
     import multiprocessing
     import os
@@ -54,15 +74,20 @@ def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int) -> Itera
             else:
                 os.environ[k] = v
     try:
-        args = [(str(recipe_path), str(p), str(out_dir), s) for p, s in jobs]
-        yield from pool.imap_unordered(_job, args)
+        allowed = _strings(allowed_dirs)
+        args = [(str(recipe_path), str(p), str(out_dir), s, allowed, figures)
+                for p, s in largest_first(jobs)]
+        # one input per task (chunksize 1): inputs differ in size, and the largest go first so the
+        # last round is short and no worker idles while one finishes a big map
+        yield from pool.imap_unordered(_job, args, chunksize=1)
         pool.close()
     finally:
         pool.terminate()
         pool.join()
 
 
-def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str) -> Iterator[InputOutcome]:
+def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str,
+             allowed_dirs=None, figures: str = "all") -> Iterator[InputOutcome]:
     """On a Dask distributed cluster (`address`), or a LocalCluster of `workers` processes ("local").
 
     The workers must see the same files (a shared file system for a real cluster) and have pointspro
@@ -87,10 +112,18 @@ def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str)
         client = Client(address, timeout="30s")
     futures = []
     try:
-        futures = [client.submit(process_job, str(recipe_path), str(p), str(out_dir), s, pure=False,
+        allowed = _strings(allowed_dirs)
+        jobs = largest_first(jobs)
+        # priority: Dask runs the largest inputs first too (higher priority first)
+        futures = [client.submit(process_job, str(recipe_path), str(p), str(out_dir), s, allowed,
+                                 figures, pure=False, priority=len(jobs) - k,
                                  key=f"pointspro-{s}-{k}") for k, (p, s) in enumerate(jobs)]
+        path_of = {f.key: str(p) for f, (p, _) in zip(futures, jobs)}
         for fut in as_completed(futures):
-            yield fut.result()
+            try:
+                yield fut.result()
+            except Exception as e:  # noqa: BLE001 — the task itself died (KilledWorker, lost data…)
+                yield failed_outcome(path_of[fut.key], "on the cluster", e)
     finally:
         if futures:
             client.cancel(futures, force=True)

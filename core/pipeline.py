@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cloud import PointCloud
-from .errors import PointsProError, StepError
+from .errors import Cancelled, InternalError, PointsProError, StepError
 from .progress import Progress
 from .recipe import Recipe
 from .step import Context, StepResult
@@ -26,11 +26,17 @@ class StepRecord:
     artifacts: dict
     points_in: int
     points_out: int
+    #: "" for a step id that runs once; "4_" (its 1-based position among the run steps) for one that
+    #: runs more than once, so the second `knn_denoise`'s omega_map.png never replaces the first's
+    file_prefix: str = ""
+
+    def file_name(self, artifact: str) -> str:
+        return self.file_prefix + artifact
 
     def to_json(self) -> dict:
         return {"id": self.id, "title": self.title, "seconds": round(self.seconds, 6),
                 "points_in": self.points_in, "points_out": self.points_out, "report": self.report,
-                "artifacts": sorted(self.artifacts)}
+                "artifacts": sorted(self.file_name(a) for a in self.artifacts)}
 
 
 @dataclass
@@ -38,69 +44,142 @@ class PipelineResult:
     input_cloud: PointCloud
     cloud: PointCloud
     steps: list[StepRecord] = field(default_factory=list)
+    #: the recipe's nominal (None: a map with no nominal) — decides the pupil of PVr
+    surface: object | None = None
 
     @property
     def artifacts(self) -> dict:
-        out = {}
-        for rec in self.steps:
-            out.update(rec.artifacts)
-        return out
+        """Every step's artifacts by the file name they are written under (StepRecord.file_name)."""
+        return {rec.file_name(name): art for rec in self.steps for name, art in rec.artifacts.items()}
 
     _summary: dict | None = field(default=None, init=False, repr=False)
 
     def summary(self) -> dict:
         """summarize() of input and output, computed once (PVr and slope RMS fit a map)."""
         if self._summary is None:
-            self._summary = summarize(self.input_cloud, self.cloud)
+            self._summary = summarize(self.input_cloud, self.cloud, self.surface)
         return dict(self._summary)
 
 
-def summarize(cloud_in: PointCloud, cloud_out: PointCloud) -> dict:
-    """points in/out and, where a residual exists, the optician's metrics over the kept points:
-    RMS, PV, PVr (µm) and slope RMS (µrad) — core.metrics.form."""
+def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None) -> dict:
+    """points in/out and the optician's metrics over the kept points: RMS, PV, PVr (µm) and slope
+    RMS (µrad) — core.metrics.form — of the residual; for a height map with no residual and no
+    nominal (or a flat), of the heights after piston and tilt removal, said in ``figures_of``.
+    PVr's 36-term fit uses the pupil of core.metrics.pupil (centre and radius reported)."""
     from .metrics import form_metrics
+    from .metrics.pupil import is_flat, pupil_of
 
     s = {"points_in": cloud_in.n, "points_out": cloud_out.n, "rms_um": None, "pv_um": None,
-         "pvr_um": None, "slope_rms_urad": None}
-    if "residual" in cloud_out.channels and cloud_out.n:
-        s.update(form_metrics(cloud_out.x, cloud_out.y, cloud_out["residual"]))
+         "pvr_um": None, "slope_rms_urad": None, "figures_of": None}
+    if not cloud_out.n:
+        return s
+    x, y = cloud_out.x, cloud_out.y
+    if "residual" in cloud_out.channels:
+        v = cloud_out["residual"]
+        s["figures_of"] = "residual"
+    elif is_flat(surface) and cloud_out.n >= 3:
+        v = remove_piston_tilt(x, y, cloud_out.z)
+        s["figures_of"] = "heights, piston and tilt removed (no residual)"
+    else:
+        return s
+    pupil = pupil_of(x, y, surface)
+    s.update(form_metrics(x, y, v, pupil.radius, center=pupil.center))
+    s["pupil"] = pupil.report()
     return s
+
+
+def remove_piston_tilt(x, y, z):
+    """z − (a + b·x + c·y), the least-squares plane about the points' bounding-box centre (mm)."""
+    x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
+    cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
+    A = np.column_stack([np.ones_like(x), x - cx, y - cy])
+    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
+    return z - A @ coef
+
+
+def check_sanity(cloud_in: PointCloud, cloud_out: PointCloud) -> None:
+    """A residual whose RMS exceeds the input's whole height range is a fit that diverged (a km of
+    "form error" on a 150 mm part), never a result: StepError naming both figures."""
+    from .units import format_length
+
+    if "residual" not in cloud_out.channels or not cloud_out.n or not cloud_in.n:
+        return
+    r = cloud_out["residual"]
+    if not np.all(np.isfinite(r)):
+        bad = int((~np.isfinite(r)).sum())
+        raise StepError(f"sanity check: {bad} residuals are NaN/inf after the steps")
+    rms = float(np.sqrt(np.mean((r - r.mean()) ** 2)))
+    span = float(np.ptp(cloud_in.z))
+    if rms > max(span, 1e-6):
+        raise StepError(f"sanity check: the residual's RMS ({format_length(rms)}) exceeds the input's "
+                        f"whole height range ({format_length(span)}) — a fit diverged; check the "
+                        "surface, the pose's DOF and the Zernike pupil in report.json")
+
+
+def _one_form(report) -> dict:
+    """A step's report with ``warnings`` always present as a list of strings (a third-party step may
+    give none, one string, or objects), so the report, the window and scripts read one form."""
+    report = dict(report or {})
+    w = report.get("warnings") or []
+    report["warnings"] = [w] if isinstance(w, str) else [str(x) for x in w]
+    return report
+
+
+def internal_message(where: str, e: BaseException) -> str:
+    """One line for a bug met at ``where``: "step 2 'buggy': internal error ZeroDivisionError:
+    division by zero — please report" (the traceback goes to summary.json and --debug)."""
+    text = str(e).strip().splitlines()[0] if str(e).strip() else ""
+    return f"{where}: internal error {type(e).__name__}" + (f": {text}" if text else "") + \
+        " — please report"
 
 
 def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None = None,
                  log: logging.Logger | None = None, surface=None, upto: int | None = None,
-                 ) -> PipelineResult:
+                 allowed_dirs=None) -> PipelineResult:
     """Run the recipe's enabled steps (those before position ``upto`` when given).
 
-    Step errors that are the input's fault come back as StepError naming the step; `Cancelled`
-    propagates. The input cloud is never modified (its arrays are read-only).
+    Step errors that are the input's fault come back as StepError naming the step, bugs as
+    InternalError naming it; `Cancelled` propagates. ``allowed_dirs``: folders a parameter file may
+    lie in besides the recipe's (the batch: the inputs' folders and --allow-path); None: any. The input cloud is never modified (its arrays are read-only).
     """
     progress = progress or Progress()
     log = log or logging.getLogger("pointspro")
     if surface is None and recipe.surface_spec is not None:
         surface = recipe.build_surface()
     steps = [s for s in recipe.steps[:upto] if s.enabled]
-    result = PipelineResult(cloud, cloud)
+    result = PipelineResult(cloud, cloud, surface=surface)
     n = max(len(steps), 1)
     current = cloud
     for i, rs in enumerate(steps):
         progress.check()
         sub = progress.sub(i / n, (i + 1) / n)
         ctx = Context(progress=sub, log=log.getChild(rs.id), surface=surface, inputs=recipe.inputs,
-                      base_dir=recipe.base_dir)
+                      base_dir=recipe.base_dir,
+                      allowed_dirs=None if allowed_dirs is None else tuple(allowed_dirs))
         sub.update(0.0, rs.step_cls.title)
         t0 = time.perf_counter()
+        where = f"step {recipe.steps.index(rs) + 1} '{rs.id}'"
         try:
             out = rs.step_cls().run(current, rs.params, ctx)
         except PointsProError as e:
-            raise StepError(f"step {recipe.steps.index(rs) + 1} '{rs.id}': {e}") from e
+            raise StepError(f"{where}: {e}") from e
+        except Cancelled:
+            raise
+        except Exception as e:  # a bug in the step or under it: this input fails alone
+            raise InternalError(internal_message(where, e)) from e
         seconds = time.perf_counter() - t0
         if not isinstance(out, StepResult) or not isinstance(out.cloud, PointCloud):
-            raise TypeError(f"step '{rs.id}' returned {type(out).__name__}, not a StepResult")
+            raise InternalError(f"{where}: internal error: returned {type(out).__name__}, not a "
+                                "StepResult — please report")
         new = out.cloud.with_provenance({"id": rs.id, "params": rs.params.model_dump(mode="json")})
-        result.steps.append(StepRecord(rs.id, rs.step_cls.title, seconds, out.report,
+        result.steps.append(StepRecord(rs.id, rs.step_cls.title, seconds, _one_form(out.report),
                                        dict(out.artifacts), current.n, new.n))
         sub.update(1.0, f"{rs.step_cls.title}: done")
         current = new
+    check_sanity(cloud, current)
+    ids = [rec.id for rec in result.steps]
+    for k, rec in enumerate(result.steps, 1):
+        if ids.count(rec.id) > 1:
+            rec.file_prefix = f"{k}_"
     result.cloud = current
     return result

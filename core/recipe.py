@@ -2,6 +2,7 @@
 
     pointspro: 1
     surface: {type: even_asphere, c: 3.3333333e-4, k: -0.98, A: {4: 7.0e-13}, aperture: 1300}
+    input: {pixel_size_um: 1.1, invalid: drop}   # optional reader options (core.io.formats)
     steps:
       - aperture: {diameter: 1290}
       - manual_edit: {remove: [17, 4212]}
@@ -15,9 +16,9 @@ A step entry may carry ``schema_version: N`` (written by the GUI when it saves) 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Hashable
 
 import yaml
 from pydantic import ValidationError
@@ -27,7 +28,7 @@ from .registry import Registry
 from .surfaces import parse_surface_spec
 
 RECIPE_VERSION = 1
-TOP_KEYS = ("pointspro", "surface", "inputs", "steps")
+TOP_KEYS = ("pointspro", "surface", "input", "inputs", "steps")
 
 
 class LineDict(dict):
@@ -38,7 +39,18 @@ class LineDict(dict):
 
 
 class _LineLoader(yaml.SafeLoader):
-    pass
+    def construct_object(self, node, deep=False):
+        """A value YAML's own constructors refuse (a date 2020-13-45, a bad !!int) is a RecipeError
+        naming its line, not a ValueError from deep inside PyYAML."""
+        try:
+            return super().construct_object(node, deep)
+        except (RecipeError, yaml.YAMLError, RecursionError):
+            raise
+        except Exception as e:  # noqa: BLE001 - PyYAML's constructors raise ValueError, TypeError,
+            # AttributeError (!!timestamp on a non-date) …
+            text = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            raise RecipeError(f"line {node.start_mark.line + 1}: cannot read the value {node.tag} "
+                              f"({text})") from None
 
 
 def _construct_mapping(loader: _LineLoader, node):
@@ -48,6 +60,9 @@ def _construct_mapping(loader: _LineLoader, node):
     d.key_lines = {}
     for knode, vnode in node.value:
         key = loader.construct_object(knode, deep=True)
+        if not isinstance(key, Hashable):
+            raise RecipeError(f"line {knode.start_mark.line + 1}: a key must be a name or a number, "
+                              f"not a {type(key).__name__}")
         if key in d:
             raise RecipeError(f"line {knode.start_mark.line + 1}: duplicate key {key!r}")
         d[key] = loader.construct_object(vnode, deep=True)
@@ -70,8 +85,11 @@ def load_yaml(text: str, where: str) -> Any:
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         pos = f", line {mark.line + 1}" if mark else ""
-        problem = getattr(e, "problem", None) or str(e)
+        problem = getattr(e, "problem", None) or getattr(e, "reason", None) or str(e)
+        problem = " ".join(str(problem).split()) if str(problem).strip() else type(e).__name__
         raise RecipeError(f"{where}{pos}: not valid YAML ({problem})") from None
+    except RecursionError:
+        raise RecipeError(f"{where}: not a recipe (nested too deeply)") from None
 
 
 def format_validation_error(e: ValidationError, prefix: str = "") -> str:
@@ -85,13 +103,15 @@ def format_validation_error(e: ValidationError, prefix: str = "") -> str:
         elif err["type"] == "missing":
             msg = "required key is missing"
         got = err.get("input")
+        text = repr(got)
+        text = text if len(text) <= 80 else text[:79] + "…"
         shown = "" if err["type"] in ("extra_forbidden", "missing") or isinstance(got, dict) \
-            else f" (got {got!r})"
+            else f" (got {text})"
         parts.append(f"key '{loc}': {msg}{shown}" if loc else f"{msg}{shown}")
     return prefix + "; ".join(parts)
 
 
-@dataclass
+@dataclass(frozen=True)
 class RecipeStep:
     id: str
     params: Any  # the step's validated Params instance
@@ -108,12 +128,17 @@ class RecipeStep:
         return entry
 
 
-@dataclass
+@dataclass(frozen=True)
 class Recipe:
+    """A validated recipe. Immutable: the edits below return a new Recipe and leave this one as it
+    was, so the window's undo history can keep old recipes by reference."""
+
     steps: list[RecipeStep]
     surface_spec: dict | None = None
     inputs: dict[str, Path] = field(default_factory=dict)
     path: Path | None = None
+    #: reader options of the measurement files (``input:`` block), as read_cloud's keywords
+    input: dict = field(default_factory=dict)
 
     @property
     def base_dir(self) -> Path | None:
@@ -129,6 +154,8 @@ class Recipe:
         d: dict = {"pointspro": RECIPE_VERSION}
         if self.surface_spec is not None:
             d["surface"] = _plain(self.surface_spec)
+        if self.input:
+            d["input"] = dict(self.input)
         if self.inputs:
             d["inputs"] = {k: str(v) for k, v in self.inputs.items()}
         d["steps"] = [s.to_yaml_entry(full) for s in self.steps]
@@ -136,6 +163,50 @@ class Recipe:
 
     def to_yaml(self) -> str:
         return yaml.safe_dump(self.to_dict(), sort_keys=False)
+
+    # -- edits: each returns a new Recipe (steps not edited are shared, never copied) ----------------
+    def with_steps(self, steps) -> Recipe:
+        return replace(self, steps=list(steps))
+
+    def inserted(self, step: RecipeStep, at: int | None = None) -> Recipe:
+        """``step`` added at position ``at`` (0-based; None: at the end)."""
+        steps = list(self.steps)
+        steps.insert(len(steps) if at is None else at, step)
+        return self.with_steps(steps)
+
+    def removed(self, i: int) -> Recipe:
+        steps = list(self.steps)
+        del steps[i]
+        return self.with_steps(steps)
+
+    def moved(self, i: int, j: int) -> Recipe:
+        """Step ``i`` taken out and put back at position ``j``."""
+        steps = list(self.steps)
+        steps.insert(j, steps.pop(i))
+        return self.with_steps(steps)
+
+    def with_params(self, i: int, params: dict, registry: Registry | None = None,
+                    where: str = "recipe") -> Recipe:
+        """New parameters (a mapping, as in the YAML) for step ``i``, validated by its Params;
+        RecipeError naming the step and the key when a value is invalid."""
+        old = self.steps[i]
+        entry = {old.id: dict(params)} | ({} if old.enabled else {"enabled": False})
+        step = _parse_step(entry, i + 1, where, where, registry or Registry())
+        steps = list(self.steps)
+        steps[i] = step
+        return self.with_steps(steps)
+
+    def with_enabled(self, i: int, enabled: bool) -> Recipe:
+        steps = list(self.steps)
+        steps[i] = replace(steps[i], enabled=bool(enabled))
+        return self.with_steps(steps)
+
+
+def make_step(step_id: str, params: dict | None = None, registry: Registry | None = None,
+              position: int = 1, where: str = "recipe") -> RecipeStep:
+    """One validated step, as the YAML entry ``- step_id: params`` at 1-based ``position`` would be
+    (the same RecipeError for an unknown step or an invalid value)."""
+    return _parse_step({step_id: dict(params or {})}, position, where, where, registry or Registry())
 
 
 def _plain(o):
@@ -186,6 +257,8 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
         except ValidationError as e:
             raise RecipeError(format_validation_error(e, f"{at('surface')}: surface: ")) from None
 
+    reader_options = _parse_input_block(data, at, where)
+
     inputs = data.get("inputs") or {}
     if not isinstance(inputs, dict):
         raise RecipeError(f"{at('inputs')}: inputs: must map names to file paths")
@@ -194,7 +267,7 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
         p = Path(str(p))
         if not p.is_absolute() and base is not None:
             p = base.parent / p
-        if not p.is_file():
+        if not _is_file(p):
             raise RecipeError(f"{at('inputs')}: inputs: key '{name}': file {p} not found")
         resolved_inputs[str(name)] = p
 
@@ -206,7 +279,36 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
     steps = []
     for i, entry in enumerate(raw_steps, start=1):
         steps.append(_parse_step(entry, i, at("steps"), where, registry))
-    return Recipe(steps, surface, resolved_inputs, base)
+    return Recipe(steps, surface, resolved_inputs, base, reader_options)
+
+
+def _is_file(p: Path) -> bool:
+    try:
+        return p.is_file()
+    except (OSError, ValueError):  # a name too long, a NUL byte in it: no such file either
+        return False
+
+
+def _parse_input_block(data, at, where: str) -> dict:
+    """``input: {pixel_size_um, wavelength_nm, height_unit, invalid}`` → read_cloud's keywords
+    (validated here, so a typo stops the recipe before any file is read)."""
+    block = data.get("input")
+    if block is None:
+        return {}
+    if not isinstance(block, dict):
+        raise RecipeError(f"{at('input')}: input: must be a mapping of reader options "
+                          "(pixel_size_um, wavelength_nm, height_unit, invalid)")
+    from .io.formats import ReaderOptions
+
+    lines = getattr(block, "key_lines", {})
+    for key in block:
+        try:
+            ReaderOptions.parse({key: block[key]})
+        except ValueError as e:
+            ln = lines.get(key)
+            loc = f"{where}, line {ln}" if ln else at("input")
+            raise RecipeError(f"{loc}: input: {e}") from None
+    return ReaderOptions.parse(dict(block)).to_dict()
 
 
 def _parse_step(entry, i: int, steps_at: str, where: str, registry: Registry) -> RecipeStep:

@@ -4,8 +4,8 @@ from __future__ import annotations
 import html
 import json
 import math
-from pathlib import Path
 from datetime import datetime, timezone
+from pathlib import Path
 
 import numpy as np
 
@@ -32,15 +32,49 @@ def jsonable(o):
     return str(o)
 
 
-def build_report(input_path: str, recipe, result) -> dict:
+#: which figures (PNG files) a batch draws: all of them, only the summary's form-error map, or none
+FIGURE_MODES = ("all", "summary", "none")
+SUMMARY_FIGURE = "form_error.png"
+
+
+def skipped_figures(names, mode: str = "all") -> list[str]:
+    """The PNG artifacts among ``names`` that figure mode ``mode`` does not draw."""
+    if mode not in FIGURE_MODES:
+        raise ValueError(f"figures: {mode!r} is not one of {', '.join(FIGURE_MODES)}")
+    if mode == "all":
+        return []
+    return sorted(n for n in names if n.endswith(".png") and (mode == "none" or n != SUMMARY_FIGURE))
+
+
+def build_report(input_path: str, recipe, result, figures: str = "all", skipped=()) -> dict:
+    """report.json's content; with ``figures`` other than "all" it says which figures were not
+    drawn (``skipped``) and the steps list only the files written."""
+    skipped = set(skipped)
+    steps = [r.to_json() for r in result.steps]
+    for st in steps:
+        st["artifacts"] = [a for a in st["artifacts"] if a not in skipped]
     return jsonable({
         "pointspro": __version__,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "input": str(input_path),
         "recipe": recipe.to_dict(full=True),
-        "steps": [r.to_json() for r in result.steps],
+        "input_file": input_description(result.input_cloud),
+        "steps": steps,
         "summary": result.summary(),
+        "figures": {"mode": figures, "skipped": sorted(skipped)},
     })
+
+
+#: what the reader found, as the report states it (docs/formats.md): the format, the instrument's
+#: unit and pixel, the grid, and how many invalid pixels or rows were dropped on reading
+_INPUT_KEYS = ("format", "instrument_format", "instrument_reader", "instrument_unit", "pixel_mm",
+               "grid", "channel", "delimiter", "decimal_comma", "header_line", "channel_units",
+               "invalid_dropped")
+
+
+def input_description(cloud) -> dict:
+    meta = getattr(cloud, "meta", {}) or {}
+    return {k: meta[k] for k in _INPUT_KEYS if k in meta and meta[k] not in (None, {}, [])}
 
 
 def dumps(report: dict) -> str:
@@ -115,15 +149,27 @@ def render_html(report: dict, folder=None) -> str:
              f"<h1>PointsPro report</h1><p class='muted'>PointsPro {html.escape(report['pointspro'])}, "
              f"{html.escape(report.get('created', ''))}</p>",
              "<h2>Input</h2>", table_html({"file": report["input"], "points in": s.get("points_in"),
-                                       "points out": s.get("points_out")})]
+                                       "points out": s.get("points_out"),
+                                       **report.get("input_file", {})})]
     summary = {"RMS (µm)": s.get("rms_um"), "PV (µm)": s.get("pv_um"),
                "PVr (µm, Evans: Zernike Z1–Z36 PV + 3·RMS of the rest)": s.get("pvr_um"),
                "slope RMS (µrad, tilt removed)": s.get("slope_rms_urad")}
     if any(v is not None for v in summary.values()):
-        parts += ["<h2>Form error</h2>", table_html(summary), _img(folder, "form_error.png")]
+        what = s.get("figures_of") or "residual"
+        pupil = s.get("pupil") or {}
+        note = (f"<p class='muted'>Figures of the {html.escape(what)}"
+                + (f"; PVr's pupil: centre ({pupil['centre_mm'][0]:.6g}, {pupil['centre_mm'][1]:.6g}) mm, "
+                   f"radius {pupil['norm_radius_mm']:.6g} mm — {html.escape(pupil['centre_from'])}"
+                   if pupil else "") + ".</p>")
+        parts += ["<h2>Form error</h2>", note, table_html(summary), _img(folder, "form_error.png")]
     surf = report.get("recipe", {}).get("surface")
     if surf:
         parts += ["<h2>Nominal surface</h2>", table_html(surf)]
+    fig = report.get("figures") or {}
+    if fig.get("skipped"):
+        parts.append(f"<p class='muted'>Figures: {html.escape(fig['mode'])} — not drawn: "
+                     f"{html.escape(', '.join(fig['skipped']))} (pointspro --batch --figures all draws "
+                     "them).</p>")
     parts.append("<h2>Steps</h2>")
     if not report["steps"]:
         parts.append("<p class='muted'>The recipe has no steps: the cloud was read and written.</p>")

@@ -8,9 +8,10 @@ reports through ``ctx.log``, ``ctx.progress`` and the returned report.
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, ClassVar, Mapping
+from typing import Any, Callable, ClassVar, Iterable, Mapping
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -38,10 +39,43 @@ class Params(BaseModel):
         return data
 
 
-def param(default: Any = ..., *, unit: str | None = None, help: str, **bounds) -> Any:
-    """A step parameter with its unit and help text (shown in the GUI, `pointspro steps`, the CLI)."""
-    extra = {"unit": unit} if unit else {}
+def param(default: Any = ..., *, unit: str | None = None, help: str, file: bool = False,
+          **bounds) -> Any:
+    """A step parameter with its unit and help text (shown in the GUI, `pointspro steps`, the CLI).
+    ``file=True``: the value names a file (read through ``ctx.resolve``), so the batch checks, before
+    any input runs, that it lies where the recipe may reach (see ``check_parameter_path``)."""
+    extra = ({"unit": unit} if unit else {}) | ({"file": True} if file else {})
     return Field(default, description=help, json_schema_extra=extra or None, **bounds)
+
+
+def file_parameters(params: BaseModel) -> dict[str, str]:
+    """The set values of a step's ``file=True`` parameters, by name."""
+    out = {}
+    for name, f in type(params).model_fields.items():
+        extra = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
+        value = getattr(params, name, None)
+        if extra.get("file") and isinstance(value, (str, Path)) and str(value):
+            out[name] = str(value)
+    return out
+
+
+# --- where parameter files may lie ----------------------------------------------------------------
+# A recipe is data shared between people and machines, not a permission: a file it names must lie in
+# the recipe's folder, an input's folder or a folder allowed on the command line (--allow-path). The
+# batch passes that list to each run (Context.allowed_dirs, sent with every job to the process pool
+# and to Dask's workers); None (the window, scripts): any file the user gave is read.
+
+
+def outside_allowed(path: Path, allowed: Iterable[Path]) -> str | None:
+    """None when ``path`` (links followed, ``..`` removed) lies in one of ``allowed``; else the
+    one-line reason naming the path and the --allow-path that would permit it."""
+    real = Path(os.path.realpath(path))
+    for d in allowed:
+        if real.is_relative_to(os.path.realpath(d)):
+            return None
+    shown = str(path) if real == Path(path) else f"{path} (→ {real})"
+    return (f"{shown} is outside the recipe's folder and the inputs' folders; a recipe may not "
+            f"reach other files — to allow it, run with --allow-path {real.parent}")
 
 
 # An artifact is written by the runner into the output folder: text, bytes, or a writer callable.
@@ -66,11 +100,24 @@ class Context:
     inputs: Mapping[str, Path] = field(default_factory=dict)
     #: folder the recipe came from (relative paths in parameters are relative to it)
     base_dir: Path | None = None
+    #: folders a parameter file may lie in besides ``base_dir`` (the batch: the inputs' folders and
+    #: --allow-path); None: any file (the window, where the user chose or typed the path)
+    allowed_dirs: tuple[Path, ...] | None = None
 
-    def resolve(self, path: str | Path) -> Path:
-        """A parameter's file path: relative paths are relative to the recipe's folder."""
+    def resolve(self, path: str | Path, param: str | None = None) -> Path:
+        """A parameter's file path: relative paths are relative to the recipe's folder. With
+        ``allowed_dirs`` set, a file outside them and the recipe's folder is a StepError naming the
+        parameter (``param``), the path and the --allow-path that permits it."""
         p = Path(path)
-        return p if p.is_absolute() or self.base_dir is None else Path(self.base_dir) / p
+        p = p if p.is_absolute() or self.base_dir is None else Path(self.base_dir) / p
+        if self.allowed_dirs is not None:
+            allowed = [*([self.base_dir] if self.base_dir is not None else []), *self.allowed_dirs]
+            why = outside_allowed(p, allowed)
+            if why:
+                from .errors import StepError
+
+                raise StepError(f"parameter '{param}': {why}" if param else why)
+        return p
 
     def require_surface(self, step_id: str) -> NominalSurface:
         from .errors import StepError

@@ -16,7 +16,9 @@ def entry(input_path: str, status: str, outcome=None, report: dict | None = None
             "error": error if error is not None else (outcome.error if outcome is not None else None),
             "seconds": round(outcome.seconds, 3) if outcome is not None else None,
             "points_in": s.get("points_in"), "points_out": s.get("points_out"),
-            "rms_um": s.get("rms_um"), "pv_um": s.get("pv_um")}
+            "rms_um": s.get("rms_um"), "pv_um": s.get("pv_um"),
+            # a failed input keeps its traceback (a bug to report, or where a user error arose)
+            "traceback": getattr(outcome, "traceback", None) if status == "failed" else None}
 
 
 def write_summary(out_dir, recipe_path, entries: list[dict], *, workers: int, scheduler: str | None,

@@ -35,3 +35,26 @@ def test_steps_never_print_or_exit():
         if re.search(r"^\s*print\(|sys\.exit\(", text, re.M):
             bad.append(str(py))
     assert bad == []
+
+
+def _contracts() -> dict:
+    import tomllib
+
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    return {c["name"]: c for c in cfg["tool"]["importlinter"]["contracts"]}
+
+
+def test_core_never_imports_plugins_contract():
+    """Core finds steps through entry points by name (core.registry), never by import."""
+    c = _contracts()["core never imports a plugin"]
+    assert c["type"] == "forbidden"
+    assert c["source_modules"] == ["pointspro.core"] and c["forbidden_modules"] == ["pointspro.plugins"]
+    assert c.get("ignore_imports", []) == ["pointspro.core.cli -> pointspro.app.main"]
+
+
+def test_every_plugin_package_is_in_the_independence_contract():
+    """A new plugin is independent of the others too (a third party would copy it alone)."""
+    c = next(c for c in _contracts().values() if c["type"] == "independence")
+    packages = {f"pointspro.plugins.{p.name}" for p in (ROOT / "plugins").iterdir()
+                if (p / "__init__.py").is_file()}
+    assert set(c["modules"]) == packages

@@ -20,12 +20,12 @@ RECIPE = EXAMPLE / "recipe.yaml"
 
 def _inputs(tmp_path, n, bad=()):
     """n copies of the example measurement under their own names, some of them corrupt."""
-    src = (EXAMPLE / "asphere_cmm.csv").read_text()
+    src = (EXAMPLE / "asphere_cmm.csv").read_text(encoding="utf-8")
     files = []
     for k in range(n):
         p = tmp_path / "in" / f"part{k:02d}.csv"
         p.parent.mkdir(exist_ok=True)
-        p.write_text(src if k not in bad else src.replace("86.", "8x6.", 1))
+        p.write_text(src if k not in bad else src.replace("86.", "8x6.", 1), encoding="utf-8")
         files.append(p)
     return files
 
@@ -62,7 +62,7 @@ def test_workers_and_dask_give_identical_outputs(run_cli, tmp_path):
         assert set(ref) == EXAMPLE_OUTPUTS
         for name in ("par", "dask"):
             assert _normalised(tmp_path / name / f.stem) == ref, (name, f.stem)
-    s = json.loads((tmp_path / "dask" / "summary.json").read_text())
+    s = json.loads((tmp_path / "dask" / "summary.json").read_text(encoding="utf-8"))
     assert s["scheduler"] == "local" and s["counts"] == {"ok": 3}
 
 
@@ -70,7 +70,7 @@ def test_summary_table_and_json_with_corrupt_inputs(run_cli, tmp_path):
     files = _inputs(tmp_path, 4, bad={1, 2})
     code, out, err = run_cli("--batch", RECIPE, *files, "--out", tmp_path / "o", "--workers", "2")
     assert code == 1
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert [e["status"] for e in s["inputs"]] == ["ok", "failed", "failed", "ok"]
     bad = s["inputs"][1]
     assert re.search(r"part01.csv, line 5, column 3: '8x6.3193\d+' is not a number", bad["error"])
@@ -88,7 +88,7 @@ def test_summary_table_and_json_with_corrupt_inputs(run_cli, tmp_path):
 def test_default_workers_is_the_number_of_cores(run_cli, tmp_path):
     files = _inputs(tmp_path, 2)
     assert run_cli("--batch", RECIPE, *files, "--out", tmp_path / "o", "--quiet")[0] == 0
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     cores = len(os.sched_getaffinity(0))
     assert s["workers"] == (cores if min(cores, 2) > 1 else 1)
 
@@ -101,15 +101,15 @@ def test_resume_skips_complete_outputs_and_reruns_changed_recipes(run_cli, tmp_p
     (out / ".part02.abc.partial").mkdir()  # what a hard kill leaves
     code, _, _ = run_cli("--batch", RECIPE, *files, "--out", out, "--quiet", "--resume", "--workers", "1")
     assert code == 0
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert [e["status"] for e in s["inputs"]] == ["skipped", "skipped", "ok"]
     assert s["inputs"][0]["points_in"] == 4680  # numbers of a skipped input come from its report
     assert (out / "part00" / "report.json").stat().st_mtime_ns == stamp
     assert not list(out.glob(".*"))
     # another recipe: nothing is complete for it
-    other = write(tmp_path / "other.yaml", RECIPE.read_text().replace("window: 15.0", "window: 20.0"))
+    other = write(tmp_path / "other.yaml", RECIPE.read_text(encoding="utf-8").replace("window: 15.0", "window: 20.0"))
     run_cli("--batch", other, *files, "--out", out, "--quiet", "--resume", "--workers", "1")
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert [e["status"] for e in s["inputs"]] == ["ok", "ok", "ok"]
 
 
@@ -151,11 +151,11 @@ def test_kill_in_the_middle_then_resume(tmp_path, sig, workers):
     assert 1 <= len(done) < len(files)  # it was stopped in the middle
     for d in done:  # every folder there is complete
         assert {q.name for q in d.iterdir()} == {"cloud.csv", "report.json", "report.html", "omega_map.png"}
-        json.loads((d / "report.json").read_text())
-    s = json.loads((out / "summary.json").read_text())
+        json.loads((d / "report.json").read_text(encoding="utf-8"))
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["interrupted"] is True and s["counts"].get("not run", 0) >= 1
     res = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["counts"].get("skipped") == len(done) and s["counts"].get("ok") == len(files) - len(done)
     assert all((out / f.stem / "report.json").is_file() for f in files)

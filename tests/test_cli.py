@@ -29,14 +29,14 @@ def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
     assert code == 0, err
     folder = tmp_path / "out" / "asphere_cmm"
     assert {p.name for p in folder.iterdir()} == EXAMPLE_OUTPUTS
-    rep = json.loads((folder / "report.json").read_text())
+    rep = json.loads((folder / "report.json").read_text(encoding="utf-8"))
     assert set(rep) >= {"pointspro", "input", "recipe", "steps", "summary"}
     ids = [s["id"] for s in rep["steps"]]
     assert ids == ["manual_edit", "probe_radius", "misalignment", "knn_denoise", "aperture", "zernike",
                    "bspline_map"]
     steps = {s["id"]: s["report"] for s in rep["steps"]}
     assert steps["manual_edit"]["removed"] == 2
-    truth = json.loads((EXAMPLE / "truth.json").read_text())
+    truth = json.loads((EXAMPLE / "truth.json").read_text(encoding="utf-8"))
     mis = steps["misalignment"]
     # the pose of the simulation (the form error's projection on tilt/decenter limits dx, dy)
     assert abs(mis["alpha_deg"] - truth["pose"]["alpha_deg"]) < 0.005
@@ -55,7 +55,7 @@ def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
     assert 520 not in cloud.index and 3640 not in cloud.index
     assert np.all(np.diff(cloud.index) > 0)  # input order kept
     assert np.sqrt(np.mean(cloud["residual"] ** 2)) * 1e3 == pytest.approx(s["rms_um"], rel=0.05)
-    html = (folder / "report.html").read_text()
+    html = (folder / "report.html").read_text(encoding="utf-8")
     assert "Clear aperture" in html and "asphere_cmm.csv" in html
     assert _sha(DATA) == before
     assert "asphere_cmm.csv: ok" in out
@@ -112,7 +112,7 @@ def test_bad_input_exit_2_one_line_no_output(run_cli, tmp_path, make, pattern):
     left = sorted(p.name for p in outdir.iterdir()) if outdir.exists() else []
     assert left in ([], ["summary.json"])
     if left:
-        summary = json.loads((outdir / "summary.json").read_text())
+        summary = json.loads((outdir / "summary.json").read_text(encoding="utf-8"))
         assert [e["status"] for e in summary["inputs"]] == ["failed"]
         assert summary["inputs"][0]["error"] in err
 
@@ -150,9 +150,9 @@ def test_duplicate_output_stems_rejected(run_cli, tmp_path):
 def test_rerun_replaces_a_complete_folder_atomically(run_cli, tmp_path):
     good, _, recipe = _two_inputs(tmp_path)
     assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
-    first = (tmp_path / "o" / "good" / "cloud.csv").read_text()
+    first = (tmp_path / "o" / "good" / "cloud.csv").read_text(encoding="utf-8")
     assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
-    assert (tmp_path / "o" / "good" / "cloud.csv").read_text() == first
+    assert (tmp_path / "o" / "good" / "cloud.csv").read_text(encoding="utf-8") == first
     assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["good", "summary.json"]
 
 
@@ -169,8 +169,9 @@ def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch):
     monkeypatch.setattr(batch, "render_html", boom)
     out = tmp_path / "o"
     out.mkdir()
-    with pytest.raises(OSError):
-        batch.process_input(good, r, out, "good")
+    oc = batch.process_input(good, r, out, "good")  # the input fails alone, with one line
+    assert not oc.ok and oc.error == f"{good}: writing the outputs: disk full"
+    assert "OSError: disk full" in oc.traceback
     assert list(out.iterdir()) == []
 
 
@@ -223,6 +224,27 @@ def test_workers_give_identical_outputs(run_cli, tmp_path):
         a = tmp_path / "seq" / f"m{k}"
         b = tmp_path / "par" / f"m{k}"
         assert (a / "cloud.csv").read_bytes() == (b / "cloud.csv").read_bytes()
-        ra, rb = json.loads((a / "report.json").read_text()), json.loads((b / "report.json").read_text())
+        ra, rb = json.loads((a / "report.json").read_text(encoding="utf-8")), json.loads((b / "report.json").read_text(encoding="utf-8"))
         assert ra["summary"] == rb["summary"]
         assert [s["report"] for s in ra["steps"]] == [s["report"] for s in rb["steps"]]
+
+
+@pytest.mark.parametrize("mode", ["summary", "none"])
+def test_figures_option_skips_pictures_and_says_which(run_cli, tmp_path, mode):
+    """--figures summary draws only form_error.png, none draws no PNG; the numbers and the other
+    files are those of a full run, and the report lists what was not drawn."""
+    code, _, err = run_cli("--batch", RECIPE, DATA, "--out", tmp_path / "all", "--quiet")
+    assert code == 0, err
+    code, _, err = run_cli("--batch", RECIPE, DATA, "--out", tmp_path / mode, "--quiet", "--figures", mode)
+    assert code == 0, err
+    full, part = tmp_path / "all" / "asphere_cmm", tmp_path / mode / "asphere_cmm"
+    pngs = {p.name for p in full.glob("*.png")}
+    kept = {"form_error.png"} if mode == "summary" else set()
+    assert len(pngs) >= 5 and {p.name for p in part.glob("*.png")} == kept
+    assert {p.name for p in part.iterdir()} == {p.name for p in full.iterdir()} - (pngs - kept)
+    rep = json.loads((part / "report.json").read_text(encoding="utf-8"))
+    assert rep["figures"] == {"mode": mode, "skipped": sorted(pngs - kept)}
+    assert all(a not in pngs - kept for st in rep["steps"] for a in st["artifacts"])
+    assert rep["summary"] == json.loads((full / "report.json").read_text(encoding="utf-8"))["summary"]
+    assert _sha(part / "cloud.csv") == _sha(full / "cloud.csv")
+    assert "not drawn" in (part / "report.html").read_text(encoding="utf-8")

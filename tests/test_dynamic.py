@@ -76,7 +76,7 @@ def test_dynamic_step_from_calibration_file(tmp_path, scan):
     assert "sample at ≥ 1360 Hz" in rep["advice"][0]
     assert 0 < rep["phase_lag_scan_deg"] < 0.5  # 0.5–1.5 Hz content: hundredths of a degree
     # the saved model replays identically
-    (tmp_path / "m.json").write_text(res.artifacts["dynamic_model.json"])
+    (tmp_path / "m.json").write_text(res.artifacts["dynamic_model.json"], encoding="utf-8")
     res2 = DynamicStep().run(cloud, DynamicStep.Params(model="m.json"), Context(base_dir=tmp_path))
     assert np.array_equal(res2.cloud.z, res.cloud.z)
     # dynamic_id gives the same model and a figure
@@ -122,7 +122,7 @@ def test_bad_time_series_and_calibrations(tmp_path):
     # scan channels that do not add up
     cloud = PointCloud.from_xyz(np.zeros(50), np.zeros(50), np.ones(50), t=np.arange(50) / 1e3,
                                 xd=np.zeros(50), xc=np.zeros(50))
-    (tmp_path / "m.json").write_text(identify(t, xd, ref).to_json())
+    (tmp_path / "m.json").write_text(identify(t, xd, ref).to_json(), encoding="utf-8")
     with pytest.raises(StepError, match=r"z ≠ xd \+ xc"):
         DynamicStep().run(cloud, DynamicStep.Params(model="m.json"), Context(base_dir=tmp_path))
     with pytest.raises(StepError, match="no xd/xc channel"):

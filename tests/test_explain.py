@@ -42,7 +42,7 @@ def model(effects, scan=SPIRAL, seed=1):
 
 
 def write_model(path, m):
-    path.write_text(m.to_yaml())
+    path.write_text(m.to_yaml(), encoding="utf-8")
     return path
 
 
@@ -76,9 +76,9 @@ def test_each_hidden_effect_is_named_first_and_closes_the_gap(tmp_path, name):
         if name == "pose" or k == "phase_deg":
             continue  # pose: its own columns are nearly collinear on an asphere; checked by the gap
         assert fitted[k] == pytest.approx(v, rel=0.05, abs=0.05 * max(abs(x) for x in params.values())), k
-    upd = yaml.safe_load((tmp_path / "out" / "model.updated.yaml").read_text())
+    upd = yaml.safe_load((tmp_path / "out" / "model.updated.yaml").read_text(encoding="utf-8"))
     assert name in {next(iter(e)) for e in upd["effects"]}
-    html = (tmp_path / "out" / "explain.html").read_text()
+    html = (tmp_path / "out" / "explain.html").read_text(encoding="utf-8")
     assert html.count("data:image/png;base64,") == 2 and name in html
 
 
@@ -147,7 +147,7 @@ def test_commands_and_simulated_file(tmp_path, run_cli):
     code, out, err = run_cli("explain", "--simulated", tmp_path / "sim.csv", "--measured", tmp_path / "meas.csv",
                              "--out", tmp_path / "o", "--bootstrap", "2")
     assert code == 0, err
-    rep = json.loads((tmp_path / "o" / "explain.json").read_text())
+    rep = json.loads((tmp_path / "o" / "explain.json").read_text(encoding="utf-8"))
     assert rep["found"][0]["effect"] == "spindle_axial" and rep["match"] == "by row"
     assert rep["found"][0]["evidence"]["stability"] == 1.0
     code, out, err = run_cli("explain", "--model", tmp_path / "base.yaml", "--measured", tmp_path / "meas.csv",
@@ -155,11 +155,11 @@ def test_commands_and_simulated_file(tmp_path, run_cli):
     assert code == 0 and "spindle_axial" in out
     # bad input: unknown effect, unknown parameter, no source
     (tmp_path / "bad.yaml").write_text("pointspro_model: 1\nsurface: {type: even_asphere, R: 100}\n"
-                                       "scan: {type: spiral, radius: 5}\neffects:\n  - wobble: {a: 1}\n")
+                                       "scan: {type: spiral, radius: 5}\neffects:\n  - wobble: {a: 1}\n", encoding="utf-8")
     code, _, err = run_cli("simulate", tmp_path / "bad.yaml", "--out", tmp_path / "x.csv")
     assert code == 2 and "unknown effect 'wobble'" in err and "Traceback" not in err
     (tmp_path / "bad2.yaml").write_text("pointspro_model: 1\nsurface: {type: even_asphere, R: 100}\n"
-                                        "scan: {type: spiral, radius: 5}\neffects:\n  - pose: {gamma: 1}\n")
+                                        "scan: {type: spiral, radius: 5}\neffects:\n  - pose: {gamma: 1}\n", encoding="utf-8")
     code, _, err = run_cli("simulate", tmp_path / "bad2.yaml", "--out", tmp_path / "x.csv")
     assert code == 2 and "unknown parameter(s) ['gamma']" in err
     code, _, err = run_cli("explain", "--measured", tmp_path / "meas.csv", "--out", tmp_path / "o3")

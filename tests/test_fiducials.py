@@ -80,7 +80,7 @@ def test_000_volumetric_field_predicted_between_fiducials(tmp_path):
     assert all(abs(r - 1) < 0.1 for r in rep["gum_vs_monte_carlo"])
     study = rep["fiducial_count_study"]
     assert study[0]["fiducials"] == 4 and study[-1]["ev_mean_um"] < study[0]["ev_mean_um"]
-    (tmp_path / "m.json").write_text(res.artifacts["volumetric_model.json"])
+    (tmp_path / "m.json").write_text(res.artifacts["volumetric_model.json"], encoding="utf-8")
     # points that are not fiducials, inside the workspace, as the machine measures them
     rng = np.random.default_rng(9)
     R = np.column_stack([rng.uniform(-90, 90, 400), rng.uniform(-18, 18, 400), rng.uniform(3, 47, 400)])
@@ -113,8 +113,8 @@ def test_000_volumetric_field_predicted_between_fiducials(tmp_path):
 
 def test_bad_inputs(tmp_path):
     ref, cloud = setup_000(tmp_path, n=8)
-    lines = (tmp_path / "reference.csv").read_text().splitlines()
-    (tmp_path / "short.csv").write_text("\n".join(lines[:-1]) + "\n")
+    lines = (tmp_path / "reference.csv").read_text(encoding="utf-8").splitlines()
+    (tmp_path / "short.csv").write_text("\n".join(lines[:-1]) + "\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"fiducial\(s\) \[8\] are measured but not in the reference"):
         FiducialsStep().run(cloud, FiducialsStep.Params(reference="short.csv", monte_carlo_runs=0, Q=2),
                             Context(base_dir=tmp_path))
@@ -132,12 +132,12 @@ def test_bad_inputs(tmp_path):
     text = res.artifacts["volumetric_model.json"]
     d = json.loads(text)
     d["transform"]["params"]["Ax"] += 1.0
-    (tmp_path / "tampered.json").write_text(json.dumps(d))
+    (tmp_path / "tampered.json").write_text(json.dumps(d), encoding="utf-8")
     with pytest.raises(InputError, match="changed after it was written"):
         VolumetricStep().run(cloud, VolumetricStep.Params(model="tampered.json"), Context(base_dir=tmp_path))
     d = json.loads(text)
     d["pointspro_volumetric_model"] = 99
-    (tmp_path / "other.json").write_text(json.dumps(d))
+    (tmp_path / "other.json").write_text(json.dumps(d), encoding="utf-8")
     with pytest.raises(InputError, match="not a PointsPro volumetric model of format 1"):
         VolumetricStep().run(cloud, VolumetricStep.Params(model="other.json"), Context(base_dir=tmp_path))
 

@@ -126,14 +126,14 @@ def test_metropro_dat_written_from_the_specification(tmp_path):
 
 def test_text_dat_still_reads_as_text(tmp_path):
     p = tmp_path / "pts.dat"
-    p.write_text("x y z\n0 0 1\n1 0 2\n0 1 3\n")
+    p.write_text("x y z\n0 0 1\n1 0 2\n0 1 3\n", encoding="utf-8")
     assert read_cloud(p).n == 3
 
 
 def test_bad_instrument_files(tmp_path):
     p = tmp_path / "broken.datx"
     p.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)
-    with pytest.raises(InputError, match=r"broken.datx: cannot read this instrument file"):
+    with pytest.raises(InputError, match=r"broken.datx: not a Zygo DATX file.*damaged or truncated"):
         read_cloud(p)
     p = tmp_path / "broken.x3p"
     p.write_bytes(b"PK\x03\x04 not really a zip")
@@ -145,3 +145,128 @@ def test_bad_instrument_files(tmp_path):
     x3pio.write(str(tmp_path / "empty.x3p"), z, x_scale=1e-6, y_scale=1e-6)
     with pytest.raises(InputError, match="no valid pixel"):
         read_cloud(tmp_path / "empty.x3p")
+
+
+# --- X3P without namespace (Sensofar), .datx in pixels and fringes, reader options -------------------
+def _plain_x3p(src, dst, edit=lambda xml: xml):
+    """x3pio's X3P with main.xml's root renamed to a namespace-less <ISO5436> (as Sensofar writes)."""
+    import re
+    import zipfile
+
+    with zipfile.ZipFile(src) as zi, zipfile.ZipFile(dst, "w") as zo:
+        for name in zi.namelist():
+            data = zi.read(name)
+            if name == "main.xml":
+                xml = data.decode()
+                xml = re.sub(r"<p:ISO5436_2[^>]*>", "<ISO5436>", xml).replace("</p:ISO5436_2>",
+                                                                              "</ISO5436>")
+                data = edit(xml).encode()
+            zo.writestr(name, data)
+
+
+def test_x3p_with_namespace_less_root_is_read(tmp_path):
+    import x3pio
+
+    z = heights_um() * 1e-6
+    z[BAD] = np.nan
+    x3pio.write(str(tmp_path / "m.x3p"), z, x_scale=DX * 1e-3, y_scale=DY * 1e-3)
+    _plain_x3p(tmp_path / "m.x3p", tmp_path / "s.x3p")
+    with pytest.raises(x3pio.X3pError):  # what made the file unreadable before
+        x3pio.read(str(tmp_path / "s.x3p"))
+    c = read_cloud(tmp_path / "s.x3p")
+    _check(c, heights_um(), 1e-12)
+    assert c.meta["invalid_dropped"] == 1 and "own reader" in c.meta["instrument_format"]
+    _plain_x3p(tmp_path / "m.x3p", tmp_path / "p.x3p",
+               lambda xml: xml.replace("<FeatureType>SUR</FeatureType>",
+                                       "<FeatureType>PRF</FeatureType>"))
+    with pytest.raises(InputError, match=r"p.x3p: X3P with a namespace-less <ISO5436> root "
+                                         r"\(Sensofar\): feature type PRF is not supported"):
+        read_cloud(tmp_path / "p.x3p")
+
+
+def write_datx_units(path, z, height_unit=b"Fringes", lateral=(b"Pixels", b"Pixels", 1.0)):
+    """A .datx whose heights and lateral converter are not lengths (an uncalibrated export)."""
+    import h5py
+
+    meta = np.array([(b"Root", b"Measurement", b"{m}"), (b"{m}", b"Surface", b"{s}"),
+                     (b"{s}", b"Path", b"/Measurement/Surface")],
+                    dtype=[("Source", "S32"), ("Link", "S32"), ("Destination", "S32")])
+    conv = np.dtype([("Category", "S16"), ("BaseUnit", "S16"), ("HeightUnit", "S16"),
+                     ("Parameters", "<f8", (4,))])
+    with h5py.File(path, "w") as h5:
+        h5["MetaData"] = meta
+        d = h5.create_dataset("Measurement/Surface", data=z)
+        d.attrs["Unit"] = np.array([height_unit])
+        d.attrs["No Data"] = np.array([np.nan])
+        for a in ("X Converter", "Y Converter"):
+            d.attrs[a] = np.array([(b"LateralCat", lateral[0], lateral[1], [0, lateral[2], 0, 0])], conv)
+        d.attrs["Z Converter"] = np.array([(b"HeightCat", height_unit, height_unit, [0, 1, 0, 0])], conv)
+
+
+def test_datx_in_pixels_and_fringes_needs_named_options(tmp_path):
+    fr = heights_um() / 0.3164  # fringes of λ = 632.8 nm (λ/2 of height each)
+    fr[BAD] = np.nan
+    p = tmp_path / "fr.datx"
+    write_datx_units(p, fr)
+    with pytest.raises(InputError, match=r"fr.datx: Zygo DATX heights in Fringes; give the reader "
+                                         r"option wavelength_nm"):
+        read_cloud(p)
+    with pytest.raises(InputError, match=r"fr.datx: Zygo DATX lateral converter in pixels without a "
+                                         r"size; give the reader option pixel_size_um"):
+        read_cloud(p, wavelength_nm=632.8)
+    c = read_cloud(p, wavelength_nm=632.8, pixel_size_um=[DX * 1e3, DY * 1e3])
+    _check(c, heights_um(), 1e-9)
+    # heights in nm but pixels without a size: SurfaceTopography would take them for metres
+    q = tmp_path / "nm.datx"
+    write_datx_units(q, heights_um() * 1e3, b"NanoMeters")
+    with pytest.raises(InputError, match=r"nm.datx: .*give the reader option pixel_size_um"):
+        read_cloud(q)
+    c = read_cloud(q, pixel_size_um=[DX * 1e3, DY * 1e3])
+    assert np.allclose(c.z * 1e3, heights_um()[c["row"], c["col"]], atol=1e-9)
+    assert np.allclose(c.x, c["col"] * DX, atol=1e-12)
+
+
+def test_options_on_a_calibrated_file_are_refused_by_name(tmp_path):
+    z = heights_um() * 1e3
+    write_datx(tmp_path / "m.datx", z, DX * 1e-3, DY * 1e-3)
+    with pytest.raises(InputError, match=r"m.datx: the file gives its own lateral calibration; "
+                                         r"remove the reader option pixel_size_um"):
+        read_cloud(tmp_path / "m.datx", pixel_size_um=2.0)
+
+
+def test_recipe_input_block(tmp_path):
+    from pointspro.core.errors import RecipeError
+    from pointspro.core.recipe import load_recipe
+
+    def recipe(text):
+        p = tmp_path / "r.yaml"
+        p.write_text("pointspro: 1\n" + text + "steps: []\n", encoding="utf-8")
+        return load_recipe(p)
+
+    r = recipe("input:\n  pixel_size_um: [2.0, 3.0]\n  wavelength_nm: 632.8\n  invalid: error\n")
+    assert r.input == {"pixel_size_um": [2.0, 3.0], "wavelength_nm": 632.8, "invalid": "error"}
+    assert r.to_dict()["input"] == r.input
+    assert recipe("").input == {}
+    with pytest.raises(RecipeError, match=r"r.yaml, line 4: input: unknown reader option "
+                                          r"'pixel_size' \(options: pixel_size_um"):
+        recipe("input:\n  invalid: drop\n  pixel_size: 2\n")
+    with pytest.raises(RecipeError, match=r"r.yaml, line 3: input: key 'invalid': drop or error"):
+        recipe("input:\n  invalid: skip\n")
+    with pytest.raises(RecipeError, match=r"r.yaml, line 2: input: must be a mapping"):
+        recipe("input: 3\n")
+
+
+def test_batch_passes_the_recipe_input_block_to_the_reader(tmp_path):
+    from pointspro.core.batch import process_input
+    from pointspro.core.recipe import parse_recipe
+
+    fr = heights_um() / 0.3164
+    write_datx_units(tmp_path / "fr.datx", fr)
+    (tmp_path / "out").mkdir()
+    r = parse_recipe({"pointspro": 1, "input": {"pixel_size_um": DX * 1e3, "wavelength_nm": 632.8},
+                      "steps": []})
+    out = process_input(tmp_path / "fr.datx", r, tmp_path / "out", "fr")
+    assert out.ok, out.error
+    bare = parse_recipe({"pointspro": 1, "steps": []})
+    out = process_input(tmp_path / "fr.datx", bare, tmp_path / "out", "fr2")
+    assert not out.ok and "wavelength_nm" in out.error

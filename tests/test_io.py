@@ -56,13 +56,44 @@ def test_headerless_extra_columns_and_index_column(tmp_path):
     ("x,y,z\n1,2,3\n# c\n4,5,inf\n", r"m.csv, line 4, column 3 \(z\): inf is not a finite number"),
     ("a,b,c\n1,2,3\n", r"m.csv, line 1: no x/y/z column in the header \(columns: a, b, c\)"),
     ("x,y,q\n1,2,3\n", r"m.csv, line 1: no z column"),
-    ("1,2\n3,4\n", r"m.csv, line 1: 2 column\(s\); need at least x, y, z"),
+    ("1,2\n3,4\n", r"m.csv, line 1: 2 columns \(x, z\) — a line profile x, z; profiles are not yet "
+                   r"supported as input"),
+    ("x,z\n1,2\n3,4\n", r"m.csv, line 1: 2 columns \(x, z\) — a line profile"),
+    ("7\n8\n", r"m.csv, line 1: 1 column\(s\); need at least x, y, z"),
     ("x [furlong],y,z\n1,2,3\n", r"unknown unit \[furlong\] for x"),
     ("x,y,z,x\n1,2,3,4\n", r"duplicate column name"),
 ])
 def test_bad_text_inputs_name_the_place(tmp_path, text, pattern):
     with pytest.raises(InputError, match=pattern):
-        read_cloud(write(tmp_path / "m.csv", text))
+        read_cloud(write(tmp_path / "m.csv", text), invalid="error")
+
+
+def test_nan_rows_dropped_and_counted_by_default(tmp_path):
+    p = write(tmp_path / "m.csv", "x,y,z,t\n1,2,3,0.5\n4,nan,6,0.5\n# c\n7,8,inf,0.5\n9,9,9,nan\n"
+              "10,11,12,0.25\n")
+    c = read_cloud(p)
+    assert np.array_equal(c.xyz, [[1, 2, 3], [10, 11, 12]]) and np.allclose(c["t"], [0.5, 0.25])
+    assert c.meta["invalid_dropped"] == 3
+    assert np.array_equal(c.index, [0, 4])  # the data row of the input, gaps where rows were dropped
+    assert read_cloud(write(tmp_path / "ok.csv", "1 2 3\n4 5 6\n")).meta["invalid_dropped"] == 0
+    with pytest.raises(InputError, match=r"m.csv, line 3, column 2 \(y\): nan is not a finite"):
+        read_cloud(p, invalid="error")
+    with pytest.raises(InputError, match=r"all.csv, line 1, column 1 \(x\): every data row holds a "
+                                         r"NaN/inf value"):
+        read_cloud(write(tmp_path / "all.csv", "nan 1 2\n3 inf 4\n"))
+
+
+@pytest.mark.parametrize("options,pattern", [
+    ({"invalid": "skip"}, r"m.csv: key 'invalid': drop or error \(got 'skip'\)"),
+    ({"pixel_size": 1}, r"m.csv: unknown reader option 'pixel_size' \(options: pixel_size_um, "),
+    ({"pixel_size_um": -1}, r"m.csv: key 'pixel_size_um': a positive number"),
+    ({"pixel_size_um": [1, 2, 3]}, r"key 'pixel_size_um'"),
+    ({"wavelength_nm": "red"}, r"key 'wavelength_nm': a positive number"),
+    ({"height_unit": "furlong"}, r"key 'height_unit': one of nm, µm, mm, m"),
+])
+def test_reader_options_are_validated_by_name(tmp_path, options, pattern):
+    with pytest.raises(InputError, match=pattern):
+        read_cloud(write(tmp_path / "m.csv", "1 2 3\n"), **options)
 
 
 def test_missing_folder_and_unknown_type(tmp_path):
@@ -70,8 +101,14 @@ def test_missing_folder_and_unknown_type(tmp_path):
         read_cloud(tmp_path / "nope.csv")
     with pytest.raises(InputError, match="is a folder"):
         read_cloud(tmp_path)
-    with pytest.raises(InputError, match=r"unknown file type '.stp'"):
-        read_cloud(write(tmp_path / "m.stp", "1 2 3\n"))
+    # the content decides, not the name: x y z text is read whatever its extension
+    assert read_cloud(write(tmp_path / "m.stp", "1 2 3\n")).n == 1
+    with pytest.raises(InputError, match=r"part.stp: a STEP CAD file, not a measurement file"):
+        read_cloud(write(tmp_path / "part.stp", "ISO-10303-21;\nHEADER;\nENDSEC;\n"))
+    (tmp_path / "blob.xyz2").write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(InputError, match=r"blob.xyz2: unknown file type '.xyz2' — no reader "
+                                         r"recognises its content"):
+        read_cloud(tmp_path / "blob.xyz2")
 
 
 def _cloud(n=50, seed=0):

@@ -49,6 +49,6 @@ def test_fast_path_round_trips_full_precision(tmp_path, monkeypatch):
 def test_bad_rows_in_big_files_are_still_named(tmp_path, monkeypatch, body, where):
     monkeypatch.setattr(text, "_FAST_BYTES", 0)
     p = tmp_path / "bad.csv"
-    p.write_text("x,y,z\n" + body)
+    p.write_text("x,y,z\n" + body, encoding="utf-8")
     with pytest.raises(InputError, match=where):
         read_cloud(p)

@@ -8,7 +8,7 @@ import pytest
 from pointspro.core import PointCloud
 from pointspro.core.errors import InputError, StepError
 from pointspro.core.kinematics.errormap import KinematicMap
-from pointspro.core.kinematics.htm import TurningMachine, selective_error
+from pointspro.core.kinematics.htm import TurningMachine
 from pointspro.core.kinematics.reversal import facial_reversal, straightness_reversal
 from pointspro.core.step import Context
 from pointspro.plugins.kinematic import KinematicStep, flatness
@@ -53,7 +53,7 @@ def test_omsm_flat_compensated_toward_offline(tmp_path):
     assert rep["ebc_harmonics"][0]["upr"] == 2                         # two lobes, as 003 Fig. 11b
     assert rep["eb0c_arcsec"] == pytest.approx(0.08, abs=0.01)
     assert rep["ezc_pv_nm"] == pytest.approx(np.ptp(p3.ezc(np.arange(0, 360, 0.5))) * 1e6, abs=0.5)
-    (tmp_path / "kinematic_map.json").write_text(res.artifacts["kinematic_map.json"])
+    (tmp_path / "kinematic_map.json").write_text(res.artifacts["kinematic_map.json"], encoding="utf-8")
     x, y, z, c, h = p3.omsm_spiral()
     cloud = PointCloud.from_xyz(x, y, z, c=c)
     out = KinematicStep().run(cloud, KinematicStep.Params(map="kinematic_map.json"),
@@ -73,12 +73,12 @@ def test_bad_inputs(tmp_path):
     cloud = PointCloud.from_xyz(np.zeros(3), np.zeros(3), np.zeros(3))
     with pytest.raises(StepError, match="no spindle-angle channel 'c'"):
         KinematicStep().run(cloud, KinematicStep.Params(map="m.json"), Context(base_dir=tmp_path))
-    (tmp_path / "m.json").write_text("{}")
+    (tmp_path / "m.json").write_text("{}", encoding="utf-8")
     with pytest.raises(InputError, match="not a PointsPro kinematic map"):
         KinematicStep().run(cloud.replace(channels={"c": np.zeros(3)}), KinematicStep.Params(map="m.json"),
                             Context(base_dir=tmp_path))
     m = KinematicMap(np.linspace(0, 5, 6), np.arange(0, 360, 90.0), np.zeros((6, 4)))
-    (tmp_path / "m.json").write_text(m.to_json())
+    (tmp_path / "m.json").write_text(m.to_json(), encoding="utf-8")
     far = PointCloud.from_xyz(np.array([9.0]), np.zeros(1), np.zeros(1), c=np.zeros(1))
     with pytest.raises(StepError, match="outside the kinematic map"):
         KinematicStep().run(far, KinematicStep.Params(map="m.json"), Context(base_dir=tmp_path))

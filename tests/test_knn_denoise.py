@@ -11,7 +11,7 @@ from pointspro.plugins.knn_denoise import KnnDenoiseStep
 from pointspro.plugins.knn_denoise.omega import omega
 
 from .denoise_cases import injected, polishing_residual, q1, q2
-from .paper002 import raster, star
+from .paper002 import raster
 
 
 def run(cloud, **params):

@@ -44,7 +44,7 @@ def test_raster_620_reproduces_within_2_percent_inside_95_percent():
     inside 95 % of the aperture."""
     x, y, z = raster_620()
     cloud = PointCloud.from_xyz(x, y, np.zeros_like(z), residual=z)
-    res = _run(BSplineMapStep, cloud, diameter=620.0, spacing=2.0)
+    res = _run(BSplineMapStep, cloud, diameter=620.0, spacing=2.0, centre=(0.0, 0.0))
     from pointspro.core.maps import MapGrid  # noqa: F401
 
     spline = fit_bspline(x, y, z, bounds=(-R620, R620, -R620, R620))
@@ -95,7 +95,8 @@ def test_map_has_no_values_beyond_the_measured_region():
 def test_map_files_round_trip(tmp_path):
     x, y, z = raster_620()
     cloud = PointCloud.from_xyz(x, y, np.zeros_like(z), residual=z)
-    res = _run(BSplineMapStep, cloud, diameter=620.0, spacing=5.0, matrix_unit="nm")
+    res = _run(BSplineMapStep, cloud, diameter=620.0, spacing=5.0, matrix_unit="nm",
+               centre=(0.0, 0.0))
     for name, art in res.artifacts.items():
         art(tmp_path / name)
     # CSV: one row per valid node, x y z in mm
@@ -113,7 +114,7 @@ def test_map_files_round_trip(tmp_path):
     assert np.allclose(back[:, :2], data[:, :2], atol=1e-9)
     assert np.allclose(back[:, 2], data[:, 2], rtol=0, atol=1e-15)
     # ASCII matrix: header, NaN outside, heights in nm
-    lines = (tmp_path / "map.asc").read_text().splitlines()
+    lines = (tmp_path / "map.asc").read_text(encoding="utf-8").splitlines()
     assert lines[0].startswith("#") and "nm" in "".join(lines[:5])
     assert f"# x0 {float(g.xs[0])!r} mm, y0 {float(g.ys[0])!r} mm, spacing 5.0 mm" in lines
     M = np.loadtxt(tmp_path / "map.asc", comments="#")
@@ -139,7 +140,7 @@ def test_bad_input_messages():
         _run(BSplineMapStep, cloud)
     cloud = PointCloud.from_xyz(x, y, z)
     with pytest.raises(StepError, match="no point lies inside the 100 mm aperture"):
-        _run(BSplineMapStep, cloud, diameter=100.0, center_x=2000.0)
+        _run(BSplineMapStep, cloud, diameter=100.0, centre=(2000.0, 0.0))
     with pytest.raises(StepError, match="asked for, but the cloud has none"):
         _run(BSplineMapStep, cloud, channel="residual")
     line = PointCloud.from_xyz(np.linspace(0, 10, 100), np.zeros(100), np.zeros(100))
@@ -189,12 +190,12 @@ def test_report_html_is_self_contained_with_figures(tmp_path, run_cli):
                            "--out", str(out))
     assert code == 0, err
     folder = out / "asphere_cmm"
-    html = (folder / "report.html").read_text()
+    html = (folder / "report.html").read_text(encoding="utf-8")
     assert html.count("data:image/png;base64,") >= 6  # form error, ω, Zernike ×2, map, profiles, PSD
     assert "src='http" not in html and 'src="http' not in html
     import json
 
-    rep = json.loads((folder / "report.json").read_text())
+    rep = json.loads((folder / "report.json").read_text(encoding="utf-8"))
     s = rep["summary"]
     assert s["pvr_um"] is not None and s["slope_rms_urad"] > 0
     assert s["pvr_um"] <= s["pv_um"] * 1.5

@@ -11,8 +11,17 @@ from pointspro.core.step import Context
 from pointspro.core.surfaces import EvenAsphere, XYPolynomial
 from pointspro.plugins.misalignment import MisalignmentStep
 
-from .paper002 import (DATA1_POSE, DATA1_SURFACE, DATA2_POSE, DATA2_SURFACE, astigmatism,
-                       machining_marks, measured, raster, star)
+from .paper002 import (
+    DATA1_POSE,
+    DATA1_SURFACE,
+    DATA2_POSE,
+    DATA2_SURFACE,
+    astigmatism,
+    machining_marks,
+    measured,
+    raster,
+    star,
+)
 
 # paper 002 Table 5: |fitted − true|
 TABLE5 = {

@@ -10,7 +10,6 @@ from pointspro.core.pipeline import run_pipeline
 from pointspro.core.recipe import parse_recipe
 from pointspro.core.step import Context
 from pointspro.plugins.aperture import ApertureStep, points_in_polygon
-from pointspro.plugins.manual_edit import ManualEditStep
 from pointspro.plugins.transform import TransformStep
 
 
@@ -116,13 +115,13 @@ def test_runner_writes_step_artifacts(tmp_path):
             ctx.progress.check()
             return StepResult(cloud, {"n": cloud.n}, {"map.txt": "1 2\n3 4\n",
                                                       "blob.bin": b"\x00\x01",
-                                                      "called.txt": lambda p: p.write_text("ok")})
+                                                      "called.txt": lambda p: p.write_text("ok", encoding="utf-8")})
 
     src = tmp_path / "in.csv"
-    src.write_text("1 2 3\n4 5 6\n")
+    src.write_text("1 2 3\n4 5 6\n", encoding="utf-8")
     r = parse_recipe({"pointspro": 1, "steps": ["map_test"]}, registry=Registry(extra={"m": MapStep}))
     out = batch.process_input(src, r, tmp_path, "in")
     assert out.ok
     folder = tmp_path / "in"
-    assert (folder / "map.txt").read_text() == "1 2\n3 4\n"
-    assert (folder / "blob.bin").read_bytes() == b"\x00\x01" and (folder / "called.txt").read_text() == "ok"
+    assert (folder / "map.txt").read_text(encoding="utf-8") == "1 2\n3 4\n"
+    assert (folder / "blob.bin").read_bytes() == b"\x00\x01" and (folder / "called.txt").read_text(encoding="utf-8") == "ok"

@@ -71,8 +71,8 @@ def test_missing_recipe(tmp_path):
 
 
 def test_schema_version_migration():
-    from pointspro.core.step import Params, Step, StepResult, param
     from pointspro.core.registry import Registry
+    from pointspro.core.step import Params, Step, StepResult, param
 
     class OldParams(Params):
         schema_version = 2
@@ -113,7 +113,12 @@ def test_runner_progress_timing_provenance(raster_cloud):
     assert res.cloud.n == res.steps[-1].points_out < raster_cloud.n
     assert np.all(np.hypot(res.cloud.x, res.cloud.y) <= 500)
     s = res.summary()
-    assert s["points_in"] == raster_cloud.n and s["rms_um"] is None
+    # no residual and no nominal: the figures are of the heights after piston and tilt, said so
+    assert s["points_in"] == raster_cloud.n and s["figures_of"].startswith("heights, piston and tilt")
+    from pointspro.core.pipeline import remove_piston_tilt
+
+    h = remove_piston_tilt(res.cloud.x, res.cloud.y, res.cloud.z)
+    assert s["rms_um"] == pytest.approx(np.std(h) * 1e3, rel=1e-12)
 
 
 def test_runner_cancel_and_step_errors(raster_cloud):

@@ -73,6 +73,26 @@ def test_recovers_a_known_pose(tmp_path, name):
     assert all(v < 1e-3 for v in rep["uncertainty"].values())
 
 
+def _broken(V, T, nx):
+    """Three problems on the sinusoid sheet: two holes (the faces round two interior vertices
+    removed), a duplicated vertex (a copy of vertex 5·nx + 5 used by one face) and a non-manifold
+    edge (a small fin on an interior diagonal)."""
+    keep = np.array([k for k, tri in enumerate(T) if not ({2 * nx + 2, 7 * nx + 7} & set(tri))])
+    T = T[keep].copy()
+    V = np.vstack([V, V[5 * nx + 5], V[4 * nx + 4] + [0.1, 0.0, 0.2]])
+    k = int(np.flatnonzero((T == 5 * nx + 5).any(axis=1))[0])
+    T[k][T[k] == 5 * nx + 5] = len(V) - 2
+    diag = [4 * nx + 4, 5 * nx + 5]  # the diagonal a, a + nx + 1 of cell (4, 4)
+    return V, np.vstack([T, [diag[0], diag[1], len(V) - 1]])
+
+
+def _write_o3d(path, V, T):
+    import open3d as o3d
+
+    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T))
+    assert o3d.io.write_triangle_mesh(str(path), m)
+
+
 def test_bad_meshes(tmp_path):
     import open3d as o3d
 
@@ -82,14 +102,78 @@ def test_bad_meshes(tmp_path):
     o3d.io.write_triangle_mesh(str(tmp_path / "empty.ply"), empty)
     with pytest.raises(InputError, match="empty.ply: unusable nominal mesh: it has no faces"):
         RegisterStep().run(cloud, RegisterStep.Params(mesh=str(tmp_path / "empty.ply")), Context())
+    with pytest.raises(InputError, match="empty.ply: unusable nominal mesh: it has no faces"):
+        RegisterStep().run(cloud, RegisterStep.Params(mesh=str(tmp_path / "empty.ply"), repair=True),
+                           Context())
     V, T = write_mesh(tmp_path / "ok.ply", sinusoid, 5.0, 5.0, 1.0)
     nx = 11
     holes = np.array([k for k, tri in enumerate(T) if not ({2 * nx + 2, 7 * nx + 7} & set(tri))])
-    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(T[holes]))
-    o3d.io.write_triangle_mesh(str(tmp_path / "holes.ply"), m)
-    with pytest.raises(InputError, match="not watertight: 2 hole"):
+    _write_o3d(tmp_path / "holes.ply", V, T[holes])
+    with pytest.raises(InputError, match=r"holes.ply: unusable nominal mesh: 2 holes \(boundary loops "
+                                         r"besides the outline\) — fix the mesh or set repair: true$"):
         RegisterStep().run(cloud, RegisterStep.Params(mesh=str(tmp_path / "holes.ply")), Context())
     with pytest.raises(InputError, match="nominal mesh file not found"):
         RegisterStep().run(cloud, RegisterStep.Params(mesh=str(tmp_path / "nope.stl")), Context())
     with pytest.raises(StepError, match="no mesh given and the recipe has no nominal"):
         RegisterStep().run(cloud, RegisterStep.Params(), Context())
+
+
+def test_broken_mesh_refused_by_name_then_repaired(tmp_path):
+    """Holes, a duplicated vertex and a non-manifold edge: one line naming the file and each problem
+    with its count; with repair: true the step runs on the repaired mesh and reports the repairs."""
+    V, T = write_mesh(tmp_path / "ok.ply", sinusoid, 5.0, 5.0, 1.0)
+    Vb, Tb = _broken(V, T, 11)
+    _write_o3d(tmp_path / "part.ply", Vb, Tb)
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-4, 4, (2, 300))
+    cloud = PointCloud.from_xyz(x + 0.05, y - 0.03, sinusoid(x, y) + 0.02)
+    with pytest.raises(InputError) as e:
+        RegisterStep().run(cloud, RegisterStep.Params(mesh="part.ply"), Context(base_dir=tmp_path))
+    msg = str(e.value)
+    assert msg.startswith(f"{tmp_path / 'part.ply'}: unusable nominal mesh: ") and "\n" not in msg
+    # the fin's two free edges make one more boundary loop: 3 holes until it is removed
+    for part in ("1 non-manifold edge", "3 holes (boundary loops besides the outline)",
+                 "1 duplicated vertex", "fix the mesh or set repair: true"):
+        assert part in msg, msg
+    res = RegisterStep().run(cloud, RegisterStep.Params(mesh="part.ply", repair=True, refine_iterations=5),
+                             Context(base_dir=tmp_path))
+    done = " ".join(res.report["mesh_repaired"])
+    assert "merged 1 duplicated vertex" in done and "non-manifold edge" in done
+    assert "closed 2 holes" in done
+    assert res.report["residual_rms_um"] < 200  # registered on the repaired sheet (1 mm chords)
+
+
+def test_recipe_mesh_surface_checked_and_repaired(tmp_path):
+    """`surface: {type: mesh, ...}` is checked where it is built; `repair: true` there repairs it, and
+    register (no mesh of its own) reports what was repaired."""
+    from pointspro.core.surfaces import surface_from_spec
+
+    V, T = write_mesh(tmp_path / "ok.ply", sinusoid, 5.0, 5.0, 1.0)
+    Vb, Tb = _broken(V, T, 11)
+    _write_o3d(tmp_path / "part.ply", Vb, Tb)
+    with pytest.raises(InputError, match=r"part.ply: unusable nominal mesh: .*3 holes.*set repair: true"):
+        surface_from_spec({"type": "mesh", "path": "part.ply"}, tmp_path)
+    surf = surface_from_spec({"type": "mesh", "path": "part.ply", "repair": True}, tmp_path)
+    assert surf.describe()["repaired"] and surf.mesh_info["check"]["holes"] == 3
+    rng = np.random.default_rng(4)
+    x, y = rng.uniform(-4, 4, (2, 300))
+    cloud = PointCloud.from_xyz(x, y, sinusoid(x, y))
+    res = RegisterStep().run(cloud, RegisterStep.Params(refine_iterations=3), Context(surface=surf))
+    assert res.report["mesh_repaired"] == surf.mesh_info["repaired"]
+
+
+def test_in_memory_mesh_surface_checked(tmp_path):
+    """A MeshSurface built from arrays (not a file) is checked by register, repaired when asked."""
+    from pointspro.core.surfaces import MeshSurface
+
+    V, T = write_mesh(tmp_path / "ok.ply", sinusoid, 5.0, 5.0, 1.0)
+    keep = np.array([k for k, tri in enumerate(T) if 3 * 11 + 3 not in tri])
+    surf = MeshSurface(V, T[keep], source="sheet")
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(-4, 4, (2, 200))
+    cloud = PointCloud.from_xyz(x, y, sinusoid(x, y))
+    with pytest.raises(InputError, match=r"^sheet: unusable nominal mesh: 1 hole \(boundary loops"):
+        RegisterStep().run(cloud, RegisterStep.Params(), Context(surface=surf))
+    res = RegisterStep().run(cloud, RegisterStep.Params(repair=True, refine_iterations=3),
+                             Context(surface=surf))
+    assert res.report["mesh_repaired"] == ["closed 1 hole with 4 new faces"]  # a hexagon: 4 triangles

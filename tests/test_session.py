@@ -1,4 +1,4 @@
-"""The window's model (core/session.py), headless: open, edit the pipeline, run, select, delete,
+"""The window's model (core/session/), headless: open, edit the pipeline, run, select, delete,
 undo/redo, projects, and the batch replaying the saved recipe identically."""
 from __future__ import annotations
 
@@ -19,13 +19,13 @@ def session():
     s.open(EXAMPLE / "asphere_cmm.csv")
     s.load_recipe(EXAMPLE / "recipe.yaml")
     # keep the test fast: the steps up to the aperture
-    s.set_recipe({**s.recipe, "steps": s.recipe["steps"][:5]})
+    s.set_recipe(s.recipe.with_steps(s.recipe.steps[:5]))
     return s
 
 
 def test_edit_run_select_delete_undo_redo(session):
     events = []
-    session.listeners.append(events.append)
+    session.events.connect(lambda e: events.append(e.type))
     session.run()
     n0 = session.shown.n
     assert "residual" in session.shown.channels and n0 == 4640
@@ -75,8 +75,8 @@ def test_project_round_trip_and_batch_replays_the_cleanup(session, tmp_path, run
     s2.open_project(tmp_path / "p.pointspro.yaml")
     assert s2.shown.equals(shown)
     # the recipe of the project replays identically in the batch
-    proj = yaml.safe_load((tmp_path / "p.pointspro.yaml").read_text())
-    (tmp_path / "r.yaml").write_text(yaml.safe_dump(proj["recipe"], sort_keys=False))
+    proj = yaml.safe_load((tmp_path / "p.pointspro.yaml").read_text(encoding="utf-8"))
+    (tmp_path / "r.yaml").write_text(yaml.safe_dump(proj["recipe"], sort_keys=False), encoding="utf-8")
     code, _, err = run_cli("--batch", tmp_path / "r.yaml", EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o")
     assert code == 0, err
     out = read_cloud(tmp_path / "o" / "asphere_cmm" / "cloud.csv")
@@ -86,7 +86,7 @@ def test_project_round_trip_and_batch_replays_the_cleanup(session, tmp_path, run
 
 def test_bad_input_leaves_the_session_usable(session, tmp_path):
     before = session.shown
-    (tmp_path / "bad.csv").write_text("x,y,z\n1,2,oops\n")
+    (tmp_path / "bad.csv").write_text("x,y,z\n1,2,oops\n", encoding="utf-8")
     with pytest.raises(InputError, match="bad.csv"):
         session.open(tmp_path / "bad.csv")
     assert session.shown is before
@@ -96,7 +96,128 @@ def test_bad_input_leaves_the_session_usable(session, tmp_path):
     (tmp_path / "p.yaml").rename(moved / "p.yaml")
     with pytest.raises(InputError, match="was moved or deleted"):
         Session().open_project(moved / "p.yaml")
-    (tmp_path / "r.yaml").write_text("pointspro: 1\nsteps:\n  - wobble: {}\n")
+    (tmp_path / "r.yaml").write_text("pointspro: 1\nsteps:\n  - wobble: {}\n", encoding="utf-8")
     with pytest.raises(RecipeError, match="unknown step 'wobble'"):
         session.load_recipe(tmp_path / "r.yaml")
     assert session.shown is before
+
+
+def test_recipe_is_typed_immutable_and_shared_with_undo_by_reference(session):
+    r0 = session.recipe
+    n = len(r0.steps)
+    entries = session.steps
+    entries.append({"aperture": {}})  # a copy: editing it changes nothing
+    entries[0].clear()
+    assert len(session.steps) == n and session.steps[0]
+    assert session.recipe is r0
+    session.add_step("aperture", {"diameter": 1290})
+    r1 = session.recipe
+    assert r1 is not r0 and len(r0.steps) == n and len(r1.steps) == n + 1
+    assert r1.steps[:n] == r0.steps and all(a is b for a, b in zip(r1.steps, r0.steps))  # shared
+    assert r1.steps[-1].id == "aperture" and r1.steps[-1].params.diameter == 1290
+    session.set_enabled(n, False)
+    assert r1.steps[-1].enabled and not session.recipe.steps[-1].enabled
+    assert session.steps[-1] == {"aperture": {"diameter": 1290}, "enabled": False}
+    session.set_params(n, {"diameter": 1000})  # keeps the step disabled
+    assert session.steps[-1] == {"aperture": {"diameter": 1000}, "enabled": False}
+    session.undo()
+    session.undo()
+    assert session.recipe is r1
+    session.undo()
+    assert session.recipe is r0
+    with pytest.raises(Exception):
+        r0.steps[0].enabled = False  # frozen
+
+
+def test_recipe_edit_api_returns_new_recipes():
+    from pointspro.core.recipe import make_step, parse_recipe
+    from pointspro.core.registry import Registry
+
+    reg = Registry()
+    r = parse_recipe({"pointspro": 1, "steps": [{"aperture": {"diameter": 10}}, "misalignment"]}, "r", reg)
+    a = r.inserted(make_step("zernike", {"remove": ["piston"]}, reg), 0)
+    assert [s.id for s in a.steps] == ["zernike", "aperture", "misalignment"]
+    assert [s.id for s in a.removed(1).steps] == ["zernike", "misalignment"]
+    assert [s.id for s in a.moved(0, 2).steps] == ["aperture", "misalignment", "zernike"]
+    assert a.with_params(1, {"diameter": 5}, reg).steps[1].params.diameter == 5
+    assert not a.with_enabled(2, False).steps[2].enabled
+    assert [s.id for s in r.steps] == ["aperture", "misalignment"] and r.steps[0].params.diameter == 10
+    with pytest.raises(RecipeError, match=r"step 2 'aperture': key 'diameter'"):
+        a.with_params(1, {"diameter": -1}, reg)
+    with pytest.raises(RecipeError, match=r"step 4: unknown step 'nope'"):
+        make_step("nope", None, reg, 4)
+    # what a session saves parses back to the same recipe
+    assert parse_recipe(yaml.safe_load(a.to_yaml()), "r", reg).to_dict() == a.to_dict()
+
+
+def test_edits_read_the_entry_points_once(session, monkeypatch):
+    from pointspro.core import registry as registry_module
+
+    built = []
+    real = registry_module.Registry.__init__
+
+    def counting(self, *a, **k):
+        built.append(1)
+        real(self, *a, **k)
+    monkeypatch.setattr(registry_module.Registry, "__init__", counting)
+    session.add_step("aperture", {"diameter": 1290})
+    session.set_params(len(session.steps) - 1, {"diameter": 1200})
+    session.move_step(0, 1)
+    session.set_enabled(0, False)
+    session.run()
+    session.delete(session.select_rectangle(-100, 100, -100, 100))
+    assert built == [] and session.registry is session.registry
+
+
+def test_a_failing_listener_does_not_stop_the_edit_or_the_other_listeners(session, caplog):
+    got = []
+
+    def broken(e):
+        raise RuntimeError("a view's bug")
+    session.events.steps.connect(broken)
+    session.events.steps.connect(lambda e: got.append(e.type))
+    session.add_step("aperture")
+    assert got == ["steps"] and session.steps[-1] == {"aperture": {}}
+    assert "a view's bug" in caplog.text
+
+
+def test_project_whose_recipe_does_not_run_opens_and_says_why(tmp_path):
+    recipe = {"pointspro": 1, "steps": [{"manual_edit": {"remove": [0, 1]}},
+                                        {"aperture": {"diameter": 1.0, "center_x": 1.0e6}}]}
+    proj = tmp_path / "p.pointspro.yaml"
+    proj.write_text(yaml.safe_dump({"pointspro_project": 1, "input": str(EXAMPLE / "asphere_cmm.csv"),
+                                    "recipe": recipe}), encoding="utf-8")
+    s = Session()
+    warnings, changes = [], []
+    s.events.warning.connect(lambda e: warnings.append(e.value))
+    s.events.opened.connect(lambda e: changes.append(e.type))
+    s.open_project(proj)
+    assert changes == ["opened"] and s.input_cloud is not None and s.shown is s.input_cloud
+    assert len(warnings) == 1
+    assert "p.pointspro.yaml" in warnings[0] and "did not run" in warnings[0]
+    assert "no point lies inside the aperture" in warnings[0]
+    assert [st.id for st in s.recipe.steps] == ["manual_edit", "aperture"]
+    Session().open_project(proj)  # nobody listening: still no exception
+
+
+def test_selection_and_history_parts():
+    from pointspro.core import PointCloud
+    from pointspro.core.recipe import Recipe
+    from pointspro.core.session import History, Snapshot, selection
+
+    c = PointCloud.from_xyz(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 2.0]), np.array([0.0, 5.0, 1.0]))
+    assert selection.rectangle(c, 1.5, -0.5, 1.5, -0.5).tolist() == [True, True, False]
+    assert selection.lasso(c, [[0.5, 0.5], [3, 0.5], [3, 3], [0.5, 3]]).tolist() == [False, True, True]
+    assert selection.threshold(c, "z", 0.5).tolist() == [False, True, True]
+    assert selection.threshold(c, "z", 0.5, above=False).tolist() == [True, False, False]
+    h = History(limit=2)
+    states = [Snapshot(Recipe([]), c) for _ in range(4)]
+    for st in states[:3]:
+        h.push(st)
+    assert len(h) == 2 and h.can_undo and not h.can_redo
+    assert h.undo(states[3]) is states[2] and h.can_redo
+    assert h.redo(states[2]) is states[3]
+    h.push(states[0])
+    assert not h.can_redo
+    h.clear()
+    assert h.undo(states[0]) is None

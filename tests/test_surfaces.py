@@ -185,7 +185,7 @@ def test_mesh_file_errors(tmp_path):
         MeshSurface.from_file(tmp_path / "missing.stl")
     bad = tmp_path / "points.ply"
     bad.write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
-                   "property float z\nend_header\n0 0 0\n")
+                   "property float z\nend_header\n0 0 0\n", encoding="utf-8")
     with pytest.raises(InputError, match="no triangles"):
         MeshSurface.from_file(bad)
 

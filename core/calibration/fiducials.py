@@ -177,3 +177,33 @@ def count_study(ref, meas, sigma_m, counts, runs: int = 200, seed: int = 0) -> l
             out.append({"fiducials": int(n), "ev_mean_um": float(np.mean(ev) * 1e3),
                         "ev_std_um": float(np.std(ev) * 1e3)})
     return out
+
+
+def ball_points(centres, diameter=9.997, per_ball=20, patch=6.0, noise=0.0, seed=0):
+    """Probe points on the top caps of balls (a 6 × 6 mm patch, as 000): (points (N, 3), ball ids
+    1…n) — simulated measurements of a fiducial layout."""
+    rng = np.random.default_rng(seed)
+    R = diameter / 2
+    k = int(np.ceil(np.sqrt(per_ball)))
+    u = (np.arange(k) / max(k - 1, 1) - 0.5) * patch
+    U, V = [a.ravel()[:per_ball] for a in np.meshgrid(u, u)]
+    pts, ids = [], []
+    for i, c in enumerate(np.asarray(centres, float)):
+        w = np.sqrt(R * R - U * U - V * V)
+        p = c + np.column_stack([U, V, w])
+        p = p + rng.normal(0, noise, p.shape)
+        pts.append(p)
+        ids.append(np.full(len(p), i + 1))
+    return np.vstack(pts), np.concatenate(ids)
+
+
+def example_layout() -> np.ndarray:
+    """Ten calibrated fiducial centres (mm): a 2 × 2 × 2 box and two inside it (the steps' examples)."""
+    g = np.array([[x, y, z] for x in (-90.0, 90.0) for y in (-15.0, 15.0) for z in (5.0, 45.0)])
+    return np.vstack([g, [[0.0, 0.0, 25.0], [40.0, -10.0, 15.0]]])
+
+
+def example_measured_centres(ref) -> np.ndarray:
+    """Where a slightly sheared, scaled and shifted machine measures the centres ``ref`` (examples)."""
+    D = np.array([[1, 2e-5, 0], [-2e-5, 1, 1e-5], [0, 0, 1.00001]])
+    return np.asarray(ref, float) @ D.T + [0.5, -0.2, 0.1]

@@ -86,16 +86,50 @@ def loads(text: str, source: str) -> VolumetricModelSpec:
     try:
         d = json.loads(text)
     except ValueError as e:
-        raise InputError(f"{source}: not JSON ({e})") from None
+        from ..io.text import json_problem  # quotes nothing of the file
+
+        raise InputError(f"{source}: {json_problem(e)}") from None
     if not isinstance(d, dict) or d.get("pointspro_volumetric_model") != FORMAT:
-        raise InputError(f"{source}: not a PointsPro volumetric model of format {FORMAT} "
-                         f"(found {d.get('pointspro_volumetric_model') if isinstance(d, dict) else type(d).__name__})")
+        raise InputError(f"{source}: not a PointsPro volumetric model of format {FORMAT}")
     try:
         spec = VolumetricModelSpec.model_validate(d)
     except ValidationError as e:
-        err = e.errors()[0]
-        raise InputError(f"{source}: key '{'.'.join(map(str, err['loc']))}': {err['msg']}") from None
+        err = e.errors()[0]  # the top key only: keys further down are the file's content
+        key = err["loc"][0] if err["loc"] and err["loc"][0] in VolumetricModelSpec.model_fields else None
+        what = "an unknown key" if err["type"] == "extra_forbidden" or key is None else f"key '{key}'"
+        raise InputError(f"{source}: {what}: {err['msg']}") from None
     if _digest(d) != spec.sha256:
         raise InputError(f"{source}: the file was changed after it was written (checksum mismatch); "
                          "run the fiducial calibration again")
     return spec
+
+
+ERROR_COMPONENTS = ("ex", "ey", "ez")
+
+
+def fit_error_gps(X, errors, Q: int = 10, check=None) -> tuple[dict, dict, dict]:
+    """A GP of each volumetric-error component (ex, ey, ez) at the positions X (machine frame, mm),
+    the kernel chosen by leave-one-out (core.calibration.gp.fit_gp). Returns (regressors, their
+    specs for the model file, {component: LOO RMS µm per kernel and the chosen one}). ``check`` (e.g.
+    a Progress's) is called before each component, so a cancel stops between fits."""
+    from .gp import fit_gp
+
+    errors = np.asarray(errors, dtype=np.float64)
+    gps, specs, loo = {}, {}, {}
+    for k, name in enumerate(ERROR_COMPONENTS):
+        if check is not None:
+            check()
+        gp, info = fit_gp(X, errors[:, k], Q=Q)
+        gps[name] = gp
+        specs[name] = encode_gp(gp, info["chosen"], X, errors[:, k])
+        loo[name] = {kk: v * 1e3 for kk, v in info["loo_rms"].items()} | {"chosen": info["chosen"]}
+    return gps, specs, loo
+
+
+def model_text(fit, X, gp_specs: dict, loo_rms_um: dict) -> str:
+    """volumetric_model.json's text: the transform (an AffineFit), the workspace (bounding box of
+    the machine-frame positions X) and the GP specs."""
+    X = np.asarray(X, dtype=np.float64)
+    workspace = np.column_stack([X.min(axis=0), X.max(axis=0)]).tolist()
+    return dumps({"transform": fit.to_dict(), "workspace": workspace, "gp": gp_specs,
+                  "loo_rms_um": loo_rms_um})

@@ -110,8 +110,10 @@ class LoopModel:
                 raise KeyError("pointspro_dynamic_model")
             m = cls(np.asarray(d["b"], dtype=np.float64), np.asarray(d["a"], dtype=np.float64),
                     float(d["fs_hz"]), float(d.get("fit_rms_um", float("nan"))) * 1e-3)
-        except (ValueError, KeyError, TypeError) as e:
-            raise InputError(f"{source}: not a PointsPro dynamic model ({e})") from None
+        except (ValueError, KeyError, TypeError, AttributeError) as e:
+            from ..io.text import json_problem  # quotes nothing of the file
+
+            raise InputError(f"{source}: not a PointsPro dynamic model ({json_problem(e)})") from None
         if m.a[0] != 1.0 or not m.stable:
             raise InputError(f"{source}: the model is not a stable normalised filter")
         return m
@@ -213,3 +215,44 @@ def identify(t, xd, ref, max_order: int = 5, order: int | None = None,
                         "the data do not describe a damped measuring loop — check the xd/ref columns")
     _, b, a, c, ssr = best
     return LoopModel(b, a, fs, float(np.sqrt(ssr / N)), bic, steps)
+
+
+#: frequencies (Hz) at which reports quote the loop's phase lag
+LAG_FREQUENCIES = (1.0, 5.0, 15.0, 50.0)
+
+
+def identify_from_file(path, names, order, max_order, ctx):
+    """Gm from a calibration file (columns ``names`` = time, encoder, reference): (LoopModel, the
+    columns read). ``ctx``: the step's Context (progress and cancel)."""
+    from ..io.text import read_table
+
+    ctx.progress.check()
+    cols = read_table(path, names)
+    ctx.progress.update(0.2, "identifying Gm")
+    model = identify(cols[names[0]], cols[names[1]], cols[names[2]], max_order=max_order, order=order,
+                     what=str(path))
+    return model, cols
+
+
+def model_report(model) -> dict:
+    """The model as reports give it: order, poles, modes, DC gain, fit RMS, phase lag at
+    LAG_FREQUENCIES and the Nyquist frequency."""
+    d = model.describe()
+    d["phase_lag_deg"] = {f"{f:g}_hz": float(v) for f, v in
+                          zip(LAG_FREQUENCIES, model.phase_lag_deg(LAG_FREQUENCIES))}
+    d["nyquist_hz"] = model.fs / 2
+    return d
+
+
+def write_example_calibration(folder) -> str:
+    """A small calibration series (1 kHz, one 10 µm step up and down through a 3-tap loop) written as
+    ``calibration.csv`` (t, xd, ref) in ``folder``; its path. The dynamic steps' examples."""
+    from pathlib import Path
+
+    t = np.arange(2000) / 1000.0
+    xd = np.where((t > 0.5) & (t < 1.5), 0.01, 0.0)
+    xd = np.convolve(xd, np.ones(5) / 5, mode="same")
+    ref = np.convolve(xd, [0.6, 0.3, 0.1], mode="full")[: len(xd)] + 1e-6 * np.sin(t * 7)
+    p = Path(folder) / "calibration.csv"
+    np.savetxt(p, np.column_stack([t, xd, ref]), delimiter=",", header="t,xd,ref", comments="")
+    return str(p)

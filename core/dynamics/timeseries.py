@@ -22,11 +22,12 @@ def sampling_rate(t, what: str = "data", row_offset: int = 0) -> float:
     dt = np.diff(t)
     if np.any(dt == 0):
         i = int(np.flatnonzero(dt == 0)[0]) + 1
-        raise InputError(f"{what}: line {i + row_offset}: duplicated time stamp t = {float(t[i])!r} s")
+        raise InputError(f"{what}: line {i + row_offset}: duplicated time stamp (the same as the "
+                         "line before)")
     if np.any(dt < 0):
         i = int(np.flatnonzero(dt < 0)[0]) + 1
-        raise InputError(f"{what}: line {i + row_offset}: time goes backwards (t = {float(t[i])!r} s after "
-                         f"{float(t[i - 1])!r} s); time stamps must increase")
+        raise InputError(f"{what}: line {i + row_offset}: time goes backwards (earlier than the line "
+                         "before); time stamps must increase")
     med = float(np.median(dt))
     off = np.abs(dt - med) > RATE_TOLERANCE * med
     if np.any(off):

@@ -188,100 +188,200 @@ class _Design:
         return float(self.gg - self.b[idx] @ beta), beta
 
 
-def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int = 10,
-           seed: int = 0) -> dict:
-    """The forward selection (module doc). Returns a dict of plain results (see workflow)."""
-    N = g.size
-    order = np.argsort(ctx.t, kind="stable") if np.ptp(ctx.t) > 0 else np.arange(N)
-    # floor: a noise-free gap (simulation against simulation) must not divide by zero
-    sigma = max(noise_sigma(g[order]), 1e-9 * (float(np.sqrt(np.mean(g * g))) + 1e-12))
-    groups, unobservable = linear_groups(ctx)
-    by_name = {gr.name: gr for gr in groups}
-    # the piston (absolute height offset) is a nuisance of every measurement, never an effect
-    piston = Group("_piston", np.ones((N, 1)), np.ones(1))
+@dataclass
+class Candidate:
+    """The evidence for adding one effect to those already chosen (module doc):
+        F = ((SSR_k − SSR_e)/p_e) / (SSR_e/(N − P)),   p = P(F_{p_e, N−P} > F),
+        ΔBIC = N ln(SSR_e/SSR_k) + p_e ln N,
+    and m, the size of the Bonferroni family its p is judged in."""
+    effect: str
+    ssr: float
+    F: float
+    p: float
+    delta_bic: float
+    m: float
+
+
+def significant(p: float, m: float) -> bool:
+    """p < α/m: Bonferroni over the m candidates of a stage, so that on a gap with no effect in it the
+    chance that any candidate passes stays ≤ α (the vibration's m counts its N/2 searched frequencies)."""
+    return p < ALPHA / m
+
+
+def enters(c: Candidate) -> bool:
+    """Significant after Bonferroni and strong evidence by ΔBIC (< −10, Kass & Raftery)."""
+    return significant(c.p, c.m) and c.delta_bic < BIC_STRONG
+
+
+def scan_order(ctx: ScanContext, n: int) -> np.ndarray:
+    """The points in the order the probe visited them (by time; as given when there are no times)."""
+    return np.argsort(ctx.t, kind="stable") if np.ptp(ctx.t) > 0 else np.arange(n)
+
+
+def gap_noise(g: np.ndarray, order: np.ndarray) -> float:
+    """The noise σ of the gap (noise_sigma along the scan), floored so that a noise-free gap
+    (simulation against simulation) does not divide by zero."""
+    return max(noise_sigma(g[order]), 1e-9 * (float(np.sqrt(np.mean(g * g))) + 1e-12))
+
+
+def candidate(D: _Design, chosen_cols: list[int], name: str, ssr_cur: float, n_candidates: int) -> Candidate:
+    """F-test and ΔBIC of adding effect `name` to the columns already chosen (Candidate's equations)."""
+    N = D.g.size
+    cand = chosen_cols + D.index[name]
+    ssr, _ = D.ssr(cand)
+    pe = len(D.index[name])
+    dof = N - len(cand)
+    ssr = max(ssr, 1e-300)
+    F = ((ssr_cur - ssr) / pe) / (ssr / dof) if dof > 0 else 0.0
+    pval = float(stats.f.sf(F, pe, dof)) if dof > 0 and F > 0 else 1.0
+    dbic = N * np.log(ssr / max(ssr_cur, 1e-300)) + pe * np.log(N)
+    m = n_candidates * (N / 2 if name == "vibration" else 1)
+    return Candidate(name, ssr, F, pval, dbic, m)
+
+
+@dataclass
+class _Search:
+    """The state of the forward selection: the design, the columns and stages chosen so far, and the
+    residual of the fit on them."""
+    ctx: ScanContext
+    g: np.ndarray
+    order: np.ndarray
+    groups: list
+    D: _Design
+    by_name: dict
+    cols: list
+    ssr: float
+    resid: np.ndarray
+    stages: list = field(default_factory=list)
+
+    @property
+    def chosen(self) -> list[str]:
+        return [st.effect for st in self.stages]
+
+
+def _start(ctx: ScanContext, g: np.ndarray, order: np.ndarray, groups: list) -> _Search:
+    """Stage 0: the piston alone (the absolute height offset is a nuisance of every measurement,
+    never an effect)."""
+    piston = Group("_piston", np.ones((g.size, 1)), np.ones(1))
     D = _Design([piston] + groups, g)
-    chosen: list[str] = []
-    stages: list[Stage] = []
-    idx: list[int] = list(D.index["_piston"])
-    ssr_cur, beta0 = D.ssr(idx)
-    resid = g - beta0[0]
+    cols = list(D.index["_piston"])
+    ssr, beta0 = D.ssr(cols)
+    return _Search(ctx, g, order, groups, D, {gr.name: gr for gr in groups}, cols, ssr, g - beta0[0])
+
+
+def _candidates(s: _Search) -> list[str]:
+    """The effects not chosen yet; the vibration at the strongest spectral line of what is left, found
+    anew at every stage until it is chosen."""
+    names = [gr.name for gr in s.groups if gr.name not in s.chosen]
+    if "vibration" not in s.chosen:
+        vib = vibration_group(s.ctx, s.resid[s.order], s.order)
+        if vib is not None:
+            s.D.add("vibration", vib.cols)
+            s.by_name["vibration"] = vib
+            names.append("vibration")
+    return names
+
+
+def _is_local(s: _Search, name: str) -> bool:
+    """Every library effect acts over the whole part: one whose SSR gain comes from a small area is
+    fitting a local defect, which no effect explains (→ unexplained, located)."""
+    cols = s.cols + s.D.index[name]
+    _, beta = s.D.ssr(cols)
+    return local_fraction(s.ctx, s.resid, s.g - s.D.A[:, cols] @ beta) > LOCAL_LIMIT
+
+
+def _ambiguous_with(s: _Search, best: Candidate, others: list[Candidate], sigma: float) -> list[dict]:
+    """The other candidates that would enter too and whose fit is statistically as good:
+    SSR_o − SSR_e < σ² χ²_{0.999}(p_e) — this scan path cannot tell them from the best."""
+    thr = sigma * sigma * stats.chi2.ppf(0.999, len(s.D.index[best.effect]))
+    return [{"effect": o.effect, "ssr_excess": float(o.ssr - best.ssr)}
+            for o in others if o.ssr - best.ssr < thr and enters(o)]
+
+
+def _add(s: _Search, best: Candidate, ambiguous: list[dict]) -> None:
+    """Record the stage and refit the gap on the chosen columns."""
+    s.stages.append(Stage(best.effect, s.ssr, best.ssr, float(best.F), best.p, float(best.delta_bic), ambiguous))
+    s.cols = s.cols + s.D.index[best.effect]
+    s.ssr, beta = s.D.ssr(s.cols)
+    s.resid = s.g - s.D.A[:, s.cols] @ beta
+
+
+def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
+    """Greedy group-forward selection: at each stage the candidate of lowest ΔBIC enters when it is
+    significant, strong and not local; stops at the first stage where it is not, or at max_effects."""
     for _ in range(max_effects):
-        names = [gr.name for gr in groups if gr.name not in chosen]
-        if "vibration" not in chosen:
-            # the strongest line of what is left, found anew at every stage
-            vib = vibration_group(ctx, resid[order], order)
-            if vib is not None:
-                D.add("vibration", vib.cols)
-                by_name["vibration"] = vib
-                names.append("vibration")
+        names = _candidates(s)
         if not names:
             break
-        results = []
-        for name in names:
-            cand = idx + D.index[name]
-            ssr, _ = D.ssr(cand)
-            pe = len(D.index[name])
-            dof = N - len(cand)
-            ssr = max(ssr, 1e-300)
-            F = ((ssr_cur - ssr) / pe) / (ssr / dof) if dof > 0 else 0.0
-            pval = float(stats.f.sf(F, pe, dof)) if dof > 0 and F > 0 else 1.0
-            dbic = N * np.log(ssr / max(ssr_cur, 1e-300)) + pe * np.log(N)
-            m = len(names) * (N / 2 if name == "vibration" else 1)
-            results.append((dbic, name, ssr, F, pval, m))
-        results.sort(key=lambda r: r[0])
-        dbic, best, ssr_b, F, pval, m = results[0]
-        if not (pval < ALPHA / m and dbic < BIC_STRONG):
+        results = sorted((candidate(s.D, s.cols, name, s.ssr, len(names)) for name in names),
+                         key=lambda c: c.delta_bic)
+        best = results[0]
+        if not enters(best) or _is_local(s, best.effect):
             break
-        # every library effect acts over the whole part: one whose gain comes from a small area is
-        # fitting a local defect, which no effect explains (→ unexplained, located)
-        _, bb = D.ssr(idx + D.index[best])
-        r_new = g - D.A[:, idx + D.index[best]] @ bb
-        if local_fraction(ctx, resid, r_new) > LOCAL_LIMIT:
-            break
-        thr = sigma * sigma * stats.chi2.ppf(0.999, len(D.index[best]))
-        amb = []
-        for d2, other, ssr_o, F_o, p_o, m_o in results[1:]:
-            if ssr_o - ssr_b < thr and p_o < ALPHA / m_o and d2 < BIC_STRONG:
-                amb.append({"effect": other, "ssr_excess": float(ssr_o - ssr_b)})
-        stages.append(Stage(best, ssr_cur, ssr_b, float(F), pval, float(dbic), amb))
-        chosen.append(best)
-        idx = idx + D.index[best]
-        ssr_cur, beta = D.ssr(idx)
-        resid = g - D.A[:, idx] @ beta
-    out_found = []
-    P = len(idx)
-    if P > 1:
-        X = D.A[:, idx]
-        beta = np.linalg.lstsq(D.G[np.ix_(idx, idx)], D.b[idx], rcond=1e-12)[0]
-        resid = g - X @ beta
-        s2 = float(resid @ resid) / max(N - P, 1)
-        cov = np.linalg.pinv(D.G[np.ix_(idx, idx)]) * s2
-        # uncentred VIF (the design holds a constant column): diag of the inverse of the normalised Gram
-        Gs = D.G[np.ix_(idx, idx)]
-        dn = np.sqrt(np.diag(Gs))
-        vif = np.diag(np.linalg.pinv(Gs / np.outer(dn, dn))) if P > 1 else np.ones(1)
-        col = 1  # after the piston
-        for st, name in zip(stages, chosen):
-            gr = by_name[name]
-            p = len(D.index[name])
-            bb = beta[col:col + p]
-            sd = np.sqrt(np.clip(np.diag(cov)[col:col + p], 0, None))
-            upto = idx[: col + p]
-            _, bk = D.ssr(upto)
-            out_found.append({"group": gr, "stage": st, "beta": bb, "sd": sd,
-                              "vif_max": float(np.max(vif[col:col + p])), "fitted": X[:, col:col + p] @ bb,
-                              "resid_upto": g - D.A[:, upto] @ bk})
-            col += p
+        _add(s, best, _ambiguous_with(s, best, results[1:], sigma))
+    return s
+
+
+def uncentred_vif(G: np.ndarray) -> np.ndarray:
+    """Variance inflation of each column, uncentred (the design holds a constant column): the diagonal
+    of the inverse of the Gram matrix normalised to unit diagonal."""
+    dn = np.sqrt(np.diag(G))
+    return np.diag(np.linalg.pinv(G / np.outer(dn, dn)))
+
+
+def _fitted_effects(s: _Search) -> tuple[list[dict], np.ndarray]:
+    """The final least-squares fit on all chosen columns: each chosen effect's coefficients, their
+    standard deviations (σ̂² (AᵀA)⁻¹, σ̂² = SSR/(N − P)), its largest VIF, its fitted part and the gap
+    left after the effects up to it; and the final residual."""
+    D, g, idx = s.D, s.g, s.cols
+    N, P = g.size, len(idx)
+    X = D.A[:, idx]
+    Gs = D.G[np.ix_(idx, idx)]
+    beta = np.linalg.lstsq(Gs, D.b[idx], rcond=1e-12)[0]
+    resid = g - X @ beta
+    s2 = float(resid @ resid) / max(N - P, 1)
+    cov = np.linalg.pinv(Gs) * s2
+    vif = uncentred_vif(Gs)
+    found = []
+    col = 1  # after the piston
+    for st in s.stages:
+        p = len(D.index[st.effect])
+        bb = beta[col:col + p]
+        sd = np.sqrt(np.clip(np.diag(cov)[col:col + p], 0, None))
+        upto = idx[: col + p]
+        _, bk = D.ssr(upto)
+        found.append({"group": s.by_name[st.effect], "stage": st, "beta": bb, "sd": sd,
+                      "vif_max": float(np.max(vif[col:col + p])), "fitted": X[:, col:col + p] @ bb,
+                      "resid_upto": g - D.A[:, upto] @ bk})
+        col += p
+    return found, resid
+
+
+def residual_checks(resid: np.ndarray, sigma: float, order: np.ndarray, P: int) -> dict:
+    """What is left against the noise: its RMS, the χ² test of Σr²/σ² with N − P degrees of freedom,
+    and the lag-1 autocorrelation along the scan (whiteness)."""
+    N = resid.size
     rms = float(np.sqrt(np.mean(resid**2)))
     chi2_p = float(stats.chi2.sf(float(resid @ resid) / max(sigma, 1e-300) ** 2, max(N - P, 1)))
     ro = resid[order]
     rho1 = float(np.corrcoef(ro[:-1], ro[1:])[0, 1]) if N > 3 and np.std(ro) > 0 else 0.0
+    return {"rms": rms, "chi2_p": chi2_p, "rho1": rho1}
+
+
+def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int = 10,
+           seed: int = 0) -> dict:
+    """The forward selection (module doc). Returns a dict of plain results (see workflow)."""
+    order = scan_order(ctx, g.size)
+    sigma = gap_noise(g, order)
+    groups, unobservable = linear_groups(ctx)
+    s = forward_search(_start(ctx, g, order, groups), sigma, max_effects)
+    found, resid = _fitted_effects(s) if s.stages else ([], s.resid)
+    checks = residual_checks(resid, sigma, order, len(s.cols))
     stability = {}
-    if chosen and bootstrap > 0:
-        fitted = g - resid
-        stability = _bootstrap(ctx, fitted, resid, chosen, bootstrap, seed, max_effects)
-    return {"sigma": sigma, "found": out_found, "residual": resid, "rms": rms, "chi2_p": chi2_p,
-            "rho1": rho1, "unobservable": unobservable, "stability": stability, "order": order}
+    if s.stages and bootstrap > 0:
+        stability = _bootstrap(ctx, g - resid, resid, s.chosen, bootstrap, seed, max_effects)
+    return {"sigma": sigma, "found": found, "residual": resid, **checks, "unobservable": unobservable,
+            "stability": stability, "order": order}
 
 
 def _bootstrap(ctx, fitted, resid, names, B, seed, max_effects) -> dict:

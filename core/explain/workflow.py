@@ -2,7 +2,6 @@
 with them, and the gap before and after (explain.json, explain.html, model.updated.yaml)."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -90,57 +89,96 @@ def _view(name: str) -> str:
 def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simulated: Path | None = None,
             bootstrap: int = 10) -> dict:
     from ..io import read_cloud
-    from ..io.atomic import atomic_dir
-    from ..simulate.model import load_model, simulate
+    from ..simulate.model import load_model
 
     meas = read_cloud(measured)
     model = None
     if model_path is not None:
         model = load_model(model_path)
-        base = Path(model_path).parent
-        t = meas["t"] if "t" in meas.channels else None
-        c = meas["c"] if "c" in meas.channels else None
-        if t is None or c is None:
-            from scipy.spatial import cKDTree
-
-            from ..simulate.scan import scan_points
-
-            sp = scan_points(model.scan)
-            _, j = cKDTree(np.column_stack([sp["x"], sp["y"]])).query(meas.xyz[:, :2])
-            t = sp["t"][j] if t is None else t
-            c = sp["c"][j] if c is None else c
-        at = {"x": meas.x, "y": meas.y, "t": t, "c": c}
-        sim = simulate(model, base, at=at, noise=False)
-        surf = model.build_surface(base)
-        ctx = ScanContext.from_surface(surf, meas.x, meas.y, t, c)
-        z_sim = sim["z"]
-        match = "model evaluated at the measured positions"
+        ctx, z_sim, match = against_model(meas, model, Path(model_path).parent)
     elif simulated is not None:
-        simc = read_cloud(simulated)
-        for ch in ("t", "c"):
-            if ch not in simc.channels:
-                raise InputError(f"{simulated}: the simulation has no '{ch}' channel")
-        if simc.n == meas.n and np.max(np.abs(simc.xyz[:, :2] - meas.xyz[:, :2])) < 1e-6:
-            j = np.arange(meas.n)
-            match = "by row"
-        else:
-            from scipy.spatial import cKDTree
-
-            d, j = cKDTree(simc.xyz[:, :2]).query(meas.xyz[:, :2])
-            match = f"by position (nearest simulated point, up to {float(d.max()):.3g} mm away)"
-        z_sim = simc.z[j]
-        from ..maps.bspline import fit_bspline
-
-        sp = fit_bspline(simc.x, simc.y, simc.z)
-        ctx = ScanContext(meas.x, meas.y, z_sim, sp(meas.x, meas.y, dx=1), sp(meas.x, meas.y, dy=1),
-                          simc["t"][j], simc["c"][j])
+        ctx, z_sim, match = against_simulation(meas, simulated)
     else:
         raise RecipeError("explain needs --model MODEL.yaml or --simulated FILE")
     gap = meas.z - z_sim
     res = select(ctx, gap, bootstrap=bootstrap)
     sigma = res["sigma"]
-    found = []
     effects = list(model.effects) if model is not None else []
+    found, effects = found_effects(res, effects)
+    ambiguous = ambiguities(res, sigma)
+    updated = model.model_copy(update={"effects": effects}) if model is not None else None
+    after = gap_after(meas, res, updated, model_path, ctx)
+    regs = regions(meas.x, meas.y, after - after.mean(), sigma)
+    structure = bool(regs) or res["rms"] > 1.25 * sigma
+    report = {
+        "verdict": verdict(structure, ambiguous, found), "gap_before": _stats(gap), "gap_after": _stats(after),
+        "noise_um": sigma * 1e3, "found": found, "ambiguous_with": ambiguous,
+        "unexplained": {"rms_um": _stats(after)["rms_um"] if structure else 0.0, "regions": regs if structure else []},
+        "checks": {"chi2_p": res["chi2_p"], "residual_lag1_autocorrelation": res["rho1"],
+                   "residual_rms_over_noise": res["rms"] / max(sigma, 1e-300)},
+        "not_observable_on_this_scan": res["unobservable"], "points": int(meas.n), "match": match,
+        "measured": str(measured), "model": str(model_path) if model_path else None,
+        "simulated": str(simulated) if simulated else None,
+    }
+    _write(Path(out_dir), report, updated, effects, ctx, gap, after, found, res["order"])
+    return report
+
+
+def against_model(meas, model, base: Path):
+    """The model simulated at the measured positions, noise-free: (ScanContext, simulated z, how the
+    points were matched). Time and spindle angle come from the measurement, or else from the nearest
+    point of the model's scan path."""
+    from ..simulate.model import simulate
+
+    t = meas["t"] if "t" in meas.channels else None
+    c = meas["c"] if "c" in meas.channels else None
+    if t is None or c is None:
+        from scipy.spatial import cKDTree
+
+        from ..simulate.scan import scan_points
+
+        sp = scan_points(model.scan)
+        _, j = cKDTree(np.column_stack([sp["x"], sp["y"]])).query(meas.xyz[:, :2])
+        t = sp["t"][j] if t is None else t
+        c = sp["c"][j] if c is None else c
+    at = {"x": meas.x, "y": meas.y, "t": t, "c": c}
+    sim = simulate(model, base, at=at, noise=False)
+    surf = model.build_surface(base)
+    ctx = ScanContext.from_surface(surf, meas.x, meas.y, t, c)
+    return ctx, sim["z"], "model evaluated at the measured positions"
+
+
+def against_simulation(meas, simulated: Path):
+    """A simulated cloud (with t and c) matched to the measurement by row when the positions agree,
+    else by nearest position; its slopes from a B-spline through it: (ScanContext, simulated z, how
+    the points were matched)."""
+    from ..io import read_cloud
+
+    simc = read_cloud(simulated)
+    for ch in ("t", "c"):
+        if ch not in simc.channels:
+            raise InputError(f"{simulated}: the simulation has no '{ch}' channel")
+    if simc.n == meas.n and np.max(np.abs(simc.xyz[:, :2] - meas.xyz[:, :2])) < 1e-6:
+        j = np.arange(meas.n)
+        match = "by row"
+    else:
+        from scipy.spatial import cKDTree
+
+        d, j = cKDTree(simc.xyz[:, :2]).query(meas.xyz[:, :2])
+        match = f"by position (nearest simulated point, up to {float(d.max()):.3g} mm away)"
+    z_sim = simc.z[j]
+    from ..maps.bspline import fit_bspline
+
+    sp = fit_bspline(simc.x, simc.y, simc.z)
+    ctx = ScanContext(meas.x, meas.y, z_sim, sp(meas.x, meas.y, dx=1), sp(meas.x, meas.y, dy=1),
+                      simc["t"][j], simc["c"][j])
+    return ctx, z_sim, match
+
+
+def found_effects(res: dict, effects: list[dict]) -> tuple[list[dict], list[dict]]:
+    """Each chosen effect in the order it entered, with its parameters in the library's units, their
+    uncertainties, the gap after it and its evidence; and the model's effects with them added."""
+    found = []
     for f in res["found"]:
         params, unc = _params_of(f)
         st = f["stage"]
@@ -150,46 +188,51 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
                       "evidence": {"F": st.F, "p": st.p, "delta_bic": st.delta_bic, "vif_max": f["vif_max"],
                                    "stability": res["stability"].get(f["group"].name),
                                    "ssr_before_um2": st.ssr_before * 1e6, "ssr_after_um2": st.ssr_after * 1e6}})
-    ambiguous = []
+    return found, effects
+
+
+def ambiguities(res: dict, sigma: float) -> list[dict]:
+    """The pairs this scan cannot tell apart, why (their SSR difference in σ²) and what would."""
+    out = []
     for f in res["found"]:
         for a in f["stage"].ambiguous_with:
-            ambiguous.append({"effects": [f["group"].name, a["effect"]],
-                              "why": "on this scan path the two signatures fit the gap equally well "
-                                     f"(their fits differ by {a['ssr_excess'] / max(sigma, 1e-300) ** 2:.3g} σ² "
-                                     "in the sum of squares, below the χ² threshold)",
-                              "separate_by": separate_by(f["group"].name, a["effect"])})
-    # gap after: re-simulate with the updated model when there is one
-    if model is not None:
-        updated = model.model_copy(update={"effects": effects})
-        after = meas.z - simulate(updated, Path(model_path).parent, at={"x": meas.x, "y": meas.y,
-                                  "t": ctx.t, "c": ctx.c}, noise=False)["z"]
-    else:
-        updated = None
-        after = res["residual"]
-    after_c = after - after.mean()
-    regs = regions(meas.x, meas.y, after_c, sigma)
-    structure = bool(regs) or res["rms"] > 1.25 * sigma
+            out.append({"effects": [f["group"].name, a["effect"]],
+                        "why": "on this scan path the two signatures fit the gap equally well "
+                               f"(their fits differ by {a['ssr_excess'] / max(sigma, 1e-300) ** 2:.3g} σ² "
+                               "in the sum of squares, below the χ² threshold)",
+                        "separate_by": separate_by(f["group"].name, a["effect"])})
+    return out
+
+
+def gap_after(meas, res: dict, updated, model_path, ctx: ScanContext) -> np.ndarray:
+    """The gap after the found effects: measured − the updated model simulated again when there is a
+    model, else the selection's residual."""
+    if updated is None:
+        return res["residual"]
+    from ..simulate.model import simulate
+
+    return meas.z - simulate(updated, Path(model_path).parent, at={"x": meas.x, "y": meas.y,
+                             "t": ctx.t, "c": ctx.c}, noise=False)["z"]
+
+
+def verdict(structure: bool, ambiguous: list, found: list) -> str:
+    """unexplained (structure left above the noise) > ambiguous > explained > nothing_missing."""
     if structure:
-        verdict = "unexplained"
-    elif ambiguous:
-        verdict = "ambiguous"
-    elif found:
-        verdict = "explained"
-    else:
-        verdict = "nothing_missing"
-    report = {
-        "verdict": verdict, "gap_before": _stats(gap), "gap_after": _stats(after),
-        "noise_um": sigma * 1e3, "found": found, "ambiguous_with": ambiguous,
-        "unexplained": {"rms_um": _stats(after)["rms_um"] if structure else 0.0, "regions": regs if structure else []},
-        "checks": {"chi2_p": res["chi2_p"], "residual_lag1_autocorrelation": res["rho1"],
-                   "residual_rms_over_noise": res["rms"] / max(sigma, 1e-300)},
-        "not_observable_on_this_scan": res["unobservable"], "points": int(meas.n), "match": match,
-        "measured": str(measured), "model": str(model_path) if model_path else None,
-        "simulated": str(simulated) if simulated else None,
-    }
+        return "unexplained"
+    if ambiguous:
+        return "ambiguous"
+    if found:
+        return "explained"
+    return "nothing_missing"
+
+
+def _write(out_dir: Path, report: dict, updated, effects: list[dict], ctx, gap, after, found, order) -> None:
+    """explain.json, model.updated.yaml (the model with the found effects, or just the effects when
+    the gap came from a simulated file), the figures and explain.html — all or nothing."""
+    from ..io.atomic import atomic_dir
     from ..report import dumps, jsonable
 
-    with atomic_dir(Path(out_dir)) as tmp:
+    with atomic_dir(out_dir) as tmp:
         (tmp / "explain.json").write_text(dumps(jsonable(report)), encoding="utf-8")
         if updated is not None:
             (tmp / "model.updated.yaml").write_text(updated.to_yaml(), encoding="utf-8")
@@ -198,9 +241,8 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
 
             (tmp / "model.updated.yaml").write_text(yaml.safe_dump({"effects": effects}, sort_keys=False),
                                                     encoding="utf-8")
-        _figures(tmp, ctx, gap, after, found, res["order"])
+        _figures(tmp, ctx, gap, after, found, order)
         (tmp / "explain.html").write_text(_html(report, tmp), encoding="utf-8")
-    return report
 
 
 def _figures(folder, ctx, gap, after, found, order):
@@ -253,7 +295,8 @@ def _figures(folder, ctx, gap, after, found, order):
 def _html(report: dict, folder: Path) -> str:
     import html
 
-    from ..report import _CSS, _img, table_html as _table
+    from ..report import _CSS, _img
+    from ..report import table_html as _table
 
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>PointsPro explain</title><style>{_CSS}"
              "</style></head><body><h1>Explain: where simulation and measurement disagree</h1>",

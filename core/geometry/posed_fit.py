@@ -156,7 +156,7 @@ class PosedSurfaceFit:
                 np.negative(fx, out=G[0])
                 np.negative(fy, out=G[1])
             G[2] = 1.0
-            gx, gy, gz = G[0], G[1], 1.0
+            gx, gz = G[0], 1.0
             rho = np.sqrt(r2) if self.design_free else None
             dz_design = 1.0
         else:
@@ -165,7 +165,7 @@ class PosedSurfaceFit:
             if not want_jac:
                 return r, None
             G = np.ascontiguousarray(n.T)
-            gx, gy, gz = G[0], G[1], G[2]
+            gx, gz = G[0], G[2]
             rho = np.sqrt(foot[:, 0] ** 2 + foot[:, 1] ** 2) if self.design_free else None
             dz_design = gz
         J = np.empty((len(r), len(self.free)), order="F")  # contiguous columns

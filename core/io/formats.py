@@ -1,14 +1,33 @@
-"""Reading and writing point clouds by file extension.
+"""Reading and writing point clouds; the reader is chosen by the file's content, not its name.
 
-read:  .csv .txt .xyz .asc .dat (text exports), .ply (all vertex properties kept), .pcd .pts (open3d),
-       areal instrument files .datx .dat (MetroPro, told from text by its magic) .sur .sdf .x3p
-       (core.io.instruments)
+read (see docs/formats.md for units and the pixel convention):
+  point clouds   x y z text columns (.csv .txt .xyz .asc .dat … — core.io.text), .ply (all vertex
+                 properties kept), .pcd .pts (open3d)
+  height maps    every format SurfaceTopography reads — Zygo .datx and MetroPro .dat, Digital Surf
+                 .sur, ISO 25178-71 .sdf, Wyko/Bruker .opd, Bruker .di, Sensofar .plu/.plux, Keyence
+                 .vk4/.zon, Gwyddion .gwy, FRT .frt, Alicona .al3d, Igor .ibw, Agilent .mi … — found
+                 by content (core.io.instruments); .x3p through x3pio (and our own reader for
+                 Sensofar's namespace-less main.xml); text height matrices with a Gwyddion / SPIP /
+                 Wyko / Nova header (core.io.matrix)
+  A text file is told apart by content: x y z columns, a two-column x z profile (refused: profiles
+  are not yet an input), or a height matrix with a header. A file whose extension lies about its
+  content is read for what it is; one that matches no reader is refused naming what it looks like.
 write: .csv (all channels, `index` included, shortest round-trip decimal), .ply (binary, float64)
+
+Reader options (``read_cloud(path, pixel_size_um=…, …)``, a recipe's ``input:`` block):
+  pixel_size_um  lateral pixel size, one number or [x, y], for maps whose file has no calibration
+  wavelength_nm  for heights stored in fringes (× λ/2) or waves (× λ)
+  height_unit    nm, µm, mm or m, for heights whose file names no unit
+  invalid        drop (default) or error: x y z rows with NaN/inf; the dropped count is in
+                 ``cloud.meta["invalid_dropped"]`` (instrument maps always drop invalid pixels and
+                 count them the same way)
 """
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -18,14 +37,129 @@ from .atomic import atomic_path
 
 TEXT_SUFFIXES = (".csv", ".txt", ".xyz", ".asc", ".dat")
 OPEN3D_SUFFIXES = (".pcd", ".pts")
-from .instruments import AREAL_SUFFIXES, is_metropro
+from .instruments import AREAL_SUFFIXES  # noqa: E402
 
-READ_SUFFIXES = TEXT_SUFFIXES + (".ply",) + OPEN3D_SUFFIXES + AREAL_SUFFIXES
+READ_SUFFIXES = tuple(dict.fromkeys(TEXT_SUFFIXES + (".ply",) + OPEN3D_SUFFIXES + AREAL_SUFFIXES))
 WRITE_SUFFIXES = (".csv", ".ply")
 
+#: length units accepted by ``height_unit`` → factor to mm
+HEIGHT_UNITS = {"nm": 1e-6, "um": 1e-3, "µm": 1e-3, "μm": 1e-3, "mm": 1.0, "m": 1e3}
+INVALID_POLICIES = ("drop", "error")
 
-def read_cloud(path) -> PointCloud:
-    """Read a measurement file into a PointCloud (frame `measuring`, `index` = row of the input)."""
+
+@dataclass(frozen=True)
+class ReaderOptions:
+    """Validated reader options (see the module doc). Build with :meth:`parse`."""
+
+    pixel_size_um: tuple[float, float] | None = None
+    wavelength_nm: float | None = None
+    height_unit: str | None = None
+    invalid: str = "drop"
+
+    KEYS = ("pixel_size_um", "wavelength_nm", "height_unit", "invalid")
+
+    @classmethod
+    def parse(cls, data: Mapping[str, Any] | None) -> "ReaderOptions":
+        """Options from a mapping; raises ValueError naming the key at fault (callers prefix the
+        file or the recipe line)."""
+        if data is None:
+            return cls()
+        if isinstance(data, ReaderOptions):
+            return data
+        if not isinstance(data, Mapping):
+            raise ValueError(f"reader options must be a mapping of {', '.join(cls.KEYS)}")
+        for k in data:
+            if k not in cls.KEYS:
+                raise ValueError(f"unknown reader option '{k}' (options: {', '.join(cls.KEYS)})")
+        px = data.get("pixel_size_um")
+        if px is not None:
+            vals = list(px) if isinstance(px, (list, tuple)) else [px]
+            if len(vals) not in (1, 2) or not all(_positive(v) for v in vals):
+                raise ValueError(f"key 'pixel_size_um': a positive number or [x, y] of positive "
+                                 f"numbers (µm) (got {px!r})")
+            px = (float(vals[0]), float(vals[-1]))
+        wl = data.get("wavelength_nm")
+        if wl is not None:
+            if not _positive(wl):
+                raise ValueError(f"key 'wavelength_nm': a positive number (nm) (got {wl!r})")
+            wl = float(wl)
+        hu = data.get("height_unit")
+        if hu is not None and (not isinstance(hu, str) or hu not in HEIGHT_UNITS):
+            raise ValueError(f"key 'height_unit': one of nm, µm, mm, m (got {hu!r})")
+        inv = data.get("invalid", "drop")
+        if not isinstance(inv, str) or inv not in INVALID_POLICIES:
+            raise ValueError(f"key 'invalid': drop or error (got {inv!r})")
+        return cls(px, wl, hu, inv)
+
+    def to_dict(self) -> dict:
+        """The options that differ from the defaults, as a recipe would write them."""
+        d: dict = {}
+        if self.pixel_size_um is not None:
+            px = self.pixel_size_um
+            d["pixel_size_um"] = px[0] if px[0] == px[1] else list(px)
+        if self.wavelength_nm is not None:
+            d["wavelength_nm"] = self.wavelength_nm
+        if self.height_unit is not None:
+            d["height_unit"] = self.height_unit
+        if self.invalid != "drop":
+            d["invalid"] = self.invalid
+        return d
+
+
+def _positive(v) -> bool:
+    if not isinstance(v, (int, float)) or isinstance(v, bool):
+        return False
+    try:
+        f = float(v)
+    except OverflowError:  # an integer beyond float64 (1e400 written without a point)
+        return False
+    return bool(np.isfinite(f) and f > 0)
+
+
+# --- content sniffing ----------------------------------------------------------------------------
+_HEAD_BYTES = 65536
+_FOREIGN_MAGICS = (  # files people drop by mistake: name them
+    (b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+    (b"%PDF", "a PDF document"), (b"BM", "a BMP image"), (b"\x1f\x8b", "a gzip archive"),
+    (b"7z\xbc\xaf", "a 7-zip archive"), (b"Rar!", "a RAR archive"),
+    (b"\xd0\xcf\x11\xe0", "an old Microsoft Office document"), (b"ISO-10303-21", "a STEP CAD file"),
+    (b"solid ", "an ASCII STL mesh"),
+)
+
+
+def _sniff(path: Path) -> tuple[bytes, bool]:
+    """(first bytes, is_text): text when the head and the tail hold no NUL byte and decode."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(_HEAD_BYTES)
+        tail = b""
+        if size > _HEAD_BYTES:
+            f.seek(max(size - 4096, _HEAD_BYTES))
+            tail = f.read()
+    if b"\0" in head or b"\0" in tail:
+        return head, False
+    try:
+        head.decode("utf-8")
+        return head, True
+    except UnicodeDecodeError as e:
+        if e.start > len(head) - 4:  # a multi-byte character cut by the read
+            return head, True
+    sample = head[:4096]
+    printable = sum(b >= 32 or b in (9, 10, 13) for b in sample)
+    return head, printable >= 0.95 * len(sample)
+
+
+def foreign_kind(head: bytes) -> str | None:
+    """What a file that is no measurement looks like (a PNG image, a PDF…), or None."""
+    for magic, what in _FOREIGN_MAGICS:
+        if head.startswith(magic):
+            return what
+    return None
+
+
+def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> PointCloud:
+    """Read a measurement file into a PointCloud (frame `measuring`, `index` = row of the input,
+    or pixel number of a map). ``options`` / keywords: the reader options of the module doc."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: file not found")
@@ -33,18 +167,15 @@ def read_cloud(path) -> PointCloud:
         raise InputError(f"{path}: is a folder, not a data file")
     if not os.access(path, os.R_OK):
         raise InputError(f"{path}: permission denied")
+    try:
+        opts = ReaderOptions.parse({**(ReaderOptions.parse(options).to_dict()), **kw})
+    except ValueError as e:
+        raise InputError(f"{path}: {e}") from None
     suffix = path.suffix.lower()
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file — no data rows")
-    if suffix in AREAL_SUFFIXES or (suffix == ".dat" and is_metropro(path)):
-        from .instruments import read_areal
-
-        xyz, cols, meta = read_areal(path)
-    elif suffix in TEXT_SUFFIXES:
-        from .text import read_text
-
-        xyz, cols, meta = read_text(path)
-    elif suffix == ".ply":
+    head, is_text = _sniff(path)
+    if head.startswith((b"ply\n", b"ply\r\n")):
         from .ply import NotSimplePly, read_ply
 
         try:
@@ -53,20 +184,66 @@ def read_cloud(path) -> PointCloud:
             xyz, cols, meta = _read_open3d(path)
     elif suffix in OPEN3D_SUFFIXES:
         xyz, cols, meta = _read_open3d(path)
+    elif head.startswith(b"PK\x03\x04") and _zip_has(path, "main.xml"):
+        from .instruments import read_x3p
+
+        xyz, cols, meta = read_x3p(path)
+    elif is_text:
+        xyz, cols, meta = _read_text_by_content(path, head, suffix, opts)
     else:
-        raise InputError(f"{path}: unknown file type '{suffix}'; PointsPro reads "
-                         f"{', '.join(READ_SUFFIXES)}")
+        from .instruments import read_surface_topography
+
+        xyz, cols, meta = read_surface_topography(path, opts, head=head)
     meta = {**meta, "source": str(path), "frame": "measuring", "units": "mm"}
+    meta.setdefault("invalid_dropped", 0)
     try:
         return PointCloud(xyz, cols, meta)
     except ValueError as e:
         raise InputError(f"{path}: {e}") from None
 
 
+def _zip_has(path: Path, name: str) -> bool:
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return name in zf.namelist()
+    except (zipfile.BadZipFile, OSError, ValueError):
+        return path.suffix.lower() == ".x3p"  # a damaged X3P: its reader names the damage
+
+
+def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOptions):
+    """x y z columns, a header-described height matrix, or a text format of SurfaceTopography."""
+    from . import matrix
+    from .instruments import read_surface_topography, st_extension_names, st_magic_names
+
+    text_head = head.decode("utf-8", errors="replace")
+    if matrix.is_st_text_format(text_head):  # ISO 25178-71 SDF text, Wyko ASCII …
+        return read_surface_topography(path, opts, head=head)
+    if suffix not in TEXT_SUFFIXES and st_magic_names(head):  # a text header, binary further on
+        return read_surface_topography(path, opts, head=head)
+    if matrix.has_matrix_header(text_head):
+        return matrix.read_matrix(path, opts)
+    from .text import read_text
+
+    try:
+        return read_text(path, invalid=opts.invalid)
+    except InputError as e:
+        what = foreign_kind(head)
+        if what:
+            raise InputError(f"{path}: {what}, not a measurement file") from None
+        if st_magic_names(head):
+            return read_surface_topography(path, opts, head=head)
+        claimed = st_extension_names(suffix)
+        if claimed and suffix not in TEXT_SUFFIXES:
+            raise InputError(f"{e} — the content is text, not a {claimed} file as the extension "
+                             f"'{suffix}' says") from None
+        raise
 def _read_open3d(path: Path):
     import open3d as o3d  # lazy: heavy
 
-    pc = o3d.io.read_point_cloud(str(path))
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # no C++ warnings
+        pc = o3d.io.read_point_cloud(str(path))
     xyz = np.asarray(pc.points, dtype=np.float64)
     if len(xyz) == 0:
         raise InputError(f"{path}: no points read (empty or not a {path.suffix} point cloud)")

@@ -1,13 +1,26 @@
-"""Areal files of interferometers and profilers → point clouds (x, y, z in mm, invalid pixels dropped).
+"""Areal files of interferometers, profilers and AFMs → point clouds (x, y, z in mm, invalid pixels
+dropped and counted in ``meta["invalid_dropped"]``).
 
-Readers (maintained, not ours):
-  .x3p  ISO 25178-72 — x3pio (reads the 2000 and the Amd 1:2020 revisions; SurfaceTopography's reader
-        accepts only 'ISO5436 - 2000' files)
-  .datx Zygo Mx (HDF5), .dat Zygo MetroPro, .sur Digital Surf, .sdf ISO 25178-71 / BCR — SurfaceTopography
-        (pastewka/SurfaceTopography), with each file's lateral calibration and height unit.
-Pixel (i, j) lies at x = x0 + i·Δx, y = y0 + j·Δy; the channels ``row`` (j) and ``col`` (i) keep the
-pixel so a map can go back to the instrument's grid. Units are converted to mm from what the file
-says; a file without lateral calibration is an error (never a silent "pixel = 1 mm").
+Readers (maintained, not ours), each chosen by the file's content, never by its extension alone:
+  .x3p  ISO 25178-72 — x3pio (the 2000 and the Amd 1:2020 revisions). Files whose main.xml root is
+        a namespace-less ``<ISO5436>`` (Sensofar) are refused by x3pio and SurfaceTopography; we read
+        those ourselves (:func:`read_x3p_plain`: the same Record1/Record3 layout, binary point data).
+  everything else — SurfaceTopography (ContactEngineering/SurfaceTopography): Zygo .datx / MetroPro
+        .dat, Digital Surf .sur, ISO 25178-71 .sdf, Wyko/Bruker .opd, Bruker .di, Sensofar .plu/.plux,
+        Keyence .vk3/.vk4/.zon, Gwyddion .gwy, FRT .frt, Alicona .al3d, Igor .ibw, Agilent .mi, NMM,
+        Dektak .opdx … with each file's lateral calibration and height unit. Its own detection tries
+        the readers by content (magic bytes first); multi-channel files give their default height
+        channel.
+  Zygo .datx whose heights are in fringes or waves (SurfaceTopography refuses the unit): read here
+        with h5py, heights × λ/2 (fringe) or × λ (wave) with the reader option ``wavelength_nm``.
+
+Pixel convention (SurfaceTopography's ``positions()``): pixel (i, j) — column i, row j — lies at
+x = x0 + i·Δx, y = y0 + j·Δy, so the first pixel is at the origin (x0 = y0 = 0 unless the file
+gives an offset, as X3P does) and the points span (n − 1)·Δ while the map's size is n·Δ.
+The channels ``row`` (j) and ``col`` (i) keep the pixel so a map can go back to the instrument's grid.
+Units are converted to mm from what the file says. A file without lateral calibration is an error
+naming the reader option ``pixel_size_um`` (never a silent "pixel = 1 mm"); heights without a
+length unit need ``height_unit`` (or ``wavelength_nm`` for fringes/waves).
 """
 from __future__ import annotations
 
@@ -17,13 +30,28 @@ import numpy as np
 
 from ..errors import InputError
 
-AREAL_SUFFIXES = (".datx", ".sur", ".sdf", ".x3p")
+#: extensions of the areal formats (a reminder for file dialogs: the reader is chosen by content)
+AREAL_SUFFIXES = (".datx", ".dat", ".sur", ".sdf", ".x3p", ".opd", ".opdx", ".mi", ".di", ".spm",
+                  ".ibw", ".plu", ".plux", ".apx", ".zon", ".vk3", ".vk4", ".vk6", ".vk7",
+                  ".gwy", ".frt", ".al3d", ".os3d", ".lext", ".oir", ".poir", ".mdt", ".ezd", ".nid",
+                  ".tmd", ".zmg", ".mnt", ".jpk", ".qep", ".nc", ".h5", ".npy", ".npz", ".bcr",
+                  ".bcrf", ".tif", ".tiff", ".xlsx", ".nms", ".hgt", ".mat")
 METROPRO_MAGICS = (b"\x88\x1b\x03\x6f", b"\x88\x1b\x03\x70", b"\x88\x1b\x03\x71")
+_LENGTH_TO_MM = {"nm": 1e-6, "um": 1e-3, "µm": 1e-3, "μm": 1e-3, "mm": 1.0, "m": 1e3}
+_MAX_MSG = 160
 
 
 def is_metropro(path: Path) -> bool:
     with open(path, "rb") as f:
         return f.read(4) in METROPRO_MAGICS
+
+
+def _short(e: BaseException) -> str:
+    """The first line of a library's message, printable and bounded (some quote whole buffers)."""
+    s = str(e).strip()
+    s = s.splitlines()[0].strip() if s else type(e).__name__
+    s = "".join(ch if ch.isprintable() else "?" for ch in s)
+    return s if len(s) <= _MAX_MSG else s[:_MAX_MSG - 1] + "…"
 
 
 def _to_cloud(X_mm, Y_mm, Z_mm, valid, path):
@@ -34,17 +62,31 @@ def _to_cloud(X_mm, Y_mm, Z_mm, valid, path):
     return xyz, {"row": rows.astype(np.int64), "col": cols.astype(np.int64)}
 
 
+def _grid_cloud(z_mm, dx_mm, dy_mm, path, x0=0.0, y0=0.0, valid=None):
+    """A (rows = y, cols = x) height grid in mm → (xyz, channels, meta part)."""
+    ny, nx = z_mm.shape
+    X, Y = np.meshgrid(x0 + dx_mm * np.arange(nx), y0 + dy_mm * np.arange(ny))
+    ok = np.isfinite(z_mm) if valid is None else valid & np.isfinite(z_mm)
+    xyz, ch = _to_cloud(X, Y, z_mm, ok, path)
+    return xyz, ch, {"pixel_mm": [float(dx_mm), float(dy_mm)], "grid": [int(nx), int(ny)],
+                     "invalid_dropped": int(ok.size - ok.sum())}
+
+
+# --- X3P ---------------------------------------------------------------------------------------------
 def read_x3p(path: Path):
     import x3pio
 
     try:
         f = x3pio.read(str(path))
-    except (x3pio.X3pError, OSError, ValueError) as e:
-        raise InputError(f"{path}: not a readable X3P file ({e})") from None
+    except (x3pio.X3pError, OSError, ValueError, KeyError, EOFError) as e:
+        plain = _plain_iso5436_root(path)
+        if plain:
+            return read_x3p_plain(path)
+        raise InputError(f"{path}: not a readable X3P file ({_short(e)})") from None
     if isinstance(f, x3pio.PointCloud):
         p = np.asarray(f.layers[0].points, dtype=np.float64) * 1e3
         ok = np.all(np.isfinite(p), axis=1)
-        return p[ok], {}, {"instrument_format": "x3p point cloud"}
+        return p[ok], {}, {"instrument_format": "x3p point cloud", "invalid_dropped": int((~ok).sum())}
     z = np.asarray(f.layers[0].z, dtype=np.float64)
     if z.ndim == 1:
         z = z[None, :]
@@ -52,38 +94,284 @@ def read_x3p(path: Path):
     hy = (f.header.y.increment if f.header.y is not None else f.header.x.increment) * 1e3
     off = getattr(f, "placement", None)
     ox, oy, oz = (0.0, 0.0, 0.0) if off is None else tuple(np.asarray(off.offset) * 1e3)
-    ny, nx = z.shape
-    X, Y = np.meshgrid(ox + hx * np.arange(nx), oy + hy * np.arange(ny))
-    xyz, ch = _to_cloud(X, Y, z * 1e3 + oz, np.isfinite(z), path)
-    return xyz, ch, {"instrument_format": "x3p", "pixel_mm": [hx, hy]}
+    xyz, ch, m = _grid_cloud(z * 1e3 + oz, hx, hy, path, ox, oy)
+    return xyz, ch, {"instrument_format": "x3p", **m}
 
 
-def read_surface_topography(path: Path):
-    import warnings
+def _plain_iso5436_root(path: Path) -> bool:
+    """Whether main.xml's root is ``<ISO5436>`` without the ISO 5436-2 namespace (Sensofar)."""
+    import xml.etree.ElementTree as ET
+    import zipfile
 
     try:
+        with zipfile.ZipFile(path) as zf:
+            root = ET.fromstring(zf.read("main.xml"))
+    except Exception:  # noqa: BLE001 - not a zip, no main.xml, bad XML: x3pio's message stands
+        return False
+    return root.tag in ("ISO5436", "ISO5436_2")
+
+
+_X3P_TYPES = {"D": "<f8", "F": "<f4", "L": "<i4", "I": "<i2"}
+
+
+def read_x3p_plain(path: Path):
+    """An X3P whose main.xml has no namespace: Record1 axes (CX, CY incremental), Record3 matrix
+    size and a binary PointDataLink (optional ValidPointsLink bit mask), heights × CZ increment."""
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    def fail(what):
+        raise InputError(f"{path}: X3P with a namespace-less <ISO5436> root (Sensofar): {what}")
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            root = ET.fromstring(zf.read("main.xml"))
+            names = set(zf.namelist())
+            r1, r3 = root.find("Record1"), root.find("Record3")
+            if r1 is None or r3 is None:
+                fail("main.xml has no Record1/Record3")
+            ftype = (r1.findtext("FeatureType") or "").strip()
+            if ftype != "SUR":
+                fail(f"feature type {ftype or '?'} is not supported (only SUR, an areal map)")
+            axes = {}
+            for a in ("CX", "CY", "CZ"):
+                node = r1.find(f"Axes/{a}")
+                if node is None:
+                    fail(f"axis {a} missing in Record1")
+                axes[a] = node
+            for a in ("CX", "CY"):
+                if (axes[a].findtext("AxisType") or "").strip() != "I":
+                    fail(f"axis {a} is not incremental (AxisType I); absolute x/y are not supported")
+            inc = {a: float(axes[a].findtext("Increment") or 1.0) for a in axes}
+            off = {a: float(axes[a].findtext("Offset") or 0.0) for a in axes}
+            dtype = (axes["CZ"].findtext("DataType") or "D").strip()
+            if dtype not in _X3P_TYPES:
+                fail(f"CZ data type {dtype!r} is not supported (D, F, L, I)")
+            size = r3.find("MatrixDimension")
+            if size is None:
+                fail("Record3 has no MatrixDimension")
+            nx, ny, nz = (int(size.findtext(k) or 1) for k in ("SizeX", "SizeY", "SizeZ"))
+            if nx < 1 or ny < 1:
+                fail(f"matrix size {nx} × {ny} is not positive")
+            if nz != 1:
+                fail(f"SizeZ = {nz} layers are not supported (one layer)")
+            link = (r3.findtext("DataLink/PointDataLink") or "").strip()
+            if not link:
+                fail("point data inline in main.xml (DataList) is not supported, only a "
+                     "binary PointDataLink")
+            if link not in names:
+                fail(f"its point data {link} is missing from the archive")
+            raw = zf.read(link)
+            valid_link = (r3.findtext("DataLink/ValidPointsLink") or "").strip()
+            valid_raw = zf.read(valid_link) if valid_link in names else None
+    except zipfile.BadZipFile as e:
+        raise InputError(f"{path}: not a readable X3P file ({_short(e)})") from None
+    except ET.ParseError as e:
+        raise InputError(f"{path}: X3P main.xml is not valid XML ({_short(e)})") from None
+    except ValueError as e:
+        raise InputError(f"{path}: X3P main.xml has a non-numeric size or increment ({_short(e)})") \
+            from None
+    dt = np.dtype(_X3P_TYPES[dtype])
+    if len(raw) != nx * ny * dt.itemsize:
+        raise InputError(f"{path}: X3P point data holds {len(raw)} bytes where {nx} × {ny} values of "
+                         f"type {dtype} need {nx * ny * dt.itemsize} (truncated or damaged)")
+    z = np.frombuffer(raw, dt).astype(np.float64).reshape(ny, nx)  # x runs fastest
+    z = z * (inc["CZ"] if dt.kind == "i" else 1.0) + off["CZ"]
+    valid = np.ones_like(z, bool)
+    if valid_raw is not None:
+        bits = np.unpackbits(np.frombuffer(valid_raw, np.uint8), bitorder="little")
+        if bits.size >= nx * ny:
+            valid = bits[:nx * ny].reshape(ny, nx).astype(bool)
+    xyz, ch, m = _grid_cloud(z * 1e3, inc["CX"] * 1e3, inc["CY"] * 1e3, path, off["CX"] * 1e3,
+                             off["CY"] * 1e3, valid)
+    return xyz, ch, {"instrument_format": "x3p (namespace-less ISO5436, own reader)", **m}
+
+
+# --- SurfaceTopography ----------------------------------------------------------------------------
+def st_extension_names(suffix: str) -> str:
+    """The SurfaceTopography format names that use this extension ("Wyko OPD"), or ''."""
+    s = suffix.lower().lstrip(".")
+    if not s:
+        return ""
+    try:
+        import warnings
+
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            from SurfaceTopography.IO import open_topography
-            from SurfaceTopography.Support.UnitConversion import get_unit_conversion_factor
+            from SurfaceTopography.IO import readers
+    except Exception:  # noqa: BLE001 - a broken install: no hint
+        return ""
+    names = [r.name() for r in readers if s in (r._file_extensions or []) and r.format() not in
+             ("asc", "xyz", "npz")]
+    return " or ".join(dict.fromkeys(names))
 
+
+def _magic_readers(head: bytes):
+    """SurfaceTopography readers whose magic bytes match the file's head."""
+    with quiet():
+        from SurfaceTopography.IO import MagicMatch, readers
+
+        return [r for r in readers if r.can_read(head[:512]) == MagicMatch.YES]
+
+
+def st_magic_names(head: bytes) -> list[str]:
+    """Names of the instrument formats whose magic bytes the head matches (imports the library)."""
+    return [r.name() for r in _magic_readers(head)]
+
+
+class quiet:
+    """SurfaceTopography's warnings and stray prints (a reader prints whole buffers) kept off the
+    terminal."""
+
+    def __enter__(self):
+        import contextlib
+        import io
+        import warnings
+
+        self._stack = contextlib.ExitStack()
+        self._stack.enter_context(warnings.catch_warnings())
+        warnings.simplefilter("ignore")
+        self._stack.enter_context(contextlib.redirect_stdout(io.StringIO()))
+        self._stack.enter_context(contextlib.redirect_stderr(io.StringIO()))
+        return self
+
+    def __exit__(self, *exc):
+        self._stack.close()
+        return False
+
+
+def read_surface_topography(path: Path, opts=None, head: bytes | None = None):
+    """(xyz mm, channels, meta) of any file SurfaceTopography reads, found by content."""
+    if opts is None:
+        from .formats import ReaderOptions
+
+        opts = ReaderOptions()
+    if head is None:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    with quiet():  # the library warns about metadata and prints; never on the terminal
+        try:
+            from SurfaceTopography.IO import open_topography
+        except Exception as e:  # noqa: BLE001
+            raise InputError(f"{path}: SurfaceTopography cannot be imported ({_short(e)})") from None
+        try:
             reader = open_topography(str(path))
-            t = reader.topography()
-    except Exception as e:  # the library raises its own classes (FileFormatMismatch, CorruptFile…)
-        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise InputError(f"{path}: cannot read this instrument file ({msg})") from None
+        except Exception as e:  # noqa: BLE001 - the library raises many classes
+            raise _not_readable(path, head, e) from None
+        magic = _magic_readers(head)
+        if magic and type(reader) not in magic:
+            # a reader without magic (NASA SRTM, NumPy …) took a file whose magic names another
+            # format: that format's reader failed on it — say so, with its own words
+            reader.close()
+            try:
+                reader = open_topography(str(path), format=magic[0].format())
+            except Exception as e:  # noqa: BLE001
+                raise InputError(f"{path}: a damaged or truncated {magic[0].name()} file "
+                                 f"({_short(e)})") from None
+        try:
+            if reader.format() in ("h5", "datx") and _is_datx(path) and (
+                    reader.format() == "h5" or not _datx_lateral_in_length(path)):
+                return _read_datx_own(path, opts)
+            return _topography_to_cloud(path, reader, opts, head)
+        finally:
+            try:
+                reader.close()
+            except Exception:  # noqa: BLE001
+                pass
+
+
+def _not_readable(path: Path, head: bytes, e: BaseException) -> InputError:
+    from SurfaceTopography.Exceptions import CannotDetectFileFormat
+
+    from .formats import foreign_kind
+
+    suffix = path.suffix.lower()
+    claimed = st_extension_names(suffix)
+    if not isinstance(e, CannotDetectFileFormat):  # a reader recognised the file and then failed
+        return InputError(f"{path}: cannot read this instrument file ({_short(e)})")
+    magic = _magic_readers(head)
+    if magic:
+        return InputError(f"{path}: a damaged or truncated {magic[0].name()} file — its header is "
+                          f"recognised but it cannot be read")
+    what = foreign_kind(head)
+    lie = f"; the extension '{suffix}' says {claimed}" if claimed else ""
+    if what:
+        return InputError(f"{path}: {what}, not a measurement file{lie}")
+    if claimed:
+        return InputError(f"{path}: not a {claimed} file, nor any format PointsPro or "
+                          f"SurfaceTopography recognises by content (damaged or truncated?)")
+    return InputError(f"{path}: unknown file type '{suffix}' — no reader recognises its content; "
+                      f"PointsPro reads x y z text, PLY/PCD/PTS, X3P and the instrument formats of "
+                      f"SurfaceTopography (see docs/formats.md)")
+
+
+def _height_channel(reader):
+    chans = reader.channels
+    default = reader.default_channel
+    if getattr(default, "is_height_channel", True) and default.dim == 2:
+        return chans.index(default), default
+    for i, c in enumerate(chans):
+        if getattr(c, "is_height_channel", True) and c.dim == 2:
+            return i, c
+    return chans.index(default), default
+
+
+def _unit_to_mm(unit):
+    from SurfaceTopography.Support.UnitConversion import get_unit_conversion_factor
+
+    return get_unit_conversion_factor(unit, "mm")
+
+
+def _topography_to_cloud(path: Path, reader, opts, head: bytes):
+    from SurfaceTopography.Support.UnitConversion import is_length_unit
+
+    fmt = reader.format()
+    try:
+        idx, ch = _height_channel(reader)
+    except Exception as e:  # noqa: BLE001
+        raise InputError(f"{path}: cannot read this {reader.name()} file ({_short(e)})") from None
+    if ch.dim != 2:
+        raise InputError(f"{path}: a line profile ({reader.name()}), not an areal map; profiles are "
+                         "not yet supported as input")
+    unit = ch.unit.replace("Âµ", "µ") if isinstance(ch.unit, str) else ch.unit  # Latin-1 µ as UTF-8
+    kwargs = {}
+    if unit is None or not is_length_unit(unit):
+        if opts.height_unit is None:
+            raise InputError(f"{path}: the {reader.name()} file gives no length unit for its heights"
+                             f"{f' ({unit})' if unit else ''}; give the reader option height_unit "
+                             "(nm, µm, mm or m)")
+        unit = "µm" if opts.height_unit in ("um", "μm") else opts.height_unit
+        kwargs["unit"] = unit
+    if ch.physical_sizes is None:
+        if opts.pixel_size_um is None:
+            raise InputError(f"{path}: the {reader.name()} file gives no lateral calibration (pixel "
+                             "size); give the reader option pixel_size_um (µm), e.g. `input: "
+                             "{pixel_size_um: 1.1}` in the recipe")
+        to_unit = 1e-3 / _unit_to_mm(unit)  # µm → the file's unit
+        nx, ny = ch.nb_grid_pts
+        kwargs["physical_sizes"] = (nx * opts.pixel_size_um[0] * to_unit,
+                                    ny * opts.pixel_size_um[1] * to_unit)
+    elif opts.pixel_size_um is not None:
+        raise InputError(f"{path}: the file gives its own lateral calibration; remove the reader "
+                         "option pixel_size_um")
+    try:
+        t = reader.topography(channel_index=idx, **kwargs)
+        h_ma = t.heights()
+        if t.dim == 2:
+            X, Y = t.positions()  # fails too on a damaged header (sizes of the wrong shape …)
+            sx, sy = t.pixel_size
+    except Exception as e:  # noqa: BLE001 - truncated data blocks, bad headers …
+        magic = "damaged or truncated " if _magic_readers(head) else ""
+        raise InputError(f"{path}: cannot read this {magic}{reader.name()} file ({_short(e)})") \
+            from None
     if t.dim != 2:
-        raise InputError(f"{path}: a line profile, not an areal map")
-    unit = t.unit
-    if unit is None:
-        raise InputError(f"{path}: the file gives no length unit, so its lateral calibration is unknown")
-    unit = unit.replace("Âµ", "µ")  # a Latin-1 µ read as UTF-8 (Digital Surf files)
-    to_mm = get_unit_conversion_factor(unit, "mm")
-    h = np.ma.getdata(t.heights()).astype(np.float64)
-    mask = np.ma.getmaskarray(t.heights())
-    X, Y = t.positions()
-    info = reader.channels[0].info.get("raw_metadata", {}) or {}
-    if type(reader).__name__ == "SURReader" and "data_offset" in info:
+        raise InputError(f"{path}: a line profile ({reader.name()}), not an areal map; profiles are "
+                         "not yet supported as input")
+    to_mm = _unit_to_mm(unit)
+    h = np.ma.getdata(h_ma).astype(np.float64)
+    mask = np.ma.getmaskarray(h_ma)
+    info = ch.info.get("raw_metadata", {}) or {}
+    if fmt == "sur" and "data_offset" in info:
         # SurfaceTopography 1.27 drops the Digital Surf header's z offset (heights = stored·scale +
         # offset in the file's data unit); tested against surfalize, which writes it
         h = h + float(info["data_offset"]) * float(info.get("data_unit_ratio", 1.0) or 1.0)
@@ -91,14 +379,113 @@ def read_surface_topography(path: Path):
     # into .sdf, which SurfaceTopography 1.27 does not mask): no surface is 10³⁰ units high
     valid = ~mask & np.isfinite(h) & (np.abs(h) < 1e30)
     # SurfaceTopography's arrays are (x, y): index [i, j] is column i, row j
-    xyz, ch = _to_cloud(X.T * to_mm, Y.T * to_mm, h.T * to_mm, valid.T, path)
-    sx, sy = t.pixel_size
-    return xyz, ch, {"instrument_format": reader.format(), "pixel_mm": [sx * to_mm, sy * to_mm],
-                     "instrument_unit": unit}
+    xyz, chans = _to_cloud(X.T * to_mm, Y.T * to_mm, h.T * to_mm, valid.T, path)
+    return xyz, chans, {"instrument_format": fmt, "instrument_reader": reader.name(),
+                        "instrument_unit": unit, "pixel_mm": [sx * to_mm, sy * to_mm],
+                        "grid": [int(t.nb_grid_pts[0]), int(t.nb_grid_pts[1])],
+                        "invalid_dropped": int(valid.size - valid.sum())}
 
 
-def read_areal(path: Path):
+# --- Zygo .datx in fringes / waves ---------------------------------------------------------------------
+def _is_datx(path: Path) -> bool:
+    try:
+        import h5py
+
+        with h5py.File(path, "r") as h5:
+            return "MetaData" in h5
+    except Exception:  # noqa: BLE001
+        return False
+
+
+def _datx_lateral_in_length(path: Path) -> bool:
+    """Whether both lateral converters of a .datx give a length per pixel (SurfaceTopography reads
+    the size as metres whatever the converter says)."""
+    import h5py
+    from SurfaceTopography.Support.UnitConversion import mangle_length_unit_utf8
+
+    try:
+        with h5py.File(path, "r") as h5:
+            attrs = h5[_datx_surface_path(h5)].attrs
+            for axis in ("X Converter", "Y Converter"):
+                c = np.ravel(attrs[axis])[0]
+                if mangle_length_unit_utf8(c[2]) not in _LENGTH_TO_MM or not c[3][1] > 0:
+                    return False
+        return True
+    except Exception:  # noqa: BLE001 - let SurfaceTopography's reader decide
+        return True
+
+
+def _datx_surface_path(h5) -> str:
+    meta: dict = {}
+    for src, link, dst in h5["MetaData"][()]:
+        meta.setdefault(src.decode(), {})[link.decode()] = dst.decode()
+    node = meta.get("Root", {})
+    for key in ("Measurement", "Surface"):
+        node = meta.get(node.get(key, ""), {})
+    return node.get("Path") or "Measurement/Surface"
+
+
+def _read_datx_own(path: Path, opts):
+    """A .datx that SurfaceTopography's DATX reader refuses (heights in fringes or waves, lateral
+    converter without a length): the surface dataset, its No Data value and converters, by h5py."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            d = h5[_datx_surface_path(h5)]
+            z = np.asarray(d[()], dtype=np.float64)  # rows along y
+            attrs = dict(d.attrs)
+    except Exception as e:  # noqa: BLE001
+        raise InputError(f"{path}: cannot read this Zygo DATX file ({_short(e)})") from None
+
+    def first(v):
+        v = np.ravel(v)[0] if np.ndim(v) else v
+        return v.decode().strip() if isinstance(v, bytes) else v
+
+    unit = str(first(attrs.get("Unit", b"")))
+    no_data = attrs.get("No Data")
+    valid = np.isfinite(z)
+    if no_data is not None:
+        valid &= z != np.ravel(no_data)[0]
+    from SurfaceTopography.Support.UnitConversion import mangle_length_unit_utf8
+
+    u = mangle_length_unit_utf8(unit) if unit else None
+    if u in _LENGTH_TO_MM:
+        scale = _LENGTH_TO_MM[u]
+    elif unit.lower() in ("fringes", "waves", "wave", "fringe"):
+        if opts.wavelength_nm is None:
+            raise InputError(f"{path}: Zygo DATX heights in {unit}; give the reader option "
+                             "wavelength_nm (a fringe is λ/2 of height, a wave λ)")
+        scale = opts.wavelength_nm * 1e-6 * (0.5 if unit.lower().startswith("fringe") else 1.0)
+    elif opts.height_unit is not None:
+        scale = _LENGTH_TO_MM[opts.height_unit]
+    else:
+        raise InputError(f"{path}: Zygo DATX heights in {unit or 'no unit'}; give the reader option "
+                         "height_unit (nm, µm, mm or m)")
+    pix = []
+    for axis in ("X Converter", "Y Converter"):
+        conv = attrs.get(axis)
+        p = None
+        try:
+            c = np.ravel(conv)[0]
+            lu = mangle_length_unit_utf8(c[2]) if c[2] else None
+            if lu in _LENGTH_TO_MM and np.isfinite(c[3][1]) and c[3][1] > 0:
+                p = float(c[3][1]) * _LENGTH_TO_MM[lu]
+        except Exception:  # noqa: BLE001 - no or odd converter: needs the option
+            p = None
+        pix.append(p)
+    if opts.pixel_size_um is not None:
+        pix = [opts.pixel_size_um[0] * 1e-3, opts.pixel_size_um[1] * 1e-3]
+    elif None in pix:
+        raise InputError(f"{path}: Zygo DATX lateral converter in pixels without a size; give the "
+                         "reader option pixel_size_um (µm)")
+    xyz, ch, m = _grid_cloud(z * scale, pix[0], pix[1], path, valid=valid)
+    return xyz, ch, {"instrument_format": "datx", "instrument_reader": "Zygo DATX (own, h5py)",
+                     "instrument_unit": unit, **m}
+
+
+def read_areal(path: Path, opts=None):
     """(xyz mm, channels, meta) of an areal instrument file."""
     if path.suffix.lower() == ".x3p":
         return read_x3p(path)
-    return read_surface_topography(path)
+    return read_surface_topography(path, opts)

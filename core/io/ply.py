@@ -7,6 +7,7 @@ back to open3d (see formats.py).
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -22,59 +23,102 @@ class NotSimplePly(Exception):
     """The file is a PLY this reader does not handle (lists in the vertex element...)."""
 
 
+_PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
+
+
 def read_ply(path: Path):
     with open(path, "rb") as f:
-        if f.readline().strip() != b"ply":
-            raise InputError(f"{path}: not a PLY file (no 'ply' magic line)")
-        fmt = None
-        elements = []  # (name, count, [(prop, type)])
-        while True:
-            line = f.readline()
-            if not line:
-                raise InputError(f"{path}: PLY header has no end_header")
-            parts = line.decode("ascii", "replace").split()
-            if not parts:
-                continue
-            if parts[0] == "format":
-                fmt = parts[1]
-            elif parts[0] == "element":
-                elements.append((parts[1], int(parts[2]), []))
-            elif parts[0] == "property":
-                if parts[1] == "list":
-                    if elements and elements[-1][0] == "vertex":
-                        raise NotSimplePly("list property in vertex element")
-                    elements[-1][2].append((parts[-1], "list"))
-                else:
-                    elements[-1][2].append((parts[2], _PLY_TYPES[parts[1]]))
-            elif parts[0] == "end_header":
-                break
+        fmt, elements = _read_header(f, path)
         if not elements or elements[0][0] != "vertex":
             raise NotSimplePly("vertex is not the first element")
         _, n, props = elements[0]
         if n == 0:
             raise InputError(f"{path}: empty file — the PLY has no vertices")
-        if fmt == "ascii":
-            data = np.loadtxt(f, max_rows=n, ndmin=2, dtype=np.float64)
-            if data.shape != (n, len(props)):
-                raise InputError(f"{path}: PLY vertex data does not match its header")
-            cols = {p: data[:, j] for j, (p, _) in enumerate(props)}
-        else:
-            order = "<" if fmt == "binary_little_endian" else ">"
-            dt = np.dtype([(p, order + t) for p, t in props])
-            buf = f.read(dt.itemsize * n)
-            if len(buf) < dt.itemsize * n:
-                raise InputError(f"{path}: PLY file is truncated ({len(buf)} of {dt.itemsize * n} bytes)")
-            arr = np.frombuffer(buf, dtype=dt, count=n)
-            cols = {p: arr[p].astype(np.float64 if arr[p].dtype.kind == "f" else np.int64)
-                    for p, _ in props}
-    for a in "xyz":
-        if a not in cols:
-            raise InputError(f"{path}: PLY vertices have no '{a}' property")
+        names = [p for p, _ in props]
+        for a in "xyz":
+            if a not in names:
+                raise InputError(f"{path}: PLY vertices have no '{a}' property")
+        dup = sorted({p for p in names if names.count(p) > 1})
+        if dup:
+            raise InputError(f"{path}: PLY vertex property {dup[0]!r} is declared twice")
+        cols = _read_ascii(f, path, n, props) if fmt == "ascii" else _read_binary(f, path, fmt, n, props)
     xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")]).astype(np.float64)
     if not np.all(np.isfinite(xyz)):
         row = int(np.argwhere(~np.isfinite(xyz))[0, 0])
         raise InputError(f"{path}: vertex {row} has a NaN/inf coordinate")
     return xyz, cols, {"format": "ply"}
+
+
+def _read_header(f, path: Path) -> tuple[str, list]:
+    """(format, [(element, count, [(property, dtype or "list")])]); InputError naming the header line
+    at fault."""
+    if f.readline().strip() != b"ply":
+        raise InputError(f"{path}: not a PLY file (no 'ply' magic line)")
+    fmt = None
+    elements: list = []
+    ln = 1
+
+    def bad(what: str):
+        raise InputError(f"{path}: PLY header line {ln}: {what}")
+
+    while True:
+        line = f.readline()
+        ln += 1
+        if not line:
+            raise InputError(f"{path}: PLY header has no end_header")
+        parts = line.decode("ascii", "replace").split()
+        if not parts:
+            continue
+        if parts[0] == "format":
+            if len(parts) < 2 or parts[1] not in _PLY_FORMATS:
+                bad(f"the format is not one of {', '.join(_PLY_FORMATS)}")
+            fmt = parts[1]
+        elif parts[0] == "element":
+            if len(parts) < 3 or not parts[2].isdigit():
+                bad("an element needs a name and a count (element vertex 1234)")
+            elements.append((parts[1], int(parts[2]), []))
+        elif parts[0] == "property":
+            if not elements:
+                bad("a property before any element")
+            if len(parts) > 1 and parts[1] == "list":
+                if elements[-1][0] == "vertex":
+                    raise NotSimplePly("list property in vertex element")
+                elements[-1][2].append((parts[-1], "list"))
+            elif len(parts) < 3 or parts[1] not in _PLY_TYPES:
+                bad(f"a property needs a type ({', '.join(sorted(set(_PLY_TYPES)))}) and a name")
+            else:
+                elements[-1][2].append((parts[2], _PLY_TYPES[parts[1]]))
+        elif parts[0] == "end_header":
+            break
+    if fmt is None:
+        raise InputError(f"{path}: PLY header has no format line")
+    return fmt, elements
+
+
+def _read_ascii(f, path: Path, n: int, props) -> dict:
+    try:
+        with warnings.catch_warnings():  # "input contained no data": the shape check names it
+            warnings.simplefilter("ignore", UserWarning)
+            data = np.loadtxt(f, max_rows=n, ndmin=2, dtype=np.float64)
+    except ValueError:
+        raise InputError(f"{path}: PLY vertex data are not numbers as its header says") from None
+    if data.shape != (n, len(props)):
+        raise InputError(f"{path}: PLY vertex data does not match its header")
+    return {p: data[:, j] for j, (p, _) in enumerate(props)}
+
+
+def _read_binary(f, path: Path, fmt: str, n: int, props) -> dict:
+    order = "<" if fmt == "binary_little_endian" else ">"
+    dt = np.dtype([(p, order + t) for p, t in props])
+    need = dt.itemsize * n
+    left = path.stat().st_size - f.tell()
+    if left < need:  # before reading: a damaged count must not allocate terabytes
+        raise InputError(f"{path}: PLY file is truncated ({max(left, 0)} of {need} bytes)")
+    buf = f.read(need)
+    if len(buf) < need:
+        raise InputError(f"{path}: PLY file is truncated ({len(buf)} of {need} bytes)")
+    arr = np.frombuffer(buf, dtype=dt, count=n)
+    return {p: arr[p].astype(np.float64 if arr[p].dtype.kind == "f" else np.int64) for p, _ in props}
 
 
 def write_ply(path: Path, xyz: np.ndarray, channels: dict) -> None:

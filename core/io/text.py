@@ -4,13 +4,17 @@ Accepted: a header line or none; preamble lines before the header (instrument, d
 semicolon, tab or whitespace separators; decimal commas when the separator is a semicolon, tab or
 space (European exports); comment lines starting with #, //, % or !; a unit in brackets in the header
 (``X [µm]``) scales x, y, z to mm. Columns beyond x, y, z become channels named from the header (or
-``col4``, ``col5``... without one). Parsing is numpy's C reader (``np.loadtxt``); only when it fails
+``col4``, ``col5``... without one). Rows with a NaN/inf value are dropped and counted in
+``meta["invalid_dropped"]`` (reader option ``invalid: drop``, the default of read_cloud) or refused
+naming line and column (``invalid: error``). Two columns are a line profile (x, z): refused for now,
+by name. Height matrices with a header are core.io.matrix's. Parsing is numpy's C reader (``np.loadtxt``); only when it fails
 do we walk the lines in Python to name the exact line and column at fault.
 """
 from __future__ import annotations
 
 import io
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -73,35 +77,130 @@ def _header_name(tok: str) -> tuple[str, float | None, str | None]:
 
 
 def read_table(path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
-    """A headed text table (e.g. a calibration series ``t, xd, ref``) as columns by name, with the
-    same parsing and messages as point files; ``required`` names must be in the header."""
-    _, cols, meta = read_text(Path(path), need_xyz=False)
+    """A headed text table of a recipe's parameter (e.g. a calibration series ``t, xd, ref``) as
+    columns by name, parsed as point files are; ``required`` names must be in the header. Its
+    messages name the file, line and column but never quote its content: a recipe may name any
+    file, and the message goes into logs and summary.json."""
+    path = Path(path)
+    _check_readable(path)
+    try:
+        _, cols, meta = read_text(path, need_xyz=False, quote=False)
+    except OSError as e:
+        raise InputError(f"{path}: cannot read it ({e.strerror or type(e).__name__})") from None
     if meta.get("header_line") is None:
         raise InputError(f"{path}: needs a header line naming the columns ({', '.join(required)})")
     missing = [n for n in required if n not in cols]
     if missing:
-        raise InputError(f"{path}, line {meta['header_line']}: no {'/'.join(missing)} column "
-                         f"(columns: {', '.join(cols)})")
+        raise InputError(f"{path}, line {meta['header_line']}: no {'/'.join(missing)} column")
     return cols
 
 
-def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dict, dict]:
-    """Read a text export. Returns (xyz (N,3) float64 mm, channels, meta); with ``need_xyz=False``
-    a header without x, y, z is allowed and every column comes back as a channel (xyz None)."""
-    raw = path.read_bytes()
+def read_parameter_text(path: Path, what: str = "file") -> str:
+    """The UTF-8 text of a recipe's parameter file (a model, a map): InputError naming the file
+    when it is missing, unreadable or not text — never quoting its content."""
+    path = Path(path)
+    _check_readable(path, what)
     try:
-        text = raw.decode("utf-8-sig")
-        encoding = "utf-8-sig"
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")  # Windows exports with µ in the header
-        encoding = "latin-1"
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path}: not a {what} (not UTF-8 text at byte {e.start})") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read the {what} ({e.strerror or type(e).__name__})") from None
+
+
+def json_problem(e: BaseException) -> str:
+    """Why a parameter file's JSON was refused, quoting none of it: a syntax error's line and
+    column, the key missing, or a value of the wrong kind."""
+    import json
+
+    if isinstance(e, json.JSONDecodeError):
+        return f"not JSON: {e.msg} at line {e.lineno}, column {e.colno}"
+    if isinstance(e, KeyError) and e.args and isinstance(e.args[0], str):
+        return f"no key '{e.args[0]}'"
+    return "a value is not of the expected kind (numbers, lists of numbers)"
+
+
+def _check_readable(path: Path, what: str = "file") -> None:
+    if not path.exists():
+        raise InputError(f"{path}: {what} not found")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a {what}")
+
+
+def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: bool = True
+              ) -> tuple[np.ndarray | None, dict, dict]:
+    """Read a text export. Returns (xyz (N,3) float64 mm, channels, meta); with ``need_xyz=False``
+    a header without x, y, z is allowed and every column comes back as a channel (xyz None).
+    ``invalid``: "drop" removes rows holding a NaN/inf (``index`` keeps the input row), "error"
+    names the first. ``quote=False``: messages name the line and column but quote nothing of the
+    file (a parameter file, which is not the user's measurement)."""
+    raw = path.read_bytes()
+    text, encoding = _decode(raw)
     # Only the head is split into lines to find the layout; the body goes to the C reader whole.
     head = text.split("\n", 200)[:200]
     lines = _LazyLines(text, head)
+    lay = _find_layout(path, head, lines, quote)
+    data = _parse_numbers(path, raw, text, lines, lay, encoding, quote)
+    meta: dict = {"format": "text", "delimiter": lay.delim or "whitespace",
+                  "decimal_comma": lay.decimal_comma,
+                  "header_line": lay.header[0] + 1 if lay.header else None}
+    if lay.header:
+        names, scales, units = _header_columns(path, lay, need_xyz, quote)
+        if not need_xyz:
+            _check_finite(path, lines, lay.first_data, data, names, quote)
+            return None, {n: data[:, j] for j, n in enumerate(names)}, meta
+    else:
+        names, scales, units = _plain_columns(path, lay)
+    xyz, cols = _xyz_in_mm(path, lay, data, names, scales, units)
+    meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in "xyz"}
+    keep = _rows_to_keep(path, lines, lay.first_data, data, names, invalid, quote)
+    meta["invalid_dropped"] = 0 if keep is None else int((~keep).sum())
+    if keep is not None:
+        xyz = xyz[keep]
+        cols = {n: a[keep] for n, a in cols.items()}
+        if "index" not in cols:
+            cols["index"] = np.flatnonzero(keep).astype(np.int64)
+    _check_index(path, cols)
+    return xyz, cols, meta
 
-    # --- find the first data line, the header and the layout --------------------------------
-    first_data = None
-    candidates = []  # (line number, text) of non-numeric, non-comment lines before the data
+
+@dataclass
+class _Layout:
+    """Where the numbers are and how they are written."""
+
+    first_data: int  # 0-based line of the first data row
+    delim: str | None  # None: whitespace
+    decimal_comma: bool
+    ncols: int
+    trailing_empty: bool  # "1,2,3," rows: an empty field after the last delimiter
+    header: tuple[int, list[str]] | None = None  # (0-based line, names as written)
+
+
+def _decode(raw: bytes) -> tuple[str, str]:
+    """(text, encoding): UTF-8 (with or without BOM), else Latin-1 (Windows exports with µ)."""
+    try:
+        return raw.decode("utf-8-sig"), "utf-8-sig"
+    except UnicodeDecodeError:
+        return raw.decode("latin-1"), "latin-1"
+
+
+def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True) -> _Layout:
+    """The first data line, the delimiter, the column count and the header (if any)."""
+    first_data, candidates = _first_data_line(path, head, lines, quote)
+    delim, decimal_comma = _sniff_delimiter(lines[first_data])
+    first_toks = _split(lines[first_data], delim)
+    trailing_empty = bool(first_toks) and first_toks[-1] == ""
+    ncols = len(first_toks) - (1 if trailing_empty else 0)
+    lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty)
+    if candidates:
+        lay.header = _find_header(path, lines, candidates[-1], lay, quote)
+    return lay
+
+
+def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = True
+                     ) -> tuple[int, list[int]]:
+    """(first all-numeric line, the non-numeric non-comment lines before it) — 0-based."""
+    candidates = []
     for i, line in enumerate(head):
         line = line.rstrip("\r")
         if _is_comment(line):
@@ -109,109 +208,151 @@ def read_text(path: Path, need_xyz: bool = True) -> tuple[np.ndarray | None, dic
         delim, dc = _sniff_delimiter(line)
         toks = _split(line, delim)
         if all(_is_number(t, dc) for t in toks if t != "") and any(t != "" for t in toks):
-            first_data = i
-            break
+            return i, candidates
         candidates.append(i)
         if len(candidates) > 50:
             break
-    if first_data is None:
-        if candidates:
-            ln = candidates[0] + 1
-            raise InputError(f"{path}: no numeric data rows found (first line {ln}: "
-                             f"{lines[candidates[0]].strip()[:60]!r})")
-        raise InputError(f"{path}: empty file — no data rows")
-    delim, decimal_comma = _sniff_delimiter(lines[first_data])
-    first_toks = _split(lines[first_data], delim)
-    trailing_empty = bool(first_toks) and first_toks[-1] == ""
-    ncols = len(first_toks) - (1 if trailing_empty else 0)
-
-    header = None
     if candidates:
-        hline = lines[candidates[-1]]
-        htoks = _split(hline, delim)
-        if htoks and htoks[-1] == "":
-            htoks = htoks[:-1]
-        numeric = [_is_number(t, decimal_comma) for t in htoks]
-        if len(htoks) == ncols and sum(numeric) > len(htoks) / 2:
-            # mostly numbers: a damaged data line, not a header
-            j = numeric.index(False)
-            raise InputError(f"{path}, line {candidates[-1] + 1}, column {j + 1}: {htoks[j][:40]!r} is "
-                             "not a number")
-        if len(htoks) == ncols:
-            header = (candidates[-1], htoks)
-        elif len(_split(hline, None)) == ncols and delim is None:
-            header = (candidates[-1], _split(hline, None))
+        ln = candidates[0] + 1
+        if not quote:
+            raise InputError(f"{path}: no numeric data rows found (from line {ln} on)")
+        raise InputError(f"{path}: no numeric data rows found (first line {ln}: "
+                         f"{lines[candidates[0]].strip()[:60]!r})")
+    raise InputError(f"{path}: empty file — no data rows")
 
-    # --- parse with numpy's C reader ----------------------------------------------------------
+
+def _find_header(path, lines: "_LazyLines", i: int, lay: _Layout, quote: bool = True
+                 ) -> tuple[int, list[str]] | None:
+    """The header is the last non-numeric line before the data when it has as many fields."""
+    hline = lines[i]
+    htoks = _split(hline, lay.delim)
+    if htoks and htoks[-1] == "":
+        htoks = htoks[:-1]
+    numeric = [_is_number(t, lay.decimal_comma) for t in htoks]
+    if len(htoks) == lay.ncols and all(numeric):  # numbers, split otherwise than the rows after
+        raise InputError(f"{path}, line {i + 1}: a row of numbers whose separators differ from "
+                         f"those of line {lay.first_data + 1} (tabs and spaces mixed?)")
+    if len(htoks) == lay.ncols and sum(numeric) > len(htoks) / 2:
+        # mostly numbers: a damaged data line, not a header
+        j = numeric.index(False)
+        raise InputError(f"{path}, line {i + 1}, column {j + 1}: {_q(htoks[j], quote)}is "
+                         "not a number")
+    if len(htoks) == lay.ncols:
+        return i, htoks
+    if len(_split(hline, None)) == lay.ncols and lay.delim is None:
+        return i, _split(hline, None)
+    return None
+
+
+def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layout,
+                   encoding: str, quote: bool = True) -> np.ndarray:
+    """The data rows as an (N, ncols) array: pandas' C reader for big files, else numpy's; a
+    failure is named by line and column (``_diagnose``)."""
     # numpy's reader is ~2x slower with several comment markers, so pass only those present.
     present = [c for c in COMMENTS if c in text]
     comments = None if not present else present[0] if len(present) == 1 else present
-    usecols = range(ncols) if trailing_empty else None
+    usecols = range(lay.ncols) if lay.trailing_empty else None
     data = None
     if len(raw) > _FAST_BYTES:
-        data = _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, trailing_empty,
-                           encoding)
+        data = _fast_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
+                           lay.trailing_empty, encoding)
     try:
         if data is not None:
             pass
-        elif decimal_comma or encoding != "utf-8-sig":
-            body = "\n".join(text.split("\n")[first_data:])
-            if decimal_comma:
+        elif lay.decimal_comma or encoding != "utf-8-sig":
+            body = "\n".join(text.split("\n")[lay.first_data:])
+            if lay.decimal_comma:
                 body = body.replace(",", ".")
-            data = np.loadtxt(io.StringIO(body), delimiter=delim, comments=comments, ndmin=2,
+            data = np.loadtxt(io.StringIO(body), delimiter=lay.delim, comments=comments, ndmin=2,
                               dtype=np.float64, usecols=usecols)
         else:
-            data = np.loadtxt(path, delimiter=delim, comments=comments, ndmin=2, dtype=np.float64,
-                              usecols=usecols, skiprows=first_data, encoding="utf-8-sig")
+            data = np.loadtxt(path, delimiter=lay.delim, comments=comments, ndmin=2, dtype=np.float64,
+                              usecols=usecols, skiprows=lay.first_data, encoding="utf-8-sig")
     except ValueError:
-        _diagnose(path, lines.all(), first_data, delim, decimal_comma, ncols, trailing_empty)
+        _diagnose(path, lines.all(), lay.first_data, lay.delim, lay.decimal_comma, lay.ncols,
+                  lay.trailing_empty, quote)
         raise InputError(f"{path}: could not parse the numeric data")  # pragma: no cover
-    if data.shape[1] != ncols:  # pragma: no cover - loadtxt keeps the width
-        raise InputError(f"{path}: expected {ncols} columns, got {data.shape[1]}")
+    if data.shape[1] != lay.ncols:  # pragma: no cover - loadtxt keeps the width
+        raise InputError(f"{path}: expected {lay.ncols} columns, got {data.shape[1]}")
+    return data
 
-    # --- names --------------------------------------------------------------------------------
-    meta: dict = {"format": "text", "delimiter": delim or "whitespace", "decimal_comma": decimal_comma,
-                  "header_line": header[0] + 1 if header else None}
-    if header:
-        names, scales, units = zip(*(_header_name(t) for t in header[1]))
-        names = [_AXIS_ALIASES.get(n, n) for n in names]
-        for j, n in enumerate(names):
-            if not n:
-                raise InputError(f"{path}, line {header[0] + 1}: column {j + 1} has no name")
-        dup = {n for n in names if names.count(n) > 1}
-        if dup:
-            raise InputError(f"{path}, line {header[0] + 1}: duplicate column name(s) {sorted(dup)}")
-        missing = [a for a in "xyz" if a not in names]
-        if not need_xyz:
-            _check_finite(path, lines, first_data, data, names)
-            return None, {n: data[:, j] for j, n in enumerate(names)}, meta
-        if missing:
-            raise InputError(f"{path}, line {header[0] + 1}: no {'/'.join(missing)} column in the header "
-                             f"(columns: {', '.join(header[1])})")
-    else:
-        if ncols < 3:
-            raise InputError(f"{path}, line {first_data + 1}: {ncols} column(s); need at least x, y, z")
-        names = ["x", "y", "z"] + [f"col{j + 1}" for j in range(3, ncols)]
-        scales, units = [None] * ncols, [None] * ncols
 
+def _header_columns(path, lay: _Layout, need_xyz: bool, quote: bool = True):
+    """(names, unit scales to mm, unit texts) from the header; x, y, z required when ``need_xyz``."""
+    line, written = lay.header
+    names, scales, units = zip(*(_header_name(t) for t in written))
+    names = [_AXIS_ALIASES.get(n, n) for n in names]
+    for j, n in enumerate(names):
+        if not n:
+            raise InputError(f"{path}, line {line + 1}: column {j + 1} has no name")
+    dup = {n for n in names if names.count(n) > 1}
+    if dup and not quote:
+        cols = [j + 1 for j, n in enumerate(names) if n in dup]
+        raise InputError(f"{path}, line {line + 1}: duplicate column names (columns "
+                         f"{', '.join(map(str, cols))})")
+    if dup:
+        raise InputError(f"{path}, line {line + 1}: duplicate column name(s) {sorted(dup)}")
+    if not need_xyz:
+        return names, scales, units
+    if lay.ncols == 2 and "y" not in names:
+        _profile(path, line + 1, ", ".join(written))
+    missing = [a for a in "xyz" if a not in names]
+    if missing:
+        raise InputError(f"{path}, line {line + 1}: no {'/'.join(missing)} column in the header "
+                         f"(columns: {', '.join(written)})")
+    return names, scales, units
+
+
+def _plain_columns(path, lay: _Layout):
+    """Names without a header: x, y, z, col4, col5…; no units."""
+    if lay.ncols == 2:
+        _profile(path, lay.first_data + 1, "x, z")
+    if lay.ncols < 3:
+        raise InputError(f"{path}, line {lay.first_data + 1}: {lay.ncols} column(s); need at least "
+                         "x, y, z")
+    names = ["x", "y", "z"] + [f"col{j + 1}" for j in range(3, lay.ncols)]
+    return names, [None] * lay.ncols, [None] * lay.ncols
+
+
+def _xyz_in_mm(path, lay: _Layout, data, names, scales, units):
+    """(xyz (N,3) in mm, the other columns by name)."""
     cols = {n: data[:, j] for j, n in enumerate(names)}
     xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")])
-    for a, j in (("x", names.index("x")), ("y", names.index("y")), ("z", names.index("z"))):
+    for a in "xyz":
+        j = names.index(a)
         if units[j] is not None:
             if scales[j] is None:
-                raise InputError(f"{path}, line {header[0] + 1}: unknown unit [{units[j]}] for {a}; "
+                raise InputError(f"{path}, line {lay.header[0] + 1}: unknown unit [{units[j]}] for {a}; "
                                  f"known: {', '.join(sorted(_UNITS))}")
             xyz[:, "xyz".index(a)] *= scales[j]
-    meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in "xyz"}
+    return xyz, cols
 
-    _check_finite(path, lines, first_data, data, names)
+
+def _rows_to_keep(path, lines, first_data, data, names, invalid: str, quote: bool = True
+                  ) -> np.ndarray | None:
+    """The rows without NaN/inf (None: all) with ``invalid: drop``; with "error", the first named."""
+    if invalid != "drop":
+        _check_finite(path, lines, first_data, data, names, quote)
+        return None
+    keep = np.isfinite(data).all(axis=1)
+    if keep.all():
+        return None
+    if not keep.any():
+        try:
+            _check_finite(path, lines, first_data, data, names, quote)
+        except InputError as e:  # name the first, then say why it is fatal
+            raise InputError(f"{str(e).split(': ', 1)[0]}: every data row holds a NaN/inf value "
+                             "— nothing left to read") from None
+    return keep
+
+
+def _check_index(path, cols: dict) -> None:
     if "index" in cols:
         idx = cols["index"]
         if np.any(idx != np.round(idx)) or np.any(idx < 0):
             raise InputError(f"{path}: the index column must hold non-negative integers")
         if len(np.unique(idx)) != len(idx):
             raise InputError(f"{path}: the index column has repeated values")
-    return xyz, cols, meta
 
 
 _FAST_BYTES = 4_000_000
@@ -242,12 +383,21 @@ def _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, trailin
     return data
 
 
-def _check_finite(path, lines, first_data, data, names) -> None:
+def _profile(path, line: int, columns: str):
+    raise InputError(f"{path}, line {line}: 2 columns ({columns}) — a line profile x, z; profiles are "
+                     "not yet supported as input (PointsPro reads areal data: x y z columns, height "
+                     "matrices, instrument maps)")
+
+
+def _check_finite(path, lines, first_data, data, names, quote: bool = True) -> None:
     """Values must be measurements: the first NaN/inf named by line and column."""
     bad = ~np.isfinite(data)
     if bad.any():
         row, col = np.argwhere(bad)[0]
         ln = _data_line_number(lines.all(), first_data, int(row))
+        if not quote:
+            raise InputError(f"{path}, line {ln}, column {col + 1}: not a finite number (NaN/inf is "
+                             "not a measurement)")
         raise InputError(f"{path}, line {ln}, column {col + 1} ({names[col]}): "
                          f"{float(data[row, col])!r} is not a finite number (NaN/inf is not a measurement)")
 
@@ -277,7 +427,12 @@ def _data_line_number(lines, first_data, row) -> int:
     return first_data + row + 1
 
 
-def _diagnose(path, lines, first_data, delim, decimal_comma, ncols, trailing_empty):
+def _q(token: str, quote: bool) -> str:
+    """``'token' `` (40 characters at most) to quote in a message, or nothing when ``quote`` is off."""
+    return f"{token[:40]!r} " if quote else ""
+
+
+def _diagnose(path, lines, first_data, delim, decimal_comma, ncols, trailing_empty, quote=True):
     """Walk the data lines to name the first bad one (only runs after the fast reader failed)."""
     for i in range(first_data, len(lines)):
         line = lines[i]
@@ -291,4 +446,4 @@ def _diagnose(path, lines, first_data, delim, decimal_comma, ncols, trailing_emp
                              f"as on line {first_data + 1}")
         for j, t in enumerate(toks):
             if not _is_number(t, decimal_comma):
-                raise InputError(f"{path}, line {i + 1}, column {j + 1}: {t[:40]!r} is not a number")
+                raise InputError(f"{path}, line {i + 1}, column {j + 1}: {_q(t, quote)}is not a number")

@@ -48,8 +48,10 @@ class KinematicMap:
                 raise KeyError("pointspro_kinematic_map")
             m = cls(np.asarray(d["r_mm"], float), np.asarray(d["c_deg"], float),
                     np.asarray(d["e_mm"], float), d.get("components", {}))
-        except (ValueError, KeyError, TypeError) as e:
-            raise InputError(f"{source}: not a PointsPro kinematic map ({e})") from None
+        except (ValueError, KeyError, TypeError, AttributeError) as e:
+            from ..io.text import json_problem  # quotes nothing of the file
+
+            raise InputError(f"{source}: not a PointsPro kinematic map ({json_problem(e)})") from None
         if m.e.shape != (m.r.size, m.c_deg.size):
             raise InputError(f"{source}: the map's table does not match its axes")
         return m

@@ -128,6 +128,11 @@ def default_knot_spacing(x, y, extent: float | None = None) -> float:
     return float(max(2.0 * mean_spacing, 2.0 * gap, span / MAX_INTERVALS))
 
 
+def _intervals(xmin, xmax, ymin, ymax, h) -> tuple[int, int]:
+    return (max(int(np.ceil((xmax - xmin) / h - 1e-9)), 1),
+            max(int(np.ceil((ymax - ymin) / h - 1e-9)), 1))
+
+
 def _second_difference_gram(n: int) -> sp.csr_matrix:
     d = sp.diags([np.ones(n - 2), -2 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2], shape=(n - 2, n))
     return (d.T @ d).tocsr()
@@ -184,7 +189,6 @@ def fit_bspline(x, y, z, *, knot_spacing: float | None = None, smoothing: float 
     """Fit the smoothing spline (module doc). ``bounds`` (xmin, xmax, ymin, ymax, mm) defaults to the
     points' box; the spline covers it with whole intervals. Raises ValueError with the reason when the
     points cannot carry it."""
-    from scipy.sparse.linalg import spsolve
 
     x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
     good = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
@@ -195,13 +199,19 @@ def fit_bspline(x, y, z, *, knot_spacing: float | None = None, smoothing: float 
     if bounds is None:
         bounds = (x.min(), x.max(), y.min(), y.max())
     xmin, xmax, ymin, ymax = (float(b) for b in bounds)
-    if knot_spacing is None:
+    automatic = knot_spacing is None
+    if automatic:
         knot_spacing = default_knot_spacing(x, y, max(xmax - xmin, ymax - ymin))
     h = float(knot_spacing)
     if not h > 0:
         raise ValueError("knot spacing must be > 0")
-    nx = max(int(np.ceil((xmax - xmin) / h - 1e-9)), 1)
-    ny = max(int(np.ceil((ymax - ymin) / h - 1e-9)), 1)
+    nx, ny = _intervals(xmin, xmax, ymin, ymax, h)
+    while automatic and (nx + 3) * (ny + 3) > len(z):
+        # the automatic spacing must always be feasible (a 4 × 4 map gives a map): coarsen until
+        # the coefficients are no more than the points; the penalty settles what few points leave
+        h = max(xmax - xmin, ymax - ymin) / max(max(nx, ny) - 1, 1) * (1 + 1e-9) \
+            if max(nx, ny) > 1 else h * 2.0
+        nx, ny = _intervals(xmin, xmax, ymin, ymax, h)
     if (nx + 3) * (ny + 3) > len(z):
         span = max(xmax - xmin, ymax - ymin)
         need = span / max(np.sqrt(len(z)) - 3.0, 1.0)
@@ -228,7 +238,6 @@ def fit_bspline(x, y, z, *, knot_spacing: float | None = None, smoothing: float 
     # penalty λ P, P = D₂ˣᵀD₂ˣ ⊗ I + I ⊗ D₂ʸᵀD₂ʸ (coefficient k = ix·my + iy), into the same band
     P = (sp.kron(_second_difference_gram(mx), sp.identity(my))
          + sp.kron(sp.identity(mx), _second_difference_gram(my))).tocoo()
-    N = mx * my
     diag_A = ab[bw]
     lam = smoothing * diag_A.sum() / max(P.diagonal().sum(), 1e-300)
     up = P.col >= P.row

@@ -59,14 +59,20 @@ class MapGrid:
             for row in self.z * scale:
                 f.write(" ".join("NaN" if not np.isfinite(v) else repr(float(v)) for v in row) + "\n")
 
-    def write_x3p(self, path: Path) -> None:
+    def write_x3p(self, path: Path, revision: str = "2000") -> None:
         """ISO 25178-72 areal file: row r of the matrix is y index r, column c is x index c; the
-        placement offset carries the first node's (x, y) so the file keeps the map's position."""
+        placement offset carries the first node's (x, y) so the file keeps the map's position.
+
+        ``revision`` "2000" writes the 'ISO5436 - 2000' record that every reader takes (MountainsMap,
+        Gwyddion, OpenGPS, SurfaceTopography — which refuses the newer one); "2017" writes
+        'ISO25178-72:2017/DAM1' (x3pio reads both)."""
         import x3pio
 
+        rev = {"2000": x3pio.Revision.ISO5436_2000,
+               "2017": x3pio.Revision.ISO25178_72_2017_DAM1}[revision]
         placement = x3pio.Placement.translation(self.xs[0] * 1e-3, self.ys[0] * 1e-3, 0.0)
         x3pio.write(str(path), self.z * 1e-3, x_scale=self.spacing * 1e-3, y_scale=self.spacing * 1e-3,
-                    placement=placement, coordinate_system=x3pio.CoordinateSystem.VIEW)
+                    placement=placement, coordinate_system=x3pio.CoordinateSystem.VIEW, revision=rev)
 
 
 def read_x3p_map(path: Path) -> MapGrid:

@@ -21,20 +21,24 @@ from . import zernike as zk
 PVR_TERMS = 36
 
 
-def _radius(x, y, radius: float | None) -> float:
-    r = float(np.max(np.hypot(x, y))) if radius is None else float(radius)
+def _radius(x, y, radius: float | None, center=(0.0, 0.0)) -> float:
+    r = (float(np.max(np.hypot(x - center[0], y - center[1]))) if radius is None
+         else float(radius))
     return r if r > 0 else 1.0
 
 
-def pvr(x, y, r, radius: float | None = None) -> float:
-    """Robust PV in the unit of r (see module doc). Needs more points than 36."""
+def pvr(x, y, r, radius: float | None = None, center=(0.0, 0.0)) -> float:
+    """Robust PV in the unit of r (see module doc). Needs more points than 36.
+
+    The 36-term fit is over the disk of ``radius`` about ``center`` (core.metrics.pupil chooses
+    them for a run: never a file's corner origin, where the fit is singular)."""
     x, y, r = (np.asarray(a, dtype=np.float64) for a in (x, y, r))
-    R = _radius(x, y, radius)
+    R = _radius(x, y, radius, center)
     pairs = zk.terms(PVR_TERMS, "fringe")
     if len(r) <= 2 * len(pairs):
         return float(np.ptp(r)) if len(r) else float("nan")
-    coef, _, resid, A, _ = zk.fit(x, y, r, R, pairs)
-    fitted = A @ coef
+    resid = zk.fit(x, y, r, R, pairs, center=center).residual
+    fitted = r - resid
     return float(np.ptp(fitted) + 3.0 * np.sqrt(np.mean(resid**2)))
 
 
@@ -56,13 +60,15 @@ def slope_rms_urad(x, y, r, spline=None) -> float | None:
     return float(np.sqrt(np.mean(gx * gx + gy * gy)) * 1e6)
 
 
-def form_metrics(x, y, r, radius: float | None = None, slopes: bool = True) -> dict:
-    """PV, RMS, PVr (µm) and slope RMS (µrad) of residual r (mm) at points (x, y) (mm)."""
+def form_metrics(x, y, r, radius: float | None = None, slopes: bool = True,
+                 center=(0.0, 0.0)) -> dict:
+    """PV, RMS, PVr (µm) and slope RMS (µrad) of residual r (mm) at points (x, y) (mm); PVr's fit
+    over the disk of ``radius`` about ``center``."""
     r = np.asarray(r, dtype=np.float64)
     if r.size == 0:
         return {"rms_um": None, "pv_um": None, "pvr_um": None, "slope_rms_urad": None}
     out = {"rms_um": float(np.sqrt(np.mean((r - r.mean()) ** 2)) * 1e3),
            "pv_um": float(np.ptp(r) * 1e3),
-           "pvr_um": pvr(x, y, r, radius) * 1e3}
+           "pvr_um": pvr(x, y, r, radius, center) * 1e3}
     out["slope_rms_urad"] = slope_rms_urad(x, y, r) if slopes else None
     return out

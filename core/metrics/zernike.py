@@ -21,6 +21,7 @@ Orderings (single index j of a pair (n, m)):
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -127,31 +128,158 @@ def name_of(n: int, m: int) -> str:
     return f"Z({n},{m})"
 
 
+#: rows per chunk of the design matrix: 2¹⁶ × 36 float64 is 19 MB, inside the cache hierarchy's
+#: reach, and bounds memory whatever the number of points (a 12.6M-point map never holds its 3.6 GB
+#: design matrix)
+CHUNK = 1 << 16
+
+
+def _jacobi_0b(kmax: int, beta: int, t: np.ndarray) -> list[np.ndarray]:
+    """[P_0, …, P_kmax] of P_k^(0, β)(t) by the three-term recurrence (DLMF 18.9.1 with α = 0):
+
+        2k(k+β)(2k+β−2) P_k = (2k+β−1)[(2k+β)(2k+β−2) t − β²] P_{k−1} − 2(k−1)(k+β−1)(2k+β) P_{k−2},
+        P_0 = 1,  P_1 = 1 + (β+2)(t−1)/2."""
+    out = [np.ones_like(t)]
+    if kmax >= 1:
+        out.append(1.0 + 0.5 * (beta + 2) * (t - 1.0))
+    for k in range(2, kmax + 1):
+        c = 2 * k + beta
+        a1 = 2.0 * k * (k + beta) * (c - 2)
+        out.append(((c - 1) * (c * (c - 2) * t - beta * beta) * out[-1]
+                    - 2.0 * (k - 1) * (k + beta - 1) * c * out[-2]) / a1)
+    return out
+
+
+def _design_block(u: np.ndarray, v: np.ndarray, pairs, normalization: str, out: np.ndarray) -> None:
+    """Fill ``out`` (len(u), len(pairs)) with the terms at normalised coordinates (u, v) = (x, y)/R.
+
+    No arctan2, powers or trigonometry: ρ^|m| cos(mθ) + i ρ^|m| sin(mθ) = (u + iv)^|m| by repeated
+    complex multiplication, and R_n^|m|(ρ)/ρ^|m| = P_k^(0,|m|)(2ρ² − 1) by the Jacobi recurrence
+    (tests/test_metrics.py checks both against scipy's eval_jacobi and the closed forms)."""
+    t = 2.0 * (u * u + v * v) - 1.0
+    mmax = max(abs(m) for _, m in pairs)
+    cos_m, sin_m = [np.ones_like(u)], [np.zeros_like(u)]  # ρ^m cos mθ, ρ^m sin mθ
+    for _ in range(mmax):
+        c, s = cos_m[-1], sin_m[-1]
+        cos_m.append(c * u - s * v)
+        sin_m.append(s * u + c * v)
+    kmax: dict[int, int] = {}
+    for n, m in pairs:
+        kmax[abs(m)] = max(kmax.get(abs(m), 0), (n - abs(m)) // 2)
+    radial_k = {am: _jacobi_0b(k, am, t) for am, k in kmax.items()}
+    for j, (n, m) in enumerate(pairs):
+        am = abs(m)
+        ang = cos_m[am] if m >= 0 else sin_m[am]
+        np.multiply(radial_k[am][(n - am) // 2], ang, out=out[:, j])
+        out[:, j] *= norm(n, m, normalization)
+
+
 def design_matrix(x, y, radius: float, pairs, normalization: str = "rms",
                   center=(0.0, 0.0)) -> np.ndarray:
-    """(N, len(pairs)) values of the terms at points (x, y) (mm) normalised by ``radius`` (mm)."""
-    dx = np.asarray(x, dtype=np.float64) - center[0]
-    dy = np.asarray(y, dtype=np.float64) - center[1]
-    rho = np.hypot(dx, dy) / radius
-    theta = np.arctan2(dy, dx)
-    return np.column_stack([zernike(n, m, rho, theta, normalization) for n, m in pairs]) \
-        if len(pairs) else np.empty((len(dx), 0))
+    """(N, len(pairs)) values of the terms at points (x, y) (mm) normalised by ``radius`` (mm).
+
+    Holds N × p floats: for millions of points use ``fit`` and ``evaluate``, which work in chunks."""
+    u = (np.asarray(x, dtype=np.float64) - center[0]) / radius
+    v = (np.asarray(y, dtype=np.float64) - center[1]) / radius
+    A = np.empty((len(u), len(pairs)))
+    for s in range(0, len(u), CHUNK):
+        if len(pairs):
+            _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, A[s:s + CHUNK])
+    return A
 
 
-def fit(x, y, z, radius: float, pairs, normalization: str = "rms", center=(0.0, 0.0)):
+def evaluate(x, y, coef, radius: float, pairs, normalization: str = "rms",
+             center=(0.0, 0.0)) -> np.ndarray:
+    """Σ_j coef_j Z_j(x, y), in chunks (never the whole design matrix)."""
+    u = (np.asarray(x, dtype=np.float64) - center[0]) / radius
+    v = (np.asarray(y, dtype=np.float64) - center[1]) / radius
+    coef = np.asarray(coef, dtype=np.float64)
+    out = np.zeros(len(u))
+    if not len(pairs):
+        return out
+    block = np.empty((min(CHUNK, len(u)), len(pairs)))
+    for s in range(0, len(u), CHUNK):
+        b = block[:len(u[s:s + CHUNK])]
+        _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, b)
+        np.dot(b, coef, out=out[s:s + CHUNK])
+    return out
+
+
+@dataclass(frozen=True)
+class ZernikeFit:
+    """A least-squares Zernike fit: coefficients and standard uncertainties (unit of z), the
+    residual z − fit at every point, the condition number of the design matrix."""
+    coef: np.ndarray
+    sd: np.ndarray
+    residual: np.ndarray
+    cond: float
+
+    def __iter__(self):  # coef, sd, residual, cond = fit(...)
+        return iter((self.coef, self.sd, self.residual, self.cond))
+
+
+#: below this condition number of the design matrix the normal equations (one pass of BLAS
+#: products) lose at most cond²·ε ≈ 2·10⁻¹⁰ relative; above it, the fit is done by QR (TSQR)
+_NORMAL_EQUATIONS_MAX_COND = 1e3
+
+
+def fit(x, y, z, radius: float, pairs, normalization: str = "rms", center=(0.0, 0.0)) -> ZernikeFit:
     """Least-squares coefficients (same unit as z) with standard uncertainties and the residual.
 
     On a discrete, possibly irregular sampling the terms are not exactly orthogonal, so all are fitted
-    together (not by projection). Uncertainty: σ² (AᵀA)⁻¹ with σ² = SSR / (N − p)."""
-    A = design_matrix(x, y, radius, pairs, normalization, center)
+    together (not by projection). Uncertainty: σ² (AᵀA)⁻¹ with σ² = SSR / (N − p).
+
+    Memory and time are linear in N with a p × p working set: the design matrix is built and reduced
+    in chunks of CHUNK rows. Pass 1 accumulates the Gram matrix [A z]ᵀ[A z]; a well-conditioned
+    pupil (a centred disk: cond ≈ 1–10) is solved from it; an ill-conditioned one (cond > 10³: the
+    data in one corner of the disk) is solved by TSQR — the R factors of the chunks' QR stacked and
+    factored again, R of [A z] giving Qᵀz in its last column — which is as accurate as a QR of the
+    whole matrix. Pass 2 forms the residual."""
+    u = (np.asarray(x, dtype=np.float64) - center[0]) / radius
+    v = (np.asarray(y, dtype=np.float64) - center[1]) / radius
     z = np.asarray(z, dtype=np.float64)
-    npts, p = A.shape
+    npts, p = len(z), len(pairs)
     if npts < p:
         raise ValueError(f"{npts} points cannot determine {p} Zernike terms")
-    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
-    resid = z - A @ coef
+    if p == 0:
+        return ZernikeFit(np.zeros(0), np.zeros(0), z.copy(), 1.0)
+    block = np.empty((min(CHUNK, npts), p + 1))
+    gram = np.zeros((p + 1, p + 1))
+    for s in range(0, npts, CHUNK):
+        b = block[:len(z[s:s + CHUNK])]
+        _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, b[:, :p])
+        b[:, p] = z[s:s + CHUNK]
+        gram += b.T @ b
+    G = gram[:p, :p]
+    scale = np.sqrt(np.diag(G))
+    scale[scale == 0] = 1.0
+    lam = np.linalg.eigvalsh(G / np.outer(scale, scale))
+    cond_scaled = float(np.sqrt(lam[-1] / lam[0])) if lam[0] > 0 else np.inf
+    if cond_scaled < _NORMAL_EQUATIONS_MAX_COND:
+        Gs = G / np.outer(scale, scale)
+        coef = np.linalg.solve(Gs, gram[:p, p] / scale) / scale
+        ginv = np.linalg.inv(Gs) / np.outer(scale, scale)
+        sv = np.sqrt(np.clip(np.linalg.eigvalsh(G), 0, None))[::-1]
+    else:
+        coef, ginv, sv = _fit_tsqr(u, v, z, pairs, normalization, block)
+    resid = z - evaluate(x, y, coef, radius, pairs, normalization, center)
     dof = max(npts - p, 1)
     s2 = float(resid @ resid) / dof
-    cov = np.linalg.pinv(A.T @ A) * s2
-    cond = float(np.linalg.cond(A)) if p else 1.0
-    return coef, np.sqrt(np.clip(np.diag(cov), 0, None)), resid, A, cond
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    return ZernikeFit(coef, np.sqrt(np.clip(np.diag(ginv) * s2, 0, None)), resid, cond)
+
+
+def _fit_tsqr(u, v, z, pairs, normalization, block):
+    """(coef, (AᵀA)⁺, singular values of A) by a tall-skinny QR of [A z] over chunks."""
+    p = len(pairs)
+    rs = []
+    for s in range(0, len(z), CHUNK):
+        b = block[:len(z[s:s + CHUNK])]
+        _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, b[:, :p])
+        b[:, p] = z[s:s + CHUNK]
+        rs.append(np.linalg.qr(b, mode="r"))
+    r = np.linalg.qr(np.vstack(rs), mode="r")
+    R, qz = r[:p, :p], r[:p, p]
+    coef, _, _, sv = np.linalg.lstsq(R, qz, rcond=None)  # the singular values of R are those of A
+    rinv = np.linalg.pinv(R)
+    return coef, rinv @ rinv.T, sv

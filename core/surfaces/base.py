@@ -18,6 +18,10 @@ class NominalSurface(ABC):
     #: clear-aperture diameter (mm) or None when the design does not say
     aperture: float | None = None
 
+    def is_flat(self) -> bool:
+        """True for a plane z = 0: no axis, no curvature (its pose has only tilt and height)."""
+        return False
+
     @abstractmethod
     def sag(self, x, y) -> np.ndarray:
         """Height f(x, y) in mm. Raises DomainError for points outside the surface's domain."""

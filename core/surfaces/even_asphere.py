@@ -32,6 +32,9 @@ class EvenAsphere(SurfaceOfRevolution):
                 raise ValueError(f"asphere coefficient A{n}: powers start at 2")
         self.aperture = None if aperture is None else float(aperture)
 
+    def is_flat(self) -> bool:
+        return self.c == 0.0 and not self.A
+
     @property
     def radius(self) -> float:
         """Vertex radius R = 1/c (mm); inf for a flat."""

@@ -3,7 +3,8 @@
     surface: {type: even_asphere, c: 3.3333333e-4, k: -0.98, A: {4: 7.0e-13, 6: 1.0e-19}, aperture: 1300}
     surface: {type: even_asphere, R: -1646.4, k: -0.9861, A: {4: 4e-16}}
     surface: {type: xy_polynomial, c: 0, k: 0, norm_radius: 50, terms: {x2y0: 1e-3, x0y2: -1e-3}}
-    surface: {type: mesh, path: nominal.stl}        # path relative to the recipe file
+    surface: {type: mesh, path: nominal.stl}        # path relative to the recipe file (STL/OBJ/OFF/PLY/3MF)
+    surface: {type: mesh, path: part.obj, repair: true}   # repair a broken mesh instead of refusing it
     surface: {type: qcon, R: 500, k: -1, norm_radius: 50, a: [1e-4, -2e-5]}   # Forbes Q-con
     surface: {type: qbfs, R: 500, norm_radius: 50, a: [2e-3, 1e-4]}           # Forbes Q-bfs
 """
@@ -87,13 +88,16 @@ class XYPolynomialSpec(_Spec):
 
 class MeshSpec(_Spec):
     type: Literal["mesh"]
-    path: str = Field(description="STL or PLY triangle mesh, relative to the recipe")
+    path: str = Field(description="STL, OBJ, OFF, PLY or 3MF triangle mesh, relative to the recipe")
+    repair: bool = Field(False, description="repair a mesh with problems (non-manifold edges or "
+                         "vertices, holes, duplicated vertices, zero-area faces, inconsistent "
+                         "orientation) instead of refusing it")
 
     def build(self, base_dir: Path | None = None) -> MeshSurface:
         p = Path(self.path)
         if not p.is_absolute() and base_dir is not None:
             p = Path(base_dir) / p
-        return MeshSurface.from_file(p, self.aperture)
+        return MeshSurface.from_file(p, self.aperture, repair=self.repair)
 
 
 class _ForbesSpec(_CurvatureSpec):

@@ -26,6 +26,10 @@ class XYPolynomial(NominalSurface):
             raise ValueError("norm_radius must be > 0")
         self.aperture = None if aperture is None else float(aperture)
 
+    def is_flat(self) -> bool:
+        """A plane: no base curvature and only terms of degree ≤ 1 (a tilted plane)."""
+        return self.base.is_flat() and all(i + j <= 1 for i, j in self.terms)
+
     def sag(self, x, y):
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)

@@ -12,20 +12,8 @@ import numpy as np
 from pydantic import model_validator
 
 from pointspro.core.errors import StepError
+from pointspro.core.geometry.polygon import points_in_polygon
 from pointspro.core.step import Context, Params, Step, StepResult, param
-
-
-def points_in_polygon(x, y, poly: np.ndarray) -> np.ndarray:
-    """Even-odd rule, vectorised over the points (loop over the polygon's edges only)."""
-    inside = np.zeros(x.shape, dtype=bool)
-    xj, yj = poly[-1]
-    for xi, yi in poly:
-        crosses = (yi > y) != (yj > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xint = (xj - xi) * (y - yi) / (yj - yi) + xi
-        inside ^= crosses & (x < xint)
-        xj, yj = xi, yi
-    return inside
 
 
 class ApertureParams(Params):

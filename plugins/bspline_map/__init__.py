@@ -6,6 +6,11 @@ measured region (core.maps.grid). Seed paper 000 builds its form maps the same w
 
 Artifacts: ``map.csv`` (x, y, z in mm per valid node), ``map.x3p`` (ISO 25178-72), ``map.asc``
 (ASCII matrix for polishing machines), and the figures ``map.png``, ``profiles.png``, ``psd.png``.
+With ``mesh: ply|stl|obj``, ``map_mesh.<fmt>``: the map grid triangulated over its valid nodes for
+CAD/FEA (core.io.mesh.grid_mesh: two triangles per cell whose four nodes are valid; mm), z = the
+mapped value (``mesh_z: map``) or the nominal's sag plus it (``mesh_z: surface`` — the measured
+surface; misalignment's residual is vertical, so this is exact for it). Default none: the batch
+writes no mesh unless asked (File → Export mesh… in the window triangulates the map on demand).
 The cloud passes through unchanged.
 """
 from __future__ import annotations
@@ -15,10 +20,12 @@ from typing import Literal
 import numpy as np
 
 from pointspro.core.errors import StepError
-from pointspro.core.step import Context, Params, Step, StepResult, param
+from pointspro.core.metrics.pupil import pupil_of
+from pointspro.core.params.pupil import PupilCentreParams
+from pointspro.core.step import Context, Step, StepResult, param
 
 
-class BSplineMapParams(Params):
+class BSplineMapParams(PupilCentreParams):
     channel: Literal["auto", "residual", "z"] = param(
         "auto", help="what to map: the residual (form error) or z; auto: residual when present")
     spacing: float | None = param(None, unit="mm", gt=0,
@@ -31,11 +38,18 @@ class BSplineMapParams(Params):
     diameter: float | None = param(None, unit="mm", gt=0,
                                    help="clear-aperture diameter of the map; empty: the surface's "
                                         "aperture, else the measured region only")
-    center_x: float = param(0.0, unit="mm", help="x of the aperture's centre")
-    center_y: float = param(0.0, unit="mm", help="y of the aperture's centre")
     extrapolate: bool = param(False, help="also fill nodes of the aperture outside the measured "
                               "region (continued smoothly by the penalty)")
+    x3p_revision: Literal["2000", "2017"] = param(
+        "2000", help="map.x3p record: 2000 = 'ISO5436 - 2000', read by every X3P reader; 2017 = "
+        "'ISO25178-72:2017/DAM1' (newer; SurfaceTopography and older tools refuse it)")
     matrix_unit: Literal["mm", "um", "nm"] = param("um", help="height unit of the ASCII matrix")
+    mesh: Literal["none", "ply", "stl", "obj"] = param(
+        "none", help="also write the map as a triangle mesh for CAD/FEA, map_mesh.<format> (mm): "
+        "binary PLY (float64), binary STL (float32) or OBJ text; none: no mesh")
+    mesh_z: Literal["map", "surface"] = param(
+        "map", help="z of the mesh: the mapped value itself (the error map), or the nominal "
+        "surface's sag plus it (the measured surface; needs the recipe's surface:)")
     profile_angles: list[float] = param(default_factory=lambda: [0.0, 90.0], unit="deg",
                                         help="angles of the profiles through the aperture's centre "
                                              "(from +x towards +y)")
@@ -62,7 +76,9 @@ class BSplineMapStep(Step):
         diameter = params.diameter
         if diameter is None and ctx.surface is not None:
             diameter = getattr(ctx.surface, "aperture", None)
-        center = (params.center_x, params.center_y)
+        # the aperture's and the profiles' centre: given, else the surface's axis, else the measured
+        # region's bounding-box centre (never a file's corner origin)
+        center = pupil_of(x, y, ctx.surface, params.given_centre).center
         if diameter is not None:
             inside = (x - center[0]) ** 2 + (y - center[1]) ** 2 <= (diameter / 2) ** 2
             if not inside.any():
@@ -101,15 +117,22 @@ class BSplineMapStep(Step):
         report = {
             "channel": channel, "knot_spacing": spline.h, "intervals": list(spline.intervals),
             "smoothing": params.smoothing, "spacing": spacing, "grid": [len(grid.xs), len(grid.ys)],
-            "nodes": int(zv.size), "diameter": diameter,
+            "nodes": int(zv.size), "diameter": diameter, "centre_mm": [float(center[0]), float(center[1])],
             "fit_residual_rms_um": float(np.sqrt(np.mean(fit_res**2)) * 1e3),
             "map_rms_um": float(np.std(zv) * 1e3), "map_pv_um": float(np.ptp(zv) * 1e3),
             "empty_cell_fraction": cells, "warnings": warnings,
         }
         unit = params.matrix_unit
+        mesh_art = None
+        if params.mesh != "none":
+            mesh_art = _map_mesh(grid, channel, params, ctx)
+            report["mesh"] = {"file": f"map_mesh.{params.mesh}", "z": mesh_art.z_label,
+                              "vertices": int(len(mesh_art.vertices)), "faces": int(len(mesh_art.faces))}
         arts = {
+            # keep map.csv the grid's bound write_csv: the window's Export mesh… finds the grid there
+            # (core.io.mesh.map_mesh_of)
             "map.csv": grid.write_csv,
-            "map.x3p": grid.write_x3p,
+            "map.x3p": lambda p: grid.write_x3p(p, params.x3p_revision),
             "map.asc": lambda p: grid.write_ascii_matrix(p, unit),
             "map.png": png_artifact(grid_map_figure, grid,
                                     title=f"{channel} map: RMS {report['map_rms_um']:.4g} µm, "
@@ -119,11 +142,34 @@ class BSplineMapStep(Step):
             "psd.png": png_artifact(psd_figure, grid),
             "psd.csv": lambda p: _write_psd(p, grid),
         }
+        if mesh_art is not None:
+            arts[f"map_mesh.{params.mesh}"] = mesh_art
         return StepResult(cloud.replace(), report, arts)
 
     @classmethod
     def example_params(cls) -> dict:
         return {}
+
+
+def _map_mesh(grid, channel, params, ctx):
+    """The map's mesh artifact (core.io.mesh): z the map, or the nominal's sag plus the map."""
+    from pointspro.core.errors import DomainError
+    from pointspro.core.io.mesh import MeshArtifact, grid_mesh
+
+    V, F = grid_mesh(grid.xs, grid.ys, grid.z)
+    label = f"{channel} map (mm)"
+    if params.mesh_z == "surface" and channel != "z":  # a map of z is the surface already
+        if ctx.surface is None:
+            raise StepError("mesh_z: surface needs the recipe's nominal `surface:` (its sag plus the "
+                            "map); use mesh_z: map for the error map")
+        try:
+            V[:, 2] = V[:, 2] + ctx.surface.sag(V[:, 0], V[:, 1])
+        except DomainError as e:
+            raise StepError(f"mesh_z: surface: the nominal is not defined at every map node: {e}") from None
+        label = f"nominal sag + {channel} map (mm)"
+    art = MeshArtifact(V, F, params.mesh)
+    art.z_label = label
+    return art
 
 
 def _write_profiles(path, grid, angles, center) -> None:

@@ -21,9 +21,10 @@ from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class DynamicParams(Params):
-    calibration: str | None = param(None, help="calibration series (CSV with t, xd, ref): identify "
-                                    "Gm here; give this or model")
-    model: str | None = param(None, help="dynamic_model.json from dynamic_id; give this or calibration")
+    calibration: str | None = param(None, file=True, help="calibration series (CSV with t, xd, ref): "
+                                    "identify Gm here; give this or model")
+    model: str | None = param(None, file=True, help="dynamic_model.json from dynamic_id; give this or "
+                              "calibration")
     order: int | None = param(None, ge=1, le=8, help="model order when identifying; empty: by BIC")
     t: str = param("t", help="time channel of the scan (s)")
     xd: str = param("xd", help="encoder channel of the axis carrying the sensor (mm)")
@@ -70,12 +71,16 @@ class DynamicStep(Step):
     Params = DynamicParams
 
     def run(self, cloud, params: DynamicParams, ctx: Context) -> StepResult:
-        from pointspro.core.dynamics.identify import LoopModel
+        from pointspro.core.dynamics.identify import LoopModel, identify_from_file, model_report
         from pointspro.core.dynamics.timeseries import sampling_rate
-        from pointspro.core.dynamics.vibration import (advice, aliased_frequency, dominant_peaks,
-                                                       phase_lag_hilbert_deg, psd_time)
+        from pointspro.core.dynamics.vibration import (
+            advice,
+            aliased_frequency,
+            dominant_peaks,
+            phase_lag_hilbert_deg,
+            psd_time,
+        )
         from pointspro.core.figures import png_artifact
-        from pointspro.plugins.dynamic_id import identify_from_file, model_report
 
         missing = [c for c in (params.t, params.xd, params.xc) if c not in cloud.channels]
         if missing:
@@ -85,12 +90,14 @@ class DynamicStep(Step):
         fs = sampling_rate(cloud[params.t], src, row_offset=2)
         arts = {}
         if params.model is not None:
-            p = ctx.resolve(params.model)
+            from pointspro.core.io.text import read_parameter_text
+
+            p = ctx.resolve(params.model, "model")
             if not p.is_file():
                 raise InputError(f"{p}: dynamic model file not found")
-            model = LoopModel.from_json(p.read_text(encoding="utf-8"), str(p))
+            model = LoopModel.from_json(read_parameter_text(p, "dynamic model"), str(p))
         else:
-            p = ctx.resolve(params.calibration)
+            p = ctx.resolve(params.calibration, "calibration")
             model, _ = identify_from_file(p, ("t", "xd", "ref"), params.order, 5, ctx)
             arts["dynamic_model.json"] = model.to_json()
         if abs(model.fs - fs) > 0.01 * fs:
@@ -136,6 +143,8 @@ class DynamicStep(Step):
 
     @classmethod
     def example_params(cls) -> dict:
-        from pointspro.plugins.dynamic_id import DynamicIdStep
+        import tempfile
 
-        return DynamicIdStep.example_params()
+        from pointspro.core.dynamics.identify import write_example_calibration
+
+        return {"calibration": write_example_calibration(tempfile.mkdtemp(prefix="pointspro-dyn-"))}

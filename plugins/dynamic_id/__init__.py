@@ -10,38 +10,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from pointspro.core.dynamics.identify import LAG_FREQUENCIES, identify_from_file, model_report  # noqa: F401  (LAG_FREQUENCIES: this step's report)
 from pointspro.core.step import Context, Params, Step, StepResult, param
-
-LAG_FREQUENCIES = (1.0, 5.0, 15.0, 50.0)
 
 
 class DynamicIdParams(Params):
-    calibration: str = param(help="calibration series (CSV with t, xd, ref), relative to the recipe")
+    calibration: str = param(file=True, help="calibration series (CSV with t, xd, ref), relative to the recipe")
     t: str = param("t", help="time column (s)")
     xd: str = param("xd", help="encoder column of the axis carrying the sensor (mm)")
     ref: str = param("ref", help="reference sensor column (mm)")
     order: int | None = param(None, ge=1, le=8, help="model order; empty: chosen by BIC")
     max_order: int = param(5, ge=1, le=8, help="largest order tried when the order is chosen")
-
-
-def identify_from_file(path, names, order, max_order, ctx):
-    from pointspro.core.dynamics.identify import identify
-    from pointspro.core.io.text import read_table
-
-    ctx.progress.check()
-    cols = read_table(path, names)
-    ctx.progress.update(0.2, "identifying Gm")
-    model = identify(cols[names[0]], cols[names[1]], cols[names[2]], max_order=max_order, order=order,
-                     what=str(path))
-    return model, cols
-
-
-def model_report(model) -> dict:
-    d = model.describe()
-    d["phase_lag_deg"] = {f"{f:g}_hz": float(v) for f, v in
-                          zip(LAG_FREQUENCIES, model.phase_lag_deg(LAG_FREQUENCIES))}
-    d["nyquist_hz"] = model.fs / 2
-    return d
 
 
 def fit_figure(model, t, xd, ref):
@@ -83,7 +62,7 @@ class DynamicIdStep(Step):
     def run(self, cloud, params: DynamicIdParams, ctx: Context) -> StepResult:
         from pointspro.core.figures import png_artifact
 
-        path = ctx.resolve(params.calibration)
+        path = ctx.resolve(params.calibration, "calibration")
         names = (params.t, params.xd, params.ref)
         model, cols = identify_from_file(path, names, params.order, params.max_order, ctx)
         report = {"calibration": str(path), **model_report(model), "warnings": []}
@@ -98,13 +77,8 @@ class DynamicIdStep(Step):
     @classmethod
     def example_params(cls) -> dict:
         import tempfile
-        from pathlib import Path
+
+        from pointspro.core.dynamics.identify import write_example_calibration
 
         # the contract test runs every step on a generic cloud: give it a small calibration file
-        t = np.arange(2000) / 1000.0
-        xd = np.where((t > 0.5) & (t < 1.5), 0.01, 0.0)
-        xd = np.convolve(xd, np.ones(5) / 5, mode="same")
-        ref = np.convolve(xd, [0.6, 0.3, 0.1], mode="full")[: len(xd)] + 1e-6 * np.sin(t * 7)
-        p = Path(tempfile.mkdtemp(prefix="pointspro-dynid-")) / "calibration.csv"
-        np.savetxt(p, np.column_stack([t, xd, ref]), delimiter=",", header="t,xd,ref", comments="")
-        return {"calibration": str(p)}
+        return {"calibration": write_example_calibration(tempfile.mkdtemp(prefix="pointspro-dynid-"))}

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from pointspro.core.calibration.fiducials import ball_points, example_layout, example_measured_centres
 from pointspro.core.errors import InputError, StepError
 from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class FiducialsParams(Params):
-    reference: str = param(help="calibrated centres: CSV fiducial, x, y, z (mm), relative to the recipe")
+    reference: str = param(file=True, help="calibrated centres: CSV fiducial, x, y, z (mm), relative to the recipe")
     diameter: float | None = param(9.997, gt=0, unit="mm", help="ball diameter; empty: fitted freely")
     sigma_reference: float = param(0.2, ge=0, unit="µm", help="standard uncertainty of the calibrated "
                                    "centres (001: 0.2 µm)")
@@ -105,13 +106,12 @@ class FiducialsStep(Step):
     def run(self, cloud, params: FiducialsParams, ctx: Context) -> StepResult:
         from pointspro.core.calibration import volumetric_model as vm
         from pointspro.core.calibration.fiducials import count_study, fit_affine, monte_carlo
-        from pointspro.core.calibration.gp import fit_gp
         from pointspro.core.figures import png_artifact
         from pointspro.core.io.text import read_table
         if "fiducial" not in cloud.channels:
             raise StepError("the cloud has no 'fiducial' channel (ball id of each probe point)")
         ctx.progress.check()
-        p = ctx.resolve(params.reference)
+        p = ctx.resolve(params.reference, "reference")
         ref_cols = read_table(p, ("fiducial", "x", "y", "z"))
         ref_ids = ref_cols["fiducial"].astype(int).tolist()
         centres = fit_centres(cloud, params.diameter)
@@ -143,13 +143,7 @@ class FiducialsStep(Step):
             ctx.progress.update(0.3, "Monte Carlo")
             mc = monte_carlo(ref, meas, sm, sr, centre[None, :], params.monte_carlo_runs)[0]
         ctx.progress.update(0.45, "Gaussian process")
-        gps, gp_specs, loo = {}, {}, {}
-        for k, name in enumerate(("ex", "ey", "ez")):
-            ctx.progress.check()
-            gp, info = fit_gp(meas, e[:, k], Q=params.Q)
-            gps[name] = gp
-            gp_specs[name] = vm.encode_gp(gp, info["chosen"], meas, e[:, k])
-            loo[name] = {kk: v * 1e3 for kk, v in info["loo_rms"].items()} | {"chosen": info["chosen"]}
+        gps, gp_specs, loo = vm.fit_error_gps(meas, e, Q=params.Q, check=ctx.progress.check)
         ctx.progress.update(0.85, "grid")
         axes = [np.linspace(lo[d], hi[d], params.grid) for d in range(3)]
         G = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
@@ -157,8 +151,7 @@ class FiducialsStep(Step):
         std = np.column_stack([gps[n].predict(G, return_std=True)[1] for n in ("ex", "ey", "ez")])
         grid_csv = "x,y,z,ex,ey,ez,ux,uy,uz\n" + "".join(
             ",".join(repr(float(v)) for v in row) + "\n" for row in np.column_stack([G, pred, std]))
-        model_text = vm.dumps({"transform": fit.to_dict(), "workspace": np.column_stack([lo, hi]).tolist(),
-                               "gp": gp_specs, "loo_rms_um": loo})
+        model_text = vm.model_text(fit, meas, gp_specs, loo)
         counts = list(range(4, len(ids) + 1, max((len(ids) - 4) // 8, 1)))
         report = {
             "fiducials": len(ids), "sigma_measured_um": sm * 1e3, "sigma_reference_um": sr * 1e3,
@@ -182,28 +175,6 @@ class FiducialsStep(Step):
         return StepResult(cloud.replace(), report, arts)
 
 
-def ball_points(centres, diameter=9.997, per_ball=20, patch=6.0, noise=0.0, seed=0):
-    """Probe points on the top caps of balls (a 6 × 6 mm patch, as 000), with a `fiducial` channel."""
-    rng = np.random.default_rng(seed)
-    R = diameter / 2
-    k = int(np.ceil(np.sqrt(per_ball)))
-    u = (np.arange(k) / max(k - 1, 1) - 0.5) * patch
-    U, V = [a.ravel()[:per_ball] for a in np.meshgrid(u, u)]
-    pts, ids = [], []
-    for i, c in enumerate(np.asarray(centres, float)):
-        w = np.sqrt(R * R - U * U - V * V)
-        p = c + np.column_stack([U, V, w])
-        p = p + rng.normal(0, noise, p.shape)
-        pts.append(p)
-        ids.append(np.full(len(p), i + 1))
-    return np.vstack(pts), np.concatenate(ids)
-
-
-def _example_layout():
-    g = np.array([[x, y, z] for x in (-90.0, 90.0) for y in (-15.0, 15.0) for z in (5.0, 45.0)])
-    return np.vstack([g, [[0.0, 0.0, 25.0], [40.0, -10.0, 15.0]]])
-
-
 FiducialsStep.example_cloud = classmethod(lambda cls, cloud: _example_cloud())
 FiducialsStep.example_params = classmethod(lambda cls: _example_params())
 
@@ -211,9 +182,8 @@ FiducialsStep.example_params = classmethod(lambda cls: _example_params())
 def _example_cloud():
     from pointspro.core import PointCloud
 
-    ref = _example_layout()
-    meas = ref @ np.array([[1, 2e-5, 0], [-2e-5, 1, 1e-5], [0, 0, 1.00001]]).T + [0.5, -0.2, 0.1]
-    pts, ids = ball_points(meas)
+    ref = example_layout()
+    pts, ids = ball_points(example_measured_centres(ref))
     return PointCloud.from_xyz(*pts.T, fiducial=ids)
 
 
@@ -222,7 +192,7 @@ def _example_params():
     from pathlib import Path
 
     d = Path(tempfile.mkdtemp(prefix="pointspro-fid-"))
-    ref = _example_layout()
+    ref = example_layout()
     np.savetxt(d / "reference.csv", np.column_stack([np.arange(1, len(ref) + 1), ref]), delimiter=",",
                header="fiducial,x,y,z", comments="", fmt="%.10g")
     return {"reference": str(d / "reference.csv"), "monte_carlo_runs": 100, "Q": 2}

@@ -15,7 +15,7 @@ from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class KinematicParams(Params):
-    map: str = param(help="kinematic_map.json (from the kinematic_map step), relative to the recipe")
+    map: str = param(file=True, help="kinematic_map.json (from the kinematic_map step), relative to the recipe")
     c: str = param("c", help="spindle-angle channel (deg)")
 
 
@@ -37,10 +37,12 @@ class KinematicStep(Step):
         ctx.progress.check()
         if params.c not in cloud.channels:
             raise StepError(f"the scan has no spindle-angle channel '{params.c}' (deg)")
-        p = ctx.resolve(params.map)
+        from pointspro.core.io.text import read_parameter_text
+
+        p = ctx.resolve(params.map, "map")
         if not p.is_file():
             raise InputError(f"{p}: kinematic map file not found")
-        m = KinematicMap.from_json(p.read_text(encoding="utf-8"), str(p))
+        m = KinematicMap.from_json(read_parameter_text(p, "kinematic map"), str(p))
         r = np.hypot(cloud.x, cloud.y)
         try:
             e = m(r, cloud[params.c])
@@ -72,5 +74,5 @@ class KinematicStep(Step):
         c = np.arange(0, 360, 30.0)
         m = KinematicMap(r, c, 1e-6 * np.outer(r / 1000, np.cos(np.deg2rad(2 * c))))
         p = Path(tempfile.mkdtemp(prefix="pointspro-kin-")) / "map.json"
-        p.write_text(m.to_json())
+        p.write_text(m.to_json(), encoding="utf-8")
         return {"map": str(p)}

@@ -16,10 +16,10 @@ from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class KinematicMapParams(Params):
-    straightness: str = param(help="CSV x, m1, m2: EZX reversal scans (mm)")
-    facial: str = param(help="CSV c, m1, m2, m3, m4: facial reversal readings (deg, mm)")
+    straightness: str = param(file=True, help="CSV x, m1, m2: EZX reversal scans (mm)")
+    facial: str = param(file=True, help="CSV c, m1, m2, m3, m4: facial reversal readings (deg, mm)")
     probe_distance: float = param(gt=0, unit="mm", help="distance L of the facial probe from the axis")
-    squareness: str | None = param(None, help="CSV x, m1, m2: scans along X at c = 0° and 180°; empty: "
+    squareness: str | None = param(None, file=True, help="CSV x, m1, m2: scans along X at c = 0° and 180°; empty: "
                                    "EB0C = 0")
     r_max: float | None = param(None, gt=0, unit="mm", help="largest radius of the map; empty: the "
                                 "straightness scan's reach")
@@ -52,17 +52,20 @@ class KinematicMapStep(Step):
         from pointspro.core.figures import png_artifact
         from pointspro.core.io.text import read_table
         from pointspro.core.kinematics.errormap import ARCSEC, build_map, periodic, undulations_per_rev
-        from pointspro.core.kinematics.reversal import (facial_reversal, squareness_reversal,
-                                                        straightness_reversal)
+        from pointspro.core.kinematics.reversal import (
+            facial_reversal,
+            squareness_reversal,
+            straightness_reversal,
+        )
         ctx.progress.check()
-        st = read_table(ctx.resolve(params.straightness), ("x", "m1", "m2"))
+        st = read_table(ctx.resolve(params.straightness, "straightness"), ("x", "m1", "m2"))
         ezx, flat_s = straightness_reversal(st["m1"], st["m2"])
-        fa = read_table(ctx.resolve(params.facial), ("c", "m1", "m2", "m3", "m4"))
+        fa = read_table(ctx.resolve(params.facial, "facial"), ("c", "m1", "m2", "m3", "m4"))
         ezc, ebc, flat_f = facial_reversal(fa["m1"], fa["m2"], fa["m3"], fa["m4"], params.probe_distance)
         ctx.progress.update(0.4, "squareness")
         eb0c = 0.0
         if params.squareness is not None:
-            sq = read_table(ctx.resolve(params.squareness), ("x", "m1", "m2"))
+            sq = read_table(ctx.resolve(params.squareness, "squareness"), ("x", "m1", "m2"))
             ebc_at = periodic(fa["c"], ebc)
             ezx_at = np.interp(sq["x"], np.sort(st["x"]), ezx[np.argsort(st["x"])])
             eb0c = squareness_reversal(sq["x"], sq["m1"], sq["m2"], float(ebc_at(0.0)),

@@ -19,10 +19,11 @@ them, until no point is above the threshold. On a clean measurement nothing exce
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Literal, Union
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import model_validator
 
 from pointspro.core.errors import StepError
 from pointspro.core.step import Context, Params, Step, StepResult, param
@@ -78,92 +79,17 @@ class KnnDenoiseStep(Step):
         channel = "residual" if "residual" in cloud.channels else "z"
         d = np.asarray(cloud[channel], dtype=np.float64)
         x, y = cloud.x, cloud.y
-        n = cloud.n
         self._check_input(x, y, d, params)
-        report: dict = {"method": params.method, "channel": channel, "warnings": []}
-        removed_pos: list[int] = []
-        omega_removed: list[float] = []
         if params.method == "paper":
-            keep = np.ones(n, dtype=bool)
             grid = OmegaGrid(x, y, d, params.window, params.spacing, params.interpolation)
-            field = grid.field()
-            report["interpolation"] = field.interpolation
-            if params.remove != "auto":
-                order = np.argsort(-field.omega, kind="stable")[: params.remove]
-                keep[order] = False
-                removed_pos, omega_removed = order.tolist(), field.omega[order].tolist()
-                threshold = float(field.omega[order[-1]]) if len(order) else None
-                om_kept = field.omega[keep]
-                rounds = 1
+            if params.remove == "auto":
+                removal = remove_by_rounds(grid, x, y, params, ctx.progress)
             else:
-                threshold, rounds = None, 0
-                while rounds < MAX_ROUNDS:
-                    ctx.progress.update(min(0.9, 0.1 + 0.2 * rounds), f"round {rounds + 1}")
-                    idx = np.flatnonzero(keep)
-                    s = field.signed
-                    sigma = 1.4826 * np.median(np.abs(s - np.median(s)))
-                    thr = params.threshold_sigma * sigma
-                    threshold = thr  # the one in force when the rounds stopped
-                    cand = np.flatnonzero(field.omega > thr)
-                    rounds += 1
-                    if cand.size == 0:
-                        break
-                    take = cand[_dominant(x[idx[cand]], y[idx[cand]], field.omega[cand], params.window)]
-                    keep[idx[take]] = False
-                    removed_pos += idx[take].tolist()
-                    omega_removed += field.omega[take].tolist()
-                    if keep.sum() < 4:
-                        raise StepError("auto removed nearly every point: the residual is not a surface "
-                                        "with outliers here — check the window and the input")
-                    grid.remove(idx[take])
-                    field = grid.field()
-                else:
-                    report["warnings"].append(f"stopped after {MAX_ROUNDS} rounds")
-                om_kept = field.omega
-                report["robust_sigma_um"] = float(sigma * 1e3)
-                report["threshold_sigma"] = params.threshold_sigma
+                removal = remove_largest_omega(grid, cloud.n, params.remove)
         else:
-            if params.method == "knn_mean":
-                score = knn_mean_distance(x, y, d, params.neighbours)
-                if params.remove == "auto":
-                    threshold = float(score.mean() + params.std_ratio * score.std())
-                    bad = score > threshold
-                else:
-                    order = np.argsort(-score, kind="stable")[: params.remove]
-                    bad = np.zeros(n, dtype=bool)
-                    bad[order] = True
-                    threshold = float(score[order[-1]]) if len(order) else None
-            else:
-                bad = statistical_open3d(x, y, d, params.neighbours, params.std_ratio)
-                score = knn_mean_distance(x, y, d, params.neighbours)
-                threshold = None
-            keep = ~bad
-            removed_pos = np.flatnonzero(bad).tolist()
-            omega_removed = score[bad].tolist()
-            om_kept = score[keep]
-            rounds = 1
+            removal = remove_by_peers(x, y, d, params)
         ctx.progress.update(0.95, "removing")
-        removed_pos = np.asarray(removed_pos, dtype=np.int64)
-        order = np.argsort(removed_pos)
-        removed_idx = cloud.index[removed_pos[order]]
-        omega_removed = np.asarray(omega_removed)[order]
-        report.update(
-            removed=int(removed_pos.size), removed_index=removed_idx.tolist(),
-            omega_removed_um=(omega_removed * 1e3).tolist(),
-            threshold_um=None if threshold is None else float(threshold) * 1e3,
-            omega_max_kept_um=float(om_kept.max() * 1e3) if om_kept.size else None,
-            rounds=rounds)
-        if removed_pos.size and om_kept.size:
-            report["separation"] = float(omega_removed.min() / max(om_kept.max(), 1e-300))
-        out = cloud.select(keep).replace(channels={"omega": om_kept})
-        omega_all = np.full(n, np.nan)
-        omega_all[keep] = om_kept
-        omega_all[removed_pos[order]] = omega_removed
-        from pointspro.core.figures import omega_map, png_artifact
-
-        arts = {"omega_map.png": png_artifact(omega_map, x, y, omega_all, ~keep,
-                                              title=f"ω ({params.method}), {removed_pos.size} removed")}
-        return StepResult(out, report, arts)
+        return _denoised(cloud, removal, params.method, channel)
 
     @staticmethod
     def _check_input(x, y, d, params):
@@ -204,3 +130,132 @@ def _dominant(x, y, om, window) -> np.ndarray:
     local_max = np.array([om[nb].max() for nb in tree.query_ball_point(np.column_stack([x, y]),
                                                                         r=2.0 * window)])
     return np.flatnonzero(om >= DOMINANCE * local_max)
+
+
+@dataclass
+class Removal:
+    """What one method decided: the points kept, the points removed (in the order it removed them)
+    with their score (ω, or the KNN distance), and what it reports of itself."""
+    keep: np.ndarray                 # bool, one per input point
+    removed_pos: list[int]           # positions in the input cloud, in removal order
+    score_removed: list[float]       # their ω (mm), same order
+    score_kept: np.ndarray           # ω (mm) of the kept points, in their order
+    threshold: float | None          # the score above which a point went (None: the method has none)
+    rounds: int
+    report: dict = field(default_factory=dict)     # method-specific entries, in report order
+    warnings: list[str] = field(default_factory=list)
+
+
+def robust_sigma(s: np.ndarray) -> float:
+    """σ = 1.4826 · median |s − median s| — the normal σ of s that outliers do not inflate."""
+    return 1.4826 * np.median(np.abs(s - np.median(s)))
+
+
+def remove_largest_omega(grid: OmegaGrid, n: int, count: int) -> Removal:
+    """`remove: N`, the paper's manual count: the N points of largest ω, in one pass, as the optician
+    chooses them (ties in the order of the input)."""
+    current = grid.field()
+    keep = np.ones(n, dtype=bool)
+    order = np.argsort(-current.omega, kind="stable")[:count]
+    keep[order] = False
+    threshold = float(current.omega[order[-1]]) if len(order) else None
+    return Removal(keep, order.tolist(), current.omega[order].tolist(), current.omega[keep], threshold, 1,
+                   {"interpolation": current.interpolation})
+
+
+def remove_by_rounds(grid: OmegaGrid, x, y, params: KnnDenoiseParams, progress) -> Removal:
+    """`remove: auto`. Each round, over the points still kept,
+
+        σ = 1.4826 · median |s − median s|,  s = D − window mean      (robust_sigma)
+        threshold = threshold_sigma · σ
+
+    removes the points above the threshold whose ω is at least DOMINANCE of the largest ω within 2a
+    of them (`_dominant`: the spike, not the neighbours whose windows it lifted), and ω is computed
+    again without them — until no point is above the threshold (or MAX_ROUNDS, with a warning)."""
+    keep = np.ones(len(x), dtype=bool)
+    current = grid.field()
+    entries: dict = {"interpolation": current.interpolation}
+    removed_pos: list[int] = []
+    omega_removed: list[float] = []
+    warnings: list[str] = []
+    threshold, rounds = None, 0
+    while rounds < MAX_ROUNDS:
+        progress.update(min(0.9, 0.1 + 0.2 * rounds), f"round {rounds + 1}")
+        idx = np.flatnonzero(keep)
+        sigma = robust_sigma(current.signed)
+        threshold = params.threshold_sigma * sigma  # the one in force when the rounds stop
+        cand = np.flatnonzero(current.omega > threshold)
+        rounds += 1
+        if cand.size == 0:
+            break
+        take = cand[_dominant(x[idx[cand]], y[idx[cand]], current.omega[cand], params.window)]
+        keep[idx[take]] = False
+        removed_pos += idx[take].tolist()
+        omega_removed += current.omega[take].tolist()
+        if keep.sum() < 4:
+            raise StepError("auto removed nearly every point: the residual is not a surface "
+                            "with outliers here — check the window and the input")
+        grid.remove(idx[take])
+        current = grid.field()
+    else:
+        warnings.append(f"stopped after {MAX_ROUNDS} rounds")
+    entries["robust_sigma_um"] = float(sigma * 1e3)
+    entries["threshold_sigma"] = params.threshold_sigma
+    return Removal(keep, removed_pos, omega_removed, current.omega, threshold, rounds, entries, warnings)
+
+
+def remove_by_peers(x, y, d, params: KnnDenoiseParams) -> Removal:
+    """The generic filters, for comparison (peers.py). `knn_mean`: score = mean Euclidean distance to
+    the k nearest neighbours in (x, y, D); auto removes score > mean + std_ratio · std, a count the
+    largest scores. `statistical`: open3d decides; the score is reported as knn_mean's."""
+    if params.method == "knn_mean":
+        score = knn_mean_distance(x, y, d, params.neighbours)
+        if params.remove == "auto":
+            threshold = float(score.mean() + params.std_ratio * score.std())
+            bad = score > threshold
+        else:
+            order = np.argsort(-score, kind="stable")[: params.remove]
+            bad = np.zeros(len(x), dtype=bool)
+            bad[order] = True
+            threshold = float(score[order[-1]]) if len(order) else None
+    else:
+        bad = statistical_open3d(x, y, d, params.neighbours, params.std_ratio)
+        score = knn_mean_distance(x, y, d, params.neighbours)
+        threshold = None
+    keep = ~bad
+    return Removal(keep, np.flatnonzero(bad).tolist(), score[bad].tolist(), score[keep], threshold, 1)
+
+
+def _denoised(cloud, removal: Removal, method: str, channel: str) -> StepResult:
+    """The kept points with their ω as a channel, the report (removed points in input order, µm) and
+    the ω map."""
+    removed_pos = np.asarray(removal.removed_pos, dtype=np.int64)
+    order = np.argsort(removed_pos)
+    removed_pos = removed_pos[order]
+    omega_removed = np.asarray(removal.score_removed)[order]
+    om_kept = removal.score_kept
+    threshold = removal.threshold
+    report: dict = {"method": method, "channel": channel, "warnings": removal.warnings, **removal.report}
+    report.update(
+        removed=int(removed_pos.size), removed_index=cloud.index[removed_pos].tolist(),
+        omega_removed_um=(omega_removed * 1e3).tolist(),
+        threshold_um=None if threshold is None else float(threshold) * 1e3,
+        omega_max_kept_um=float(om_kept.max() * 1e3) if om_kept.size else None,
+        rounds=removal.rounds)
+    if removed_pos.size and om_kept.size:
+        # how far the removed points stand out: smallest removed ω over the largest kept one
+        report["separation"] = float(omega_removed.min() / max(om_kept.max(), 1e-300))
+    out = cloud.select(removal.keep).replace(channels={"omega": om_kept})
+    arts = {"omega_map.png": _omega_map(cloud.x, cloud.y, removal.keep, om_kept, removed_pos, omega_removed,
+                                        f"ω ({method}), {removed_pos.size} removed")}
+    return StepResult(out, report, arts)
+
+
+def _omega_map(x, y, keep, om_kept, removed_pos, omega_removed, title: str):
+    """omega_map.png: ω of every input point, the removed ones marked."""
+    from pointspro.core.figures import omega_map, png_artifact
+
+    omega_all = np.full(len(x), np.nan)
+    omega_all[keep] = om_kept
+    omega_all[removed_pos] = omega_removed
+    return png_artifact(omega_map, x, y, omega_all, ~keep, title=title)

@@ -22,9 +22,15 @@ import numpy as np
 from pydantic import field_validator
 
 from pointspro.core.geometry.posed_fit import PosedSurfaceFit
+from pointspro.core.params.pose import (
+    FIVE_DOF,
+    INITIAL_HELP,
+    MAX_ITER_HELP,
+    InitialPose,
+    dof_for_surface,
+    validate_dof,
+)
 from pointspro.core.step import Context, Params, Step, StepResult, param
-
-from .._pose_params import FIVE_DOF, INITIAL_HELP, MAX_ITER_HELP, InitialPose, validate_dof
 
 
 class MisalignmentParams(Params):
@@ -49,13 +55,15 @@ class MisalignmentStep(Step):
     def run(self, cloud, params: MisalignmentParams, ctx: Context) -> StepResult:
         ctx.progress.check()
         surface = ctx.require_surface(self.id)
-        fit = PosedSurfaceFit(surface, cloud.xyz, params.dof, params.initial.as_dof(), "vertical",
+        dof, note = dof_for_surface(surface, params.dof, "dof" in params.model_fields_set)
+        fit = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "vertical",
                               max_iter=params.max_iterations, check=ctx.progress.check).fit()
         ctx.progress.update(0.9, "residual")
         part, residual = fit.part, fit.residuals  # p = Rᵀ(q − t) and z − sag(x, y) at the solution
         report = fit.report()
         report.update(residual_rms_um=float(np.sqrt(np.mean(residual ** 2)) * 1e3),
-                      residual_pv_um=float(np.ptp(residual) * 1e3), warnings=list(fit.warnings))
+                      residual_pv_um=float(np.ptp(residual) * 1e3),
+                      warnings=list(fit.warnings) + ([note] if note else []))
         if fit.surface is not surface:
             report["surface"] = fit.surface.describe()
         out = cloud.replace(xyz=part, channels={"residual": residual}, meta={"frame": "part"})

@@ -25,10 +25,16 @@ from pydantic import field_validator
 
 from pointspro.core.errors import StepError
 from pointspro.core.geometry.posed_fit import PosedSurfaceFit
+from pointspro.core.params.pose import (
+    FIVE_DOF,
+    INITIAL_HELP,
+    MAX_ITER_HELP,
+    InitialPose,
+    dof_for_surface,
+    validate_dof,
+)
 from pointspro.core.step import Context, Params, Step, StepResult, param
-from pointspro.core.surfaces import EvenAsphere
 
-from .._pose_params import FIVE_DOF, INITIAL_HELP, MAX_ITER_HELP, InitialPose, validate_dof
 from .normals import refined_normals, residual_slopes
 
 
@@ -83,7 +89,8 @@ class ProbeRadiusStep(Step):
         ctx.progress.check()
         surface = ctx.require_surface(self.id)
         s, rho_b = params.side, params.radius
-        fitter = PosedSurfaceFit(surface, cloud.xyz, params.dof, params.initial.as_dof(), "normal",
+        dof, note = dof_for_surface(surface, params.dof, "dof" in params.model_fields_set)
+        fitter = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "normal",
                                  offset=s * rho_b, max_iter=params.max_iterations,
                                  check=ctx.progress.check)
         fit = fitter.fit()
@@ -108,7 +115,7 @@ class ProbeRadiusStep(Step):
             probe_radius=rho_b, side=s, normals=params.normals,
             distance_residual_rms_um=float(np.sqrt(np.mean(e ** 2)) * 1e3),
             distance_residual_pv_um=float(np.ptp(e) * 1e3),
-            warnings=list(fit.warnings))
+            warnings=list(fit.warnings) + ([note] if note else []))
         if fit.surface is not surface:
             report["surface"] = fit.surface.describe()
         out = cloud.replace(xyz=contact, channels={"probe_residual": e})

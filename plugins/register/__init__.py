@@ -13,8 +13,11 @@ Output: the cloud in the mesh (part) frame; ``residual`` = signed distance to th
 on the +z side). The report gives the transform measuring → part as a 4 × 4 matrix, the rotation
 as angles about x, y, z (deg, R = Rz·Ry·Rx) and the RMS before and after.
 
-Mesh checks: no faces, non-manifold edges, inconsistent orientation, or holes (a sheet must have
-one outer boundary; a solid none) are errors naming the file.
+Mesh checks (core.io.mesh, read through pymeshlab — open3d for PLY): no faces, non-manifold edges
+or vertices, holes (a sheet has one outer boundary, its outline; a solid none: other boundary loops
+are holes), duplicated vertices, zero-area faces, inconsistent orientation. A broken mesh is refused
+in one line naming the file and each problem with its count, unless ``repair: true`` — then
+pymeshlab repairs it and the report lists what was repaired (``mesh_repaired``).
 """
 from __future__ import annotations
 
@@ -27,8 +30,11 @@ from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class RegisterParams(Params):
-    mesh: str | None = param(None, help="nominal mesh (STL/PLY) relative to the recipe; empty: the "
-                             "recipe's `surface:` (a mesh, or any analytic nominal)")
+    mesh: str | None = param(None, file=True, help="nominal mesh (STL, OBJ, OFF, PLY, 3MF) relative to "
+                             "the recipe; empty: the recipe's `surface:` (a mesh, or any analytic nominal)")
+    repair: bool = param(False, help="repair a broken mesh (non-manifold edges or vertices, holes, "
+                         "duplicated vertices, zero-area faces, inconsistent orientation) instead "
+                         "of refusing it; the report says what was repaired")
     init: Literal["identity", "centroid"] = param(
         "identity", help="start of ICP: as measured, or with the centroids matched")
     max_distance: float | None = param(
@@ -39,33 +45,13 @@ class RegisterParams(Params):
 
 
 def mesh_problems(vertices, triangles) -> list[str]:
-    """What makes a mesh unusable as a nominal: no faces, non-manifold edges (three or more faces on
-    one edge), or holes — a sheet (the optical surface) has one outer boundary, a closed solid none;
-    more boundary loops are holes. Vertices repeated per face (STL) are merged first. numpy edge
-    counting: open3d's manifold/orientability checks take ~20 s on a 10⁶-face CAD mesh."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    """What makes a mesh unusable as a nominal (core.io.mesh.check_mesh): no faces, non-manifold
+    edges or vertices, holes — a sheet (the optical surface) has one outer boundary, a closed solid
+    none; more boundary loops are holes —, duplicated vertices, zero-area faces, inconsistent
+    orientation. Each entry names a problem with its count."""
+    from pointspro.core.io.mesh import check_mesh
 
-    t = np.asarray(triangles, dtype=np.int64)
-    if t.ndim != 2 or len(t) == 0:
-        return ["it has no faces"]
-    _, inv = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
-    t = inv.reshape(-1)[t]
-    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
-    e = e[e[:, 0] != e[:, 1]]  # degenerate faces contribute no edge
-    edges, count = np.unique(e, axis=0, return_counts=True)
-    probs = []
-    if (count > 2).any():
-        probs.append(f"{int((count > 2).sum())} non-manifold edges (shared by three or more faces)")
-    b = edges[count == 1]
-    if len(b):
-        nv = int(t.max()) + 1
-        g = coo_matrix((np.ones(len(b)), (b[:, 0], b[:, 1])), shape=(nv, nv))
-        _, lab = connected_components(g, directed=False)
-        loops = len(np.unique(lab[np.unique(b)]))
-        if loops > 1:
-            probs.append(f"it is not watertight: {loops - 1} hole(s) inside its outer boundary")
-    return probs
+    return check_mesh(vertices, triangles).problems()
 
 
 def _target_points(surf, p, n):
@@ -114,39 +100,41 @@ class RegisterStep(Step):
     Params = RegisterParams
 
     def _load(self, params, ctx):
-        from pathlib import Path
-
+        """The nominal, its name, and what was repaired of its mesh (a list; empty: nothing)."""
+        from pointspro.core.io.mesh import check_mesh, repair_mesh
         from pointspro.core.surfaces.mesh import MeshSurface
 
         if params.mesh is None:
             surf = ctx.surface
             if surf is None:
                 raise StepError("no mesh given and the recipe has no nominal `surface:`")
-            return surf, getattr(surf, "source", None) or surf.kind
-        p = Path(params.mesh)
-        if not p.is_absolute() and ctx.base_dir is not None:
-            p = Path(ctx.base_dir) / p
+            name = getattr(surf, "source", None) or surf.kind
+            if not isinstance(surf, MeshSurface):
+                return surf, name, []
+            if surf.mesh_info is not None:  # read from a file: checked (and repaired) then
+                return surf, name, list(surf.mesh_info.get("repaired", []))
+            chk = check_mesh(surf.vertices, surf.triangles)
+            probs = chk.problems()
+            if not probs:
+                return surf, name, []
+            if not params.repair or chk.faces == 0:
+                raise InputError(f"{name}: unusable nominal mesh: {', '.join(probs)}"
+                                 + (" — fix the mesh or set repair: true" if chk.faces else ""))
+            try:
+                v, t, rep = repair_mesh(surf.vertices, surf.triangles, chk)
+            except InputError as e:
+                raise InputError(f"{name}: unusable nominal mesh: {e}") from None
+            return MeshSurface(v, t, surf.aperture, surf.source), name, rep.done
+        p = ctx.resolve(params.mesh, "mesh")  # relative to the recipe; only where it may reach
         if not p.is_file():
             raise InputError(f"{p}: nominal mesh file not found")
-        import open3d as o3d
-
-        m = o3d.io.read_triangle_mesh(str(p))
-        v, t = np.asarray(m.vertices), np.asarray(m.triangles)
-        probs = mesh_problems(v, t)
-        if probs:
-            raise InputError(f"{p}: unusable nominal mesh: {'; '.join(probs)}")
-        return MeshSurface(v, t, source=str(p)), str(p)
+        surf = MeshSurface.from_file(p, repair=params.repair)
+        return surf, str(p), list(surf.mesh_info.get("repaired", []))
 
     def run(self, cloud, params: RegisterParams, ctx: Context) -> StepResult:
         import open3d as o3d
 
-        surf, name = self._load(params, ctx)
-        from pointspro.core.surfaces.mesh import MeshSurface
-
-        if params.mesh is None and isinstance(surf, MeshSurface):
-            probs = mesh_problems(surf.vertices, surf.triangles)
-            if probs:
-                raise InputError(f"{name}: unusable nominal mesh: {'; '.join(probs)}")
+        surf, name, repaired = self._load(params, ctx)
         p = cloud.xyz
         if cloud.n < 6:
             raise StepError(f"{cloud.n} points cannot fix a rigid transform (6 parameters)")
@@ -208,6 +196,7 @@ class RegisterStep(Step):
         rz, ry, rx = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
         report = {
             "nominal": name, "triangles": int(len(getattr(surf, "triangles", ()))),
+            "mesh_repaired": repaired,
             "rx_deg": float(rx), "ry_deg": float(ry), "rz_deg": float(rz),
             "tx": float(T[0, 3]), "ty": float(T[1, 3]), "tz": float(T[2, 3]),
             "transform": T.tolist(),

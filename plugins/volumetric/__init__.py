@@ -17,7 +17,7 @@ from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class VolumetricParams(Params):
-    model: str = param(help="volumetric_model.json from the fiducials step, relative to the recipe")
+    model: str = param(file=True, help="volumetric_model.json from the fiducials step, relative to the recipe")
     frame: Literal["machine", "reference"] = param("machine", help="machine: correct in place; "
                                                    "reference: also map into the calibrated frame")
 
@@ -32,10 +32,12 @@ class VolumetricStep(Step):
         from pointspro.core.calibration import volumetric_model as vm
         from pointspro.core.calibration.fiducials import AffineFit
         ctx.progress.check()
-        p = ctx.resolve(params.model)
+        from pointspro.core.io.text import read_parameter_text
+
+        p = ctx.resolve(params.model, "model")
         if not p.is_file():
             raise InputError(f"{p}: volumetric model file not found")
-        spec = vm.loads(p.read_text(encoding="utf-8"), str(p))
+        spec = vm.loads(read_parameter_text(p, "volumetric model"), str(p))
         P = cloud.xyz
         e = np.empty_like(P)
         u = np.empty_like(P)
@@ -71,17 +73,19 @@ class VolumetricStep(Step):
 
 
 def _example_params():
-    """A model from the fiducials step's own example (contract test)."""
+    """A model calibrated on the fiducial steps' example layout (contract test)."""
     import tempfile
     from pathlib import Path
 
-    from pointspro.core.step import Context
-    from pointspro.plugins.fiducials import FiducialsStep
+    from pointspro.core.calibration import volumetric_model as vm
+    from pointspro.core.calibration.fiducials import example_layout, example_measured_centres, fit_affine
 
-    res = FiducialsStep().run(FiducialsStep.example_cloud(None),
-                              FiducialsStep.Params.model_validate(FiducialsStep.example_params()), Context())
+    ref = example_layout()
+    meas = example_measured_centres(ref)
+    fit = fit_affine(ref, meas, 1e-7, 0.2e-3)  # exact centres; σ_reference as the fiducials step's default
+    _, gp_specs, loo = vm.fit_error_gps(meas, fit.volumetric_errors, Q=2)
     d = Path(tempfile.mkdtemp(prefix="pointspro-vol-"))
-    (d / "volumetric_model.json").write_text(res.artifacts["volumetric_model.json"])
+    (d / "volumetric_model.json").write_text(vm.model_text(fit, meas, gp_specs, loo), encoding="utf-8")
     return {"model": str(d / "volumetric_model.json")}
 
 

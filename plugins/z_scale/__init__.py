@@ -15,7 +15,7 @@ from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class ZScaleParams(Params):
-    calibration: str | None = param(None, help="step-artefact scans (CSV x, z [, scan]), relative to "
+    calibration: str | None = param(None, file=True, help="step-artefact scans (CSV x, z [, scan]), relative to "
                                     "the recipe; give this or amplification")
     heights: list[float] = param(default_factory=list, unit="µm",
                                  help="calibrated step heights in the order along x")
@@ -45,7 +45,7 @@ class ZScaleStep(Step):
             from pointspro.core.calibration.zscale import calibrate
             from pointspro.core.io.text import read_table
 
-            p = ctx.resolve(params.calibration)
+            p = ctx.resolve(params.calibration, "calibration")
             cols = read_table(p, ("x", "z"))
             scan = cols.get("scan", np.zeros(cols["x"].size))
             cal = calibrate(cols["x"], cols["z"], scan, np.asarray(params.heights) * 1e-3)

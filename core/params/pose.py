@@ -1,4 +1,5 @@
-"""Parameter pieces shared by the steps that fit a pose (misalignment, probe_radius)."""
+"""Parameter pieces shared by the steps that fit a pose (misalignment, probe_radius; third-party steps
+may use them too)."""
 from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict
@@ -35,3 +36,29 @@ class InitialPose(BaseModel):
     def as_dof(self) -> dict:
         names = {"alpha_deg": "alpha", "beta_deg": "beta", "dx": "dx", "dy": "dy", "dz": "dz"}
         return {names[k]: v for k, v in self.model_dump().items() if v is not None}
+
+
+#: what a flat (a plane, core.surfaces is_flat) determines: its tilt and its height
+PLANE_DOF = ["alpha", "beta", "dz"]
+
+
+def dof_for_surface(surface, dof: list[str], explicit: bool) -> tuple[list[str], str | None]:
+    """The DOF to fit on ``surface`` and a note for the report.
+
+    A plane is unchanged by a shift along itself, so dx, dy (and a conic) are not determined: the
+    fit's normal matrix is singular, and its "uncertainties" are 10¹² mm (issue 15). With the
+    default DOF the fit on a flat takes alpha, beta, dz and says so; DOF named in the recipe that a
+    flat cannot determine are an error naming them."""
+    from pointspro.core.errors import StepError
+
+    if not (surface is not None and surface.is_flat()):
+        return dof, None
+    free = [d for d in dof if d in ("dx", "dy", "conic")]
+    if not free:
+        return dof, None
+    if explicit:
+        raise StepError(f"dof {free}: a flat (c = 0) is unchanged by a lateral shift, so "
+                        f"{', '.join(free)} cannot be fitted — use dof: [alpha, beta, dz]")
+    kept = [d for d in dof if d not in free]
+    return kept, (f"the nominal is a flat: fitted {', '.join(kept)} (a plane determines its tilt and "
+                  f"height, not {', '.join(free)})")

@@ -1,0 +1,71 @@
+"""The pupil of a pupil-based quantity (Zernike fit, PVr): its centre and normalisation radius.
+
+Where the centre comes from (docs/conventions.md, "Pupil"):
+
+1. given by the recipe (``centre: [x, y]`` on the step) — always wins;
+2. a nominal surface with an axis (any surface but a flat): its axis, x = y = 0 of the part frame,
+   where `misalignment`/`probe_radius` put the data; the radius is half the surface's aperture when it
+   has one;
+3. otherwise (a map with no nominal, or a flat, which has no axis): the centre of the **bounding box**
+   of the measured points, and the smallest radius about it that holds every point.
+
+Why the bounding box and not the centroid: an interferometer's map is a disk or a rectangle sampled
+on a grid with dropouts; the centroid moves with the dropouts and with uneven sampling (a star or a
+spiral scan is denser at the centre, a partial map leans to its full side), while the bounding box's
+centre is the centre of a circular or rectangular aperture whatever the sampling. A file's own
+origin (usually a corner: MetroPro, Digital Surf, X3P) is never used — on a corner-origin map the data
+fill one quadrant of the unit disk, where tilt and power are nearly the same function and a 36-term
+fit is singular (issue 15: 155.6 µm of "residual" from 0.013 µm of heights).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Pupil:
+    center: tuple[float, float]  # mm, in the cloud's frame
+    radius: float  # mm
+    how: str  # where the centre came from, in words (for the report)
+
+    def report(self) -> dict:
+        return {"centre_mm": [float(self.center[0]), float(self.center[1])],
+                "norm_radius_mm": float(self.radius), "centre_from": self.how}
+
+
+def is_flat(surface) -> bool:
+    """A nominal with no axis: zero sag and zero slope everywhere (a plane)."""
+    if surface is None:
+        return True
+    probe = getattr(surface, "is_flat", None)
+    if probe is not None:
+        return bool(probe() if callable(probe) else probe)
+    return False
+
+
+def pupil_of(x, y, surface=None, center=None, radius: float | None = None) -> Pupil:
+    """The pupil of points (x, y) (mm) by the rules in the module doc."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if center is not None:
+        c = (float(center[0]), float(center[1]))
+        how = "given in the recipe"
+    elif not is_flat(surface):
+        c = (0.0, 0.0)
+        how = "the nominal surface's axis (part frame)"
+    elif x.size:
+        c = (0.5 * (float(x.min()) + float(x.max())), 0.5 * (float(y.min()) + float(y.max())))
+        how = ("bounding-box centre of the measured region (no nominal surface)" if surface is None
+               else "bounding-box centre of the measured region (a flat has no axis)")
+    else:
+        c = (0.0, 0.0)
+        how = "no points"
+    if radius is None and center is None and not is_flat(surface):
+        ap = getattr(surface, "aperture", None)
+        if ap:
+            radius = ap / 2
+    if radius is None:
+        radius = float(np.sqrt(np.max((x - c[0]) ** 2 + (y - c[1]) ** 2))) if x.size else 0.0
+    return Pupil(c, float(radius), how)

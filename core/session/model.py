@@ -1,0 +1,233 @@
+"""The window's model: a measurement, its recipe and the optician's edits, with undo and redo.
+
+Qt-free (napari's rule: the model never imports Qt; the window subscribes to its events), so every
+interaction is tested headless. Each deletion the optician makes is recorded as a `manual_edit` step
+(indices of the input rows), so the saved recipe replays the same cleanup in `pointspro --batch`.
+
+The recipe is a typed, immutable `Recipe`: each edit validates only what it changes (with the one
+Registry of the session) and returns a new Recipe, so the undo history (session.history) keeps old
+recipes and clouds by reference. Selections are core.session.selection's, files core.session.project's.
+
+Events (``session.events``, core.events): opened, recipe, steps, ran, deleted, restored, undo, redo —
+the model changed (``event.type`` says how) — and warning: something the optician must read although
+no action failed (``event.value``, one line), e.g. a project that opened but whose recipe did not run.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..cloud import PointCloud
+from ..errors import InputError, PointsProError, RecipeError
+from ..events import EmitterGroup
+from ..recipe import Recipe, load_yaml, make_step, parse_recipe
+from ..registry import Registry
+from . import project, selection
+from .history import History, Snapshot
+
+log = logging.getLogger(__name__)
+
+#: events that say the model changed (the window redraws on each)
+CHANGES = ("opened", "recipe", "steps", "ran", "deleted", "restored", "undo", "redo")
+EVENTS = CHANGES + ("warning",)
+
+
+class Session:
+    def __init__(self, registry: Registry | None = None):
+        self.input_path: Path | None = None
+        self.input_cloud: PointCloud | None = None
+        self.recipe: Recipe = Recipe([])
+        self.shown: PointCloud | None = None  # what the views display
+        self.last_result = None
+        self.events = EmitterGroup(self, *EVENTS)
+        self.history = History()
+        self._registry = registry
+
+    @property
+    def registry(self) -> Registry:
+        """The installed steps, read once per session (reading the entry points costs ~0.2 s)."""
+        if self._registry is None:
+            self._registry = Registry()
+        return self._registry
+
+    # -- changes and undo -----------------------------------------------------------------------------
+    def _snapshot(self) -> Snapshot:
+        return Snapshot(self.recipe, self.shown)
+
+    def _change(self, what: str, recipe: Recipe, shown: PointCloud | None = None, value=None) -> None:
+        """An undoable change: the recipe (and, when given, the displayed cloud) replaced."""
+        self.history.push(self._snapshot())
+        self.recipe = recipe
+        if shown is not None:
+            self.shown = shown
+        self.events[what](value)
+
+    @property
+    def can_undo(self) -> bool:
+        return self.history.can_undo
+
+    @property
+    def can_redo(self) -> bool:
+        return self.history.can_redo
+
+    def undo(self) -> None:
+        s = self.history.undo(self._snapshot())
+        if s is not None:
+            self.recipe, self.shown = s.recipe, s.shown
+            self.events.undo()
+
+    def redo(self) -> None:
+        s = self.history.redo(self._snapshot())
+        if s is not None:
+            self.recipe, self.shown = s.recipe, s.shown
+            self.events.redo()
+
+    # -- data -----------------------------------------------------------------------------------------
+    def open(self, path) -> None:
+        """Read a measurement; on error nothing changes and the InputError says why."""
+        from ..io import read_cloud
+
+        cloud = read_cloud(Path(path), **self.recipe.input)  # the recipe's reader options
+        self.input_path, self.input_cloud, self.shown = Path(path), cloud, cloud
+        self.history.clear()
+        self.events.opened(self.input_path)
+
+    def set_recipe(self, data: Recipe | dict, where: str = "recipe") -> None:
+        """Replace the recipe (a Recipe, or a mapping validated whole first: on error nothing
+        changes)."""
+        recipe = data if isinstance(data, Recipe) else parse_recipe(data, where, self.registry)
+        self._change("recipe", recipe)
+
+    def load_recipe(self, path) -> None:
+        p = Path(path)
+        if not p.is_file():
+            raise RecipeError(f"{p}: recipe file not found")
+        self.set_recipe(load_yaml(p.read_text(encoding="utf-8"), str(p)), str(p))
+
+    # -- pipeline editing ---------------------------------------------------------------------------
+    @property
+    def steps(self) -> list[dict]:
+        """The steps as the recipe file writes them (``{id: non-default params}``, ``enabled: false``
+        when disabled): a fresh list each time — editing it changes nothing; edit through the methods
+        below (or read ``recipe.steps``, the typed steps)."""
+        return [s.to_yaml_entry() for s in self.recipe.steps]
+
+    def add_step(self, step_id: str, params: dict | None = None, at: int | None = None) -> None:
+        """RecipeError naming the step (unknown) or the key (invalid value); nothing changes then."""
+        position = (len(self.recipe.steps) if at is None else at) + 1
+        step = make_step(step_id, params, self.registry, position)
+        self._change("steps", self.recipe.inserted(step, at))
+
+    def remove_step(self, i: int) -> None:
+        self._change("steps", self.recipe.removed(i))
+
+    def move_step(self, i: int, j: int) -> None:
+        self._change("steps", self.recipe.moved(i, j))
+
+    def set_params(self, i: int, params: dict) -> None:
+        """New parameters for step i; RecipeError naming the key when a value is invalid."""
+        self._change("steps", self.recipe.with_params(i, params, self.registry))
+
+    def set_enabled(self, i: int, enabled: bool) -> None:
+        self._change("steps", self.recipe.with_enabled(i, enabled))
+
+    # -- running ------------------------------------------------------------------------------------
+    def compute(self, upto: int | None = None, progress=None):
+        """Run the recipe (steps before ``upto``) on the input and return the result without changing
+        the session — safe in a worker thread (it reads one snapshot of the recipe and the input,
+        both immutable)."""
+        from ..pipeline import run_pipeline
+
+        recipe, cloud = self.recipe, self.input_cloud
+        if cloud is None:
+            raise InputError("open a measurement first")
+        return run_pipeline(cloud, recipe, progress=progress, upto=upto)
+
+    def accept(self, result) -> None:
+        """Show a computed result (undoable)."""
+        self.history.push(self._snapshot())
+        self.last_result = result
+        self.shown = result.cloud
+        self.events.ran(result)
+
+    def run(self, upto: int | None = None, progress=None):
+        """Run the recipe on the input; the result becomes what is shown."""
+        result = self.compute(upto, progress)
+        self.accept(result)
+        return result
+
+    # -- selection and cleanup ----------------------------------------------------------------------
+    def select_rectangle(self, x0, x1, y0, y1) -> np.ndarray:
+        return selection.rectangle(self.shown, x0, x1, y0, y1)
+
+    def select_lasso(self, polygon) -> np.ndarray:
+        return selection.lasso(self.shown, polygon)
+
+    def select_threshold(self, channel: str, value: float, above: bool = True) -> np.ndarray:
+        return selection.threshold(self.shown, channel, value, above)
+
+    def delete(self, mask, note: str = "deleted in the window") -> int:
+        """Remove the selected points; recorded as a manual_edit step (their input rows)."""
+        mask = np.asarray(mask, dtype=bool)
+        n = int(mask.sum())
+        if n == 0:
+            return 0
+        rows = np.sort(self.shown.index[mask]).tolist()
+        step = make_step("manual_edit", {"remove": rows, "note": note}, self.registry,
+                         len(self.recipe.steps) + 1)
+        self._change("deleted", self.recipe.inserted(step), self.shown.select(~mask), n)
+        return n
+
+    def restore_all(self) -> None:
+        """Drop every manual_edit step (undoable)."""
+        recipe = self.recipe.with_steps([s for s in self.recipe.steps if s.id != "manual_edit"])
+        self.history.push(self._snapshot())
+        self.recipe, self.shown = recipe, self.input_cloud
+        self.events.restored()
+
+    # -- projects -----------------------------------------------------------------------------------
+    def project_text(self, project_path: Path) -> str:
+        return project.project_text(self.recipe, self.input_path, project_path)
+
+    def save_project(self, path) -> None:
+        project.write_project(Path(path), self.recipe, self.input_path)
+
+    def save_recipe(self, path) -> None:
+        """The recipe alone (what `pointspro --batch` replays), written atomically."""
+        project.write_recipe(Path(path), self.recipe)
+
+    def open_project(self, path) -> None:
+        """Open a project; a moved data file or a broken recipe is an error and nothing changes.
+
+        A project with manual edits is run at once so the view shows the cleaned cloud. When that
+        run fails the project stays open (its data and recipe are valid: the optician fixes the
+        step in the window) and the reason is the ``warning`` event — it never passes silently."""
+        from ..io import read_cloud
+
+        path = Path(path)
+        data = project.load_project(path)
+        recipe = parse_recipe(project.project_recipe(data), str(path), self.registry)
+        data_path = project.project_data_file(path, data)
+        cloud = read_cloud(data_path, **recipe.input)  # the recipe's reader options
+        self.input_path, self.input_cloud = data_path, cloud
+        self.recipe = recipe
+        self.history.clear()
+        self.shown = cloud
+        self.events.opened(data_path)
+        if any(s.id == "manual_edit" for s in recipe.steps):
+            try:
+                self.run()
+            except PointsProError as e:
+                msg = (f"{path}: the project opened, but its recipe did not run, so its deleted points "
+                       f"are still shown — {e}")
+                log.warning("%s", msg)
+                self.events.warning(msg)
+
+    def export_cloud(self, path) -> None:
+        from ..io import write_cloud
+
+        if self.shown is None:
+            raise InputError("nothing to export")
+        write_cloud(self.shown, Path(path))

@@ -1,0 +1,123 @@
+"""Issue 18: one bug must not sink the night. A third-party step that raises anything (here a
+ZeroDivisionError on one input) fails that input alone — sequentially, in the process pool and on
+Dask — with one line naming the input and the step, the traceback in summary.json; the others are
+complete; exit 1. Repeated steps keep their artifacts apart."""
+from __future__ import annotations
+
+import json
+import textwrap
+
+import numpy as np
+import pytest
+
+from .conftest import EXAMPLE, write
+
+BUGGY = '''
+from pointspro.core.step import Params, Step, StepResult
+
+
+class BuggyParams(Params):
+    pass
+
+
+class BuggyStep(Step):
+    id = "buggy"
+    title = "A third party's step with a bug"
+    summary = "divides by zero on inputs whose name holds 'bad'"
+    Params = BuggyParams
+
+    def run(self, cloud, params, ctx):
+        if "bad" in str(cloud.meta.get("source", "")):
+            1 / 0
+        return StepResult(cloud.replace(), {"ok": True}, {"buggy.txt": "fine"})
+'''
+
+
+@pytest.fixture
+def buggy_package(tmp_path, monkeypatch):
+    """An installed third-party package with a `pointspro.steps` entry point (a real dist-info on
+    sys.path and PYTHONPATH, so spawned workers and Dask's see it too)."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "buggy_step.py").write_text(BUGGY, encoding="utf-8")
+    dist = site / "buggy_step-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: buggy-step\nVersion: 0.1\n", encoding="utf-8")
+    (dist / "entry_points.txt").write_text("[pointspro.steps]\nbuggy = buggy_step:BuggyStep\n", encoding="utf-8")
+    monkeypatch.syspath_prepend(str(site))
+    import os
+
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(site),
+                                                                    os.environ.get("PYTHONPATH")])))
+    return site
+
+
+def _inputs(tmp_path):
+    src = (EXAMPLE / "asphere_cmm.csv").read_text(encoding="utf-8")
+    return [write(tmp_path / name, src) for name in ("bad_first.csv", "good2.csv", "good3.csv")]
+
+
+@pytest.mark.parametrize("mode", [["--workers", "1"], ["--workers", "2"],
+                                  ["--scheduler", "local", "--workers", "2"]],
+                         ids=["sequential", "processes", "dask"])
+def test_a_bug_in_a_step_fails_one_input_and_the_batch_goes_on(buggy_package, run_cli, tmp_path, mode):
+    recipe = write(tmp_path / "r.yaml", textwrap.dedent("""\
+        pointspro: 1
+        surface: {type: even_asphere, c: 3.3333333e-4, k: -0.98, A: {4: 7.0e-13, 6: 1.0e-19}}
+        steps:
+          - misalignment: {}
+          - buggy: {}
+        """))
+    files = _inputs(tmp_path)
+    code, out, err = run_cli("--batch", recipe, *files, "--out", tmp_path / "o", "--quiet", *mode)
+    assert code == 1, err
+    line = f"{files[0]}: step 2 'buggy': internal error ZeroDivisionError: division by zero — please report"
+    assert line in err
+    assert "Traceback" not in err  # only with --debug
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    assert [e["status"] for e in s["inputs"]] == ["failed", "ok", "ok"]
+    assert "ZeroDivisionError" in s["inputs"][0]["traceback"] and "buggy_step.py" in s["inputs"][0]["traceback"]
+    assert s["inputs"][1]["traceback"] is None
+    for f in files[1:]:
+        assert (tmp_path / "o" / f.stem / "buggy.txt").read_text(encoding="utf-8") == "fine"
+    assert not (tmp_path / "o" / files[0].stem).exists()
+    code, out, err = run_cli("--batch", recipe, files[0], "--out", tmp_path / "d", "--debug", *mode)
+    assert "Traceback" in err and "ZeroDivisionError" in err
+
+
+def test_run_pipeline_turns_a_bug_into_an_internal_error_naming_the_step(buggy_package):
+    from pointspro.core.cloud import PointCloud
+    from pointspro.core.errors import InternalError
+    from pointspro.core.pipeline import run_pipeline
+    from pointspro.core.recipe import parse_recipe
+
+    cloud = PointCloud(np.zeros((3, 3)) + np.arange(3.0)[:, None], {}, {"source": "x/bad.csv"})
+    with pytest.raises(InternalError, match=r"^step 1 'buggy': internal error ZeroDivisionError"):
+        run_pipeline(cloud, parse_recipe({"pointspro": 1, "steps": [{"buggy": {}}]}))
+
+
+def test_repeated_steps_keep_their_artifacts_apart(tmp_path, run_cli):
+    recipe = write(tmp_path / "r.yaml", textwrap.dedent("""\
+        pointspro: 1
+        surface: {type: even_asphere, c: 3.3333333e-4, k: -0.98, A: {4: 7.0e-13, 6: 1.0e-19}}
+        steps:
+          - misalignment: {}
+          - knn_denoise: {window: 15.0, remove: auto}
+          - knn_denoise: {window: 30.0, remove: 0}
+        """))
+    code, out, err = run_cli("--batch", recipe, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o",
+                             "--quiet")
+    assert code == 0, err
+    folder = tmp_path / "o" / "asphere_cmm"
+    names = {p.name for p in folder.iterdir()}
+    firsts = {n[2:] for n in names if n.startswith("2_")}
+    seconds = {n[2:] for n in names if n.startswith("3_")}
+    assert firsts and firsts == seconds  # both steps' files, under their positions
+    assert "misalignment.png" in names  # a step that runs once keeps the plain name
+    rep = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+    arts = [st["artifacts"] for st in rep["steps"]]
+    assert all(a.startswith("2_") for a in arts[1]) and all(a.startswith("3_") for a in arts[2])
+    for a in arts[1] + arts[2]:
+        assert (folder / a).is_file()
+    png = sorted(n for n in firsts if n.endswith(".png"))[0]
+    assert (folder / f"2_{png}").read_bytes() != (folder / f"3_{png}").read_bytes()
