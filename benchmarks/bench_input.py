@@ -105,6 +105,7 @@ def stage_table(recipe: Path, data: Path, out: Path, profile: bool = False) -> l
     result.summary()
     rows.append(("summary (RMS, PV, PVr, slope RMS)", time.perf_counter() - t0))
     timings: dict = {}
+    out.mkdir(parents=True, exist_ok=True)
     write_outputs(out / data.stem, str(data), rec, result, timings=timings)
     rows += [(f"write {k}", v) for k, v in timings.items()]
     if prof is not None:

@@ -201,3 +201,15 @@ def test_report_html_is_self_contained_with_figures(tmp_path, run_cli):
     assert s["pvr_um"] <= s["pv_um"] * 1.5
     for name in ("map.csv", "map.x3p", "map.asc", "zernike.csv"):
         assert (folder / name).is_file()
+
+
+@pytest.mark.parametrize("n", [64, 65, 7])
+def test_periodogram_in_numpy_equals_scipy(n):
+    from scipy.signal import periodogram
+
+    from pointspro.core.metrics.profiles import periodogram_hann
+
+    x = np.random.default_rng(n).normal(size=(5, n))
+    f, p = periodogram_hann(x, fs=2.5)
+    f0, p0 = periodogram(x, fs=2.5, window="hann", detrend=False, scaling="density", axis=-1)
+    assert np.allclose(f, f0, rtol=1e-15, atol=0) and np.allclose(p, p0, rtol=1e-12, atol=0)

@@ -6,7 +6,7 @@ spacing — the azimuthal average an optician reads the rotationally symmetric z
 
 PSD (ISO 10110-8 / ISO 25178-2 conventions, one-sided in 1-D): with the Hann window w, of the
 mean-removed heights, per unit length
-    1-D:  PSD(f) = 2 Δx |Σ w z e^{−2πi f x}|² / (N Σw²/N)        (scipy.signal.periodogram)
+    1-D:  PSD(f) = 2 Δx |Σ w z e^{−2πi f x}|² / (N Σw²/N)        (scipy.signal.periodogram's definition)
     2-D:  PSD(fx, fy) = Δx Δy |FFT2(w z)|² / (Nx Ny mean(w²))
 so that ∫ PSD df = variance of z (Parseval; tested). Unmapped nodes count as zero after the mean is
 removed and the density is divided by the mapped fraction (the usual correction for a circular
@@ -62,18 +62,34 @@ def _filled(grid):
 
 def psd_1d(grid, axis: str = "x"):
     """(f (1/mm), PSD (mm³)) averaged over the map's rows (axis 'x') or columns ('y')."""
-    from scipy.signal import periodogram
-
     zz, frac = _filled(grid)
     v = np.isfinite(grid.z)
     data, valid = (zz, v) if axis == "x" else (zz.T, v.T)
     rows = valid.mean(axis=1) > 0.5  # lines at least half inside the map
     if not rows.any():
         raise ValueError("no grid line is half inside the map")
-    f, p = periodogram(data[rows], fs=1.0 / grid.spacing, window="hann", detrend=False,
-                       scaling="density", axis=-1)
+    f, p = periodogram_hann(data[rows], fs=1.0 / grid.spacing)
     fill = valid[rows].mean(axis=1)[:, None]
     return f, np.mean(p / fill, axis=0)
+
+
+def periodogram_hann(x, fs: float):
+    """(f, one-sided PSD) of each row of ``x`` with a periodic Hann window, density scaling, no
+    detrending — scipy.signal.periodogram(x, fs, window="hann", detrend=False, scaling="density")
+    in numpy alone (tests/test_maps.py compares them): importing scipy.signal (and with it
+    scipy.stats) cost a batch 0.6 s for this one function.
+
+        w_n = ½ − ½ cos(2πn/N),   P(f_k) = c_k |Σ_n w_n x_n e^{−2πikn/N}|² / (fs Σ w_n²),
+        c_k = 2 except at f = 0 and (N even) the Nyquist frequency, where c_k = 1."""
+    x = np.asarray(x, dtype=np.float64)
+    n = x.shape[-1]
+    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
+    p = np.abs(np.fft.rfft(x * w, axis=-1)) ** 2 / (fs * np.sum(w * w))
+    if n % 2:
+        p[..., 1:] *= 2.0
+    else:
+        p[..., 1:-1] *= 2.0
+    return np.fft.rfftfreq(n, 1.0 / fs), p
 
 
 def psd_2d(grid):

@@ -74,6 +74,22 @@ class EvenAsphere(SurfaceOfRevolution):
             g = g + n * a * r ** (n - 2)
         return g
 
+    def profile_r(self, r):
+        """(f, f', f'') with one square root S and the polynomial's powers shared: one domain check
+        and one root per Newton step of the foot-point solve instead of three (~10 % of its time)."""
+        r = np.asarray(r, dtype=np.float64)
+        r2 = r * r
+        s = self._root(r2)
+        z = self.c * r2 / (1.0 + s)
+        g = self.c / s  # f'/r
+        h = g / (s * s)  # f''
+        for n, a in self.A.items():
+            rn2 = r ** (n - 2)
+            z = z + a * (rn2 * r2)
+            g = g + n * a * rn2
+            h = h + n * (n - 1) * a * rn2
+        return z, g * r, h
+
     def curvature_r(self, r) -> np.ndarray:
         """d²z/dr² (1/mm): conic part c / S³ (S = sqrt(1 − (1+k)c²r²)) plus Σ n(n−1) A_n r^(n−2)."""
         r = np.asarray(r, dtype=np.float64)

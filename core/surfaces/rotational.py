@@ -37,6 +37,12 @@ class SurfaceOfRevolution(NominalSurface):
         r = np.asarray(r, dtype=np.float64)
         return self.slope_over_r(r) * r
 
+    def profile_r(self, r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(f, f', f'') at r together — what a Newton step on the profile needs. Subclasses may share
+        work between the three (EvenAsphere: one square root instead of three)."""
+        r = np.asarray(r, dtype=np.float64)
+        return self.sag_r(r), self.slope_r(r), self.curvature_r(r)
+
     def principal_curvatures(self, r) -> tuple[np.ndarray, np.ndarray]:
         """(meridional, sagittal) curvatures (1/mm), positive when the centre of curvature is on +z.
 
@@ -62,11 +68,10 @@ class SurfaceOfRevolution(NominalSurface):
         zr = self.slope_r(rho_p)
         rho = rho_p - dz * zr / (1.0 + zr * zr)
         for _ in range(30):
-            z = self.sag_r(rho)
-            zr = self.slope_r(rho)
+            z, zr, zrr = self.profile_r(rho)
             e = zp - z
             h = (rho_p - rho) + e * zr
-            dh = -1.0 - zr * zr + e * self.curvature_r(rho)
+            dh = -1.0 - zr * zr + e * zrr
             step = h / dh
             rho = rho - step
             if np.max(np.abs(step), initial=0.0) <= 1e-15 * (1.0 + np.max(rho_p, initial=0.0)):
@@ -77,8 +82,14 @@ class SurfaceOfRevolution(NominalSurface):
         with np.errstate(invalid="ignore", divide="ignore"):
             cphi = np.where(rho_p > 0, p[:, 0] / rho_p, 1.0)
             sphi = np.where(rho_p > 0, p[:, 1] / rho_p, 0.0)
-        n = np.column_stack([-zr * cphi / w, -zr * sphi / w, 1.0 / w])
-        foot = np.column_stack([rho * cphi, rho * sphi, z])
+        n = np.empty((len(rho), 3))
+        np.multiply(-zr / w, cphi, out=n[:, 0])
+        np.multiply(-zr / w, sphi, out=n[:, 1])
+        np.divide(1.0, w, out=n[:, 2])
+        foot = np.empty((len(rho), 3))
+        np.multiply(rho, cphi, out=foot[:, 0])
+        np.multiply(rho, sphi, out=foot[:, 1])
+        foot[:, 2] = z
         return foot, n, (zp - z) * w
 
     def gradient(self, x, y):

@@ -34,28 +34,62 @@ def residual_slopes(xy: np.ndarray, e: np.ndarray, k: int = 16) -> tuple[np.ndar
 
     Each neighbourhood's 2 × 2 scatter matrix [[a, b], [b, c]] is diagonalised in closed form —
     λ± = (a + c)/2 ± √(((a − c)/2)² + b²), the larger eigenvector at φ = ½·atan2(2b, a − c) — instead
-    of a batched LAPACK call, and the sums are taken on (N, k) arrays instead of einsum over
-    (N, k, 2): 1,000,000 points in ~1.5 s instead of 6.8 s (issue 17), the same slopes to rounding."""
+    of a batched LAPACK call; the per-neighbourhood sums are row dot products (einsum) on (N, k)
+    arrays, the medians two order statistics (np.partition): 1,000,000 points in ~1.5 s instead of
+    6.8 s (issue 17), the same slopes to rounding (1e-14 relative)."""
+    from pointspro.core.parallel import thread_count
+
     n = len(xy)
     k = int(min(k, n))
-    _, idx = cKDTree(xy).query(xy, k=k)
-    ek = e[idx]  # (N, k)
-    local = np.median(ek, axis=1)
+    _, idx = cKDTree(xy).query(xy, k=k, workers=thread_count())
+    if k == 1:
+        idx = idx[:, None]
+    # rows in chunks: the (chunk, k) temporaries stay in cache instead of 128 MB arrays per operation
+    chunks = [slice(s, s + _CHUNK) for s in range(0, n, _CHUNK)]
+    local = np.empty(n)
+    for c in chunks:
+        local[c] = _row_median(e[idx[c]])
     dev = e - local
     sigma = 1.4826 * np.median(np.abs(dev))
     outlier = np.abs(dev) > 6.0 * sigma if sigma > 0 else np.zeros(n, dtype=bool)
     if outlier.any():
         e = np.where(outlier, local, e)
-        ek = e[idx]
-    ek -= ek.mean(axis=1, keepdims=True)  # ev: residuals about their neighbourhood mean
-    dx = xy[idx, 0]
-    dx -= dx.mean(axis=1, keepdims=True)
-    dy = xy[idx, 1]
-    dy -= dy.mean(axis=1, keepdims=True)
-    a, b, c = (dx * dx).sum(1), (dx * dy).sum(1), (dy * dy).sum(1)  # scatter matrix
-    rx, ry = (dx * ek).sum(1), (dy * ek).sum(1)
-    half = 0.5 * (a - c)
-    root = np.hypot(half, b)
+    v1x, v1y, b1, b2, inv_big, inv_small, fit_sd = (np.empty(n) for _ in range(7))
+    for c in chunks:
+        (v1x[c], v1y[c], b1[c], b2[c], inv_big[c], inv_small[c],
+         fit_sd[c]) = _local_planes(xy[:, 0][idx[c]], xy[:, 1][idx[c]], e[idx[c]])
+    # noise of the local plane fits, then shrink what noise could make
+    s2 = np.median(fit_sd) ** 2
+
+    def shrink(bj, inv):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(bj != 0, np.clip(1.0 - 4.0 * s2 * inv / (bj * bj), 0.0, 1.0), 0.0)
+
+    b1 = b1 * shrink(b1, inv_big)
+    b2 = b2 * shrink(b2, inv_small)
+    return np.column_stack([v1x * b1 - v1y * b2, v1y * b1 + v1x * b2]), int(outlier.sum())
+
+
+_CHUNK = 1 << 15
+
+
+def _local_planes(dx, dy, ek):
+    """For neighbourhoods given as (m, k) arrays of x, y and residual: the larger eigenvector
+    (v1x, v1y) of the scatter matrix, the slope components b1, b2 along it and across, the inverse
+    eigenvalues used (0 for a direction left at the design normal), and the local plane fit's residual
+    standard deviation (3 parameters on k points)."""
+    k = dx.shape[1]
+    ones = np.full(k, 1.0 / k)
+    ek -= (ek @ ones)[:, None]  # about the neighbourhood mean
+    dx -= (dx @ ones)[:, None]
+    dy -= (dy @ ones)[:, None]
+
+    def rowdot(p, q):
+        return np.einsum("nk,nk->n", p, q)
+
+    a, b, c = rowdot(dx, dx), rowdot(dx, dy), rowdot(dy, dy)  # scatter matrix
+    rx, ry = rowdot(dx, ek), rowdot(dy, ek)
+    root = np.hypot(0.5 * (a - c), b)
     w_big, w_small = 0.5 * (a + c) + root, 0.5 * (a + c) - root
     phi = 0.5 * np.arctan2(2.0 * b, a - c)
     v1x, v1y = np.cos(phi), np.sin(phi)  # eigenvector of w_big; (−v1y, v1x) that of w_small
@@ -65,19 +99,18 @@ def residual_slopes(xy: np.ndarray, e: np.ndarray, k: int = 16) -> tuple[np.ndar
     b1 = (v1x * rx + v1y * ry) * inv_big  # slope components in the eigenbasis
     b2 = (-v1y * rx + v1x * ry) * inv_small
     sx, sy = v1x * b1 - v1y * b2, v1y * b1 + v1x * b2
-    # noise of the local plane fits (3 parameters on k points), then shrink what noise could make
     ek -= dx * sx[:, None]
     ek -= dy * sy[:, None]
-    sigma_e = np.median(np.sqrt(np.einsum("nk,nk->n", ek, ek) / max(k - 3, 1)))
-    s2 = sigma_e ** 2
+    return v1x, v1y, b1, b2, inv_big, inv_small, np.sqrt(rowdot(ek, ek) / max(k - 3, 1))
 
-    def shrink(bj, inv):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(bj != 0, np.clip(1.0 - 4.0 * s2 * inv / (bj * bj), 0.0, 1.0), 0.0)
 
-    b1 = b1 * shrink(b1, inv_big)
-    b2 = b2 * shrink(b2, inv_small)
-    return np.column_stack([v1x * b1 - v1y * b2, v1y * b1 + v1x * b2]), int(outlier.sum())
+def _row_median(a: np.ndarray) -> np.ndarray:
+    """np.median(a, axis=1), from the one or two middle order statistics (np.partition: 6× faster
+    than np.median on short rows; the same values — the mean of the two middle ones is (p + q)/2)."""
+    k = a.shape[1]
+    lo, hi = (k - 1) // 2, k // 2
+    p = np.partition(a, [lo, hi] if hi != lo else lo, axis=1)
+    return p[:, lo] if lo == hi else 0.5 * (p[:, lo] + p[:, hi])
 
 
 def refined_normals(n_design: np.ndarray, slopes: np.ndarray) -> np.ndarray:
