@@ -106,7 +106,7 @@ def stage_table(recipe: Path, data: Path, out: Path, profile: bool = False) -> l
     rows.append(("summary (RMS, PV, PVr, slope RMS)", time.perf_counter() - t0))
     timings: dict = {}
     out.mkdir(parents=True, exist_ok=True)
-    write_outputs(out / data.stem, str(data), rec, result, timings=timings)
+    write_outputs(out / data.stem, str(data), rec, result, timings=timings, fork_csv=True)
     rows += [(f"write {k}", v) for k, v in timings.items()]
     if prof is not None:
         import pstats

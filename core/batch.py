@@ -16,6 +16,7 @@ from typing import Callable
 
 from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
+from .io.background import BackgroundWrite
 from .pipeline import run_pipeline
 from .progress import CancelToken, Progress
 from .recipe import Recipe
@@ -70,12 +71,14 @@ def write_artifact(folder: Path, name: str, art) -> None:
 
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
-                  timings: dict | None = None) -> dict:
+                  timings: dict | None = None, fork_csv: bool = False) -> dict:
     """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
     artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
     and the window's File → Export report. ``figures``: "all", "summary" (form_error.png only) or
     "none" — the report says which were not drawn. ``timings``, when given, receives the seconds
-    spent on each file (benchmarks/bench_input.py's stage table)."""
+    spent on each file (benchmarks/bench_input.py's stage table). ``fork_csv``: cloud.csv may be
+    written by a forked process while the figures are drawn (core/io/background.py) — only the
+    batch's own single-threaded process asks for it."""
     from .report import SUMMARY_FIGURE, skipped_figures
 
     timings = {} if timings is None else timings
@@ -91,27 +94,39 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     report = build_report(input_path, recipe, result, figures, skipped)
     timings["report (summary)"] = time.perf_counter() - t0
     with atomic_dir(folder) as tmp:
-        timed("cloud.csv", lambda: write_csv(result.cloud, tmp / "cloud.csv"))
-        for name, art in result.artifacts.items():
-            if name not in skipped:
-                timed(name, lambda: write_artifact(tmp, name, art))
-        if has_map and SUMMARY_FIGURE not in skipped:
-            from .figures import save_png, scattered_map
+        # cloud.csv is formatted in a forked process while the figures are drawn, where a core is
+        # free (core/io/background.py); else here. Either way it is complete before the rename.
+        t1 = time.perf_counter()
+        csv = BackgroundWrite(write_csv, result.cloud, tmp / "cloud.csv", what=f"{folder.name}/cloud.csv",
+                              fork=fork_csv)
+        timings["cloud.csv" + (" (started in a forked process)" if csv.forked else "")] = \
+            time.perf_counter() - t1
+        try:
+            for name, art in result.artifacts.items():
+                if name not in skipped:
+                    timed(name, lambda: write_artifact(tmp, name, art))
+            if has_map and SUMMARY_FIGURE not in skipped:
+                from .figures import save_png, scattered_map
 
-            c = result.cloud
-            timed("form_error.png", lambda: save_png(scattered_map(
-                c.x, c.y, c["residual"], title="Form error (residual) after all steps"),
-                tmp / SUMMARY_FIGURE))
-        timed("report.json", lambda: (tmp / "report.json").write_text(dumps(report), encoding="utf-8"))
-        timed("report.html", lambda: (tmp / "report.html").write_text(render_html(report, tmp),
-                                                                       encoding="utf-8"))
+                c = result.cloud
+                timed("form_error.png", lambda: save_png(scattered_map(
+                    c.x, c.y, c["residual"], title="Form error (residual) after all steps"),
+                    tmp / SUMMARY_FIGURE))
+            timed("report.json", lambda: (tmp / "report.json").write_text(dumps(report),
+                                                                           encoding="utf-8"))
+            timed("report.html", lambda: (tmp / "report.html").write_text(render_html(report, tmp),
+                                                                           encoding="utf-8"))
+            if csv.forked:
+                timed("cloud.csv (waiting for the forked writer)", csv.wait)
+        finally:
+            csv.cancel()  # only if still running: an error above; the folder is then removed
     return report
 
 
 def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                   sink: Callable[[float, str], None] | None = None, token: CancelToken | None = None,
                   surface=None, log: logging.Logger | None = None,
-                  allowed_dirs=None, figures: str = "all") -> InputOutcome:
+                  allowed_dirs=None, figures: str = "all", fork_csv: bool = False) -> InputOutcome:
     """Read, run, write one input. Any exception but Cancelled → a failed outcome for this input
     alone (one line naming the input and the step or stage; the traceback kept for summary.json and
     --debug); Cancelled propagates."""
@@ -125,7 +140,8 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
         result = run_pipeline(cloud, recipe, progress=progress.sub(0.05, 0.9), surface=surface,
                               log=log, allowed_dirs=allowed_dirs)
         stage = "writing the outputs"
-        report = write_outputs(out_dir / stem, str(path), recipe, result, figures=figures)
+        report = write_outputs(out_dir / stem, str(path), recipe, result, figures=figures,
+                               fork_csv=fork_csv)
         progress.update(1.0, "written")
         return InputOutcome(str(path), True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"])

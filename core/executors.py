@@ -19,8 +19,9 @@ def run_sequential(recipe, surface, jobs, out_dir: Path, bar_factory=None,
     for k, (path, stem) in enumerate(jobs, 1):
         bar = bar_factory(k, path) if bar_factory else None
         try:
+            # the batch's own process: cloud.csv may be formatted by a fork beside the figures
             yield process_input(path, recipe, out_dir, stem, sink=bar, surface=surface,
-                                allowed_dirs=allowed_dirs, figures=figures)
+                                allowed_dirs=allowed_dirs, figures=figures, fork_csv=True)
         finally:
             if bar is not None:
                 bar.done()
