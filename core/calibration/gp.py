@@ -12,7 +12,8 @@ from several draws. With ~24 fiducials the marginal likelihood is multimodal and
 length scales, so the bounds come from the workspace (periods between the fiducial spacing and ten
 workspace sizes) and the kernel actually used is the one with the lowest leave-one-out error among the
 spectral mixture, RBF and Matérn 5/2 (each plus a constant and a white-noise term).
-LOO residuals in closed form: r_i = [K⁻¹y]_i / [K⁻¹]_ii (Rasmussen & Williams eq. 5.12).
+LOO residuals in closed form: r_i = [K⁻¹y]_i / [K⁻¹]_ii (Rasmussen & Williams eq. 5.12). The targets are
+normalised here (NormalisedGP), not by scikit-learn's normalize_y, so only its public API is used.
 """
 from __future__ import annotations
 
@@ -114,20 +115,71 @@ def spectral_mixture_from_data(X, y, Q: int = 10, seed: int = 0) -> SpectralMixt
                            variances_bounds=((1.0 / (10 * span)) ** 2, (1.0 / dmin) ** 2))
 
 
+def _scale(y) -> tuple[float, float]:
+    """Mean and standard deviation of the targets; a (near-)zero deviation becomes 1, as
+    scikit-learn's normalize_y does (sklearn.preprocessing's handling of zero scales)."""
+    y = np.asarray(y, dtype=np.float64)
+    mean, std = float(np.mean(y)), float(np.std(y))
+    if std < 10 * np.finfo(np.float64).eps:
+        std = 1.0
+    return mean, std
+
+
+class NormalisedGP:
+    """A GaussianProcessRegressor fitted (normalize_y=False) to the targets normalised here,
+    (y − y_mean) / y_std, so that nothing reads scikit-learn's private attributes. ``predict``
+    answers in the units of y, as ``GaussianProcessRegressor(normalize_y=True).predict`` would."""
+
+    def __init__(self, regressor, y_mean: float, y_std: float):
+        self.regressor = regressor
+        self.y_mean = float(y_mean)
+        self.y_std = float(y_std)
+
+    @classmethod
+    def fit(cls, regressor, X, y) -> NormalisedGP:
+        """Fit ``regressor`` (normalize_y=False) to the normalised y; returns the wrapper."""
+        if regressor.normalize_y:
+            raise ValueError("NormalisedGP normalises the targets itself: give normalize_y=False")
+        mean, std = _scale(y)
+        regressor.fit(X, (np.asarray(y, dtype=np.float64) - mean) / std)
+        return cls(regressor, mean, std)
+
+    @property
+    def kernel_(self):
+        return self.regressor.kernel_
+
+    @property
+    def alpha(self):
+        return self.regressor.alpha
+
+    def predict(self, X, return_std: bool = False):
+        if not return_std:
+            return self.y_std * self.regressor.predict(X) + self.y_mean
+        m, s = self.regressor.predict(X, return_std=True)
+        return self.y_std * m + self.y_mean, s * self.y_std
+
+
 def loo_rms(gp, X, y) -> float:
-    """Closed-form leave-one-out RMS of a fitted GaussianProcessRegressor (normalised targets)."""
+    """Closed-form leave-one-out RMS, in the units of y, of a fitted NormalisedGP (or of a plain
+    GaussianProcessRegressor: its normalize_y scale is recomputed from y, as it computed it)."""
     K = gp.kernel_(X)
     K[np.diag_indices_from(K)] += gp.alpha
     Ki = np.linalg.inv(K)
-    yy = (y - gp._y_train_mean) / gp._y_train_std if gp.normalize_y else y
+    if isinstance(gp, NormalisedGP):
+        mean, std = gp.y_mean, gp.y_std
+    elif gp.normalize_y:
+        mean, std = _scale(y)
+    else:
+        mean, std = 0.0, 1.0
+    yy = (np.asarray(y, dtype=np.float64) - mean) / std
     r = (Ki @ yy) / np.diag(Ki)
-    scale = gp._y_train_std if gp.normalize_y else 1.0
-    return float(np.sqrt(np.mean(r**2)) * np.mean(scale))
+    return float(np.sqrt(np.mean(r**2)) * std)
 
 
 def fit_gp(X, y, Q: int = 10, restarts: int = 5, seed: int = 0) -> tuple[object, dict]:
     """The GP with the best leave-one-out error among spectral mixture, RBF and Matérn 5/2.
-    Returns (GaussianProcessRegressor, {kernel: LOO RMS})."""
+    Returns (NormalisedGP, {"loo_rms": {kernel: LOO RMS}, "chosen": kernel}); the NormalisedGP's
+    ``predict``/``kernel_`` are those of a GaussianProcessRegressor, in the units of y."""
     import warnings
 
     from sklearn.exceptions import ConvergenceWarning
@@ -147,12 +199,12 @@ def fit_gp(X, y, Q: int = 10, restarts: int = 5, seed: int = 0) -> tuple[object,
     }
     loo, fitted = {}, {}
     for name, k in cands.items():
-        gp = GaussianProcessRegressor(k, normalize_y=True, n_restarts_optimizer=restarts,
-                                      random_state=seed, alpha=1e-10)
+        reg = GaussianProcessRegressor(k, normalize_y=False, n_restarts_optimizer=restarts,
+                                       random_state=seed, alpha=1e-10)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             try:
-                gp.fit(X, y)
+                gp = NormalisedGP.fit(reg, X, y)
             except (np.linalg.LinAlgError, ValueError):
                 continue
         loo[name] = loo_rms(gp, X, y)
