@@ -1,24 +1,62 @@
 """Atomic writes: write under a temporary name in the same folder, then rename into place.
 
 A crash or kill never leaves a half-written file that looks complete (DESIGN "Command line").
+
+The temporary file or folder is created with the modes any other tool's output gets — 0o666 for a
+file, 0o777 for a folder, less the process umask (``-rw-r--r--`` and ``drwxr-xr-x`` under the usual
+umask 022) — and keeps them through the rename. ``tempfile.mkstemp``/``mkdtemp`` would give 0600 and
+0700, private to the user, which a colleague or a results share cannot read. The kernel applies the
+umask itself (``os.open(..., 0o666)``, ``os.mkdir(..., 0o777)``), so it is never read nor changed
+here: no ``os.umask`` round trip, which is process-wide and races with other threads.
 """
 from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import shutil
-import tempfile
 from pathlib import Path
+
+_TRIES = 100
+
+
+def _temp_name(path: Path, suffix: str) -> Path:
+    return path.parent / f".{path.name}.{secrets.token_hex(4)}{suffix}"
+
+
+def make_temp_file(path: Path, suffix: str = ".partial") -> Path:
+    """Create an empty, new file beside ``path`` (mode 0o666 less the umask) and return its path."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(_TRIES):
+        tmp = _temp_name(path, suffix)
+        try:
+            fd = os.open(tmp, flags, 0o666)
+        except FileExistsError:
+            continue
+        os.close(fd)
+        return tmp
+    raise FileExistsError(f"{path.parent}: no free temporary name for {path.name}")  # pragma: no cover
+
+
+def make_temp_dir(path: Path, suffix: str = ".partial") -> Path:
+    """Create a new, empty folder beside ``path`` (mode 0o777 less the umask) and return its path."""
+    for _ in range(_TRIES):
+        tmp = _temp_name(path, suffix)
+        try:
+            os.mkdir(tmp, 0o777)
+        except FileExistsError:
+            continue
+        return tmp
+    raise FileExistsError(f"{path.parent}: no free temporary name for {path.name}")  # pragma: no cover
 
 
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path``; on success rename it to ``path``, else remove it."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
-    os.close(fd)
+    tmp = make_temp_file(path)
     try:
-        yield Path(tmp)
+        yield tmp
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -34,11 +72,11 @@ def atomic_dir(path):
     kept until the new one is ready).
     """
     path = Path(path)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    tmp = make_temp_dir(path)
     try:
         yield tmp
         if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+            old = make_temp_dir(path, ".old")  # reserves a free name; the old folder moves there
             os.rmdir(old)
             os.replace(path, old)
             os.replace(tmp, path)
