@@ -1,15 +1,25 @@
 """The pipeline dock: the recipe's steps (enable checkboxes, add from the installed steps, remove,
-reorder), a form generated from the selected step's Params (units, bounds and help as tooltips,
-invalid values marked in red with the message), Run all / Run to selected / Cancel and the progress.
+reorder), a form generated from the selected step's Params, Run all / Run to selected / Cancel and
+the progress.
 
-It edits the recipe only through core.session.Session, which validates each edit before it changes
-anything.
+The form has one widget per parameter (app.param_widgets, from core.forms' description: spin boxes
+with the unit as suffix and the bounds, check boxes, combo boxes, small tables for lists and
+mappings, an "auto" box where None means automatic; help and bounds as tooltips). Each value the
+user enters goes at once to the recipe through core.session.Session, which validates it with the
+step's Params before it changes anything: a refused value stays in its widget, marked in red with the
+message (also shown under the form), and is sent again with the next edit (so two parameters that
+must change together, a transform's pose and matrix, can), while the recipe keeps its valid values.
+The widgets show the recipe's values (the defaults where it sets none) and follow it on undo/redo.
 """
 from __future__ import annotations
+
+import functools
 
 from PySide6 import QtCore, QtWidgets
 
 from pointspro.core.errors import PointsProError
+
+from .param_widgets import ParamWidget, build_widget, fits
 
 
 class PipelineDock(QtWidgets.QDockWidget):
@@ -36,12 +46,21 @@ class PipelineDock(QtWidgets.QDockWidget):
             row.addWidget(b)
         lay.addLayout(row)
         self.form = QtWidgets.QFormLayout()
-        box = QtWidgets.QGroupBox("Parameters")
-        box.setLayout(self.form)
-        lay.addWidget(box)
-        self.apply = QtWidgets.QPushButton("Apply parameters")
-        self.apply.clicked.connect(self._apply)
-        lay.addWidget(self.apply)
+        self.form.setFieldGrowthPolicy(QtWidgets.QFormLayout.AllNonFixedFieldsGrow)
+        self.form.setLabelAlignment(QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
+        self.box = QtWidgets.QGroupBox("Parameters")
+        self.box.setLayout(self.form)
+        scroll = QtWidgets.QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QtWidgets.QFrame.NoFrame)
+        scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarAlwaysOff)
+        scroll.setWidget(self.box)
+        lay.addWidget(scroll, 2)
+        self.message = QtWidgets.QLabel()
+        self.message.setWordWrap(True)
+        self.message.setStyleSheet("color:#b00000")
+        self.message.hide()
+        lay.addWidget(self.message)
         row = QtWidgets.QHBoxLayout()
         self.run_all = QtWidgets.QPushButton("Run all")
         self.run_all.clicked.connect(lambda: win.start_run(None))
@@ -59,7 +78,9 @@ class PipelineDock(QtWidgets.QDockWidget):
         self.setWidget(w)
         self.list.currentRowChanged.connect(self._show_form)
         self.list.itemChanged.connect(self._toggled)
-        self.fields = {}
+        self.fields: dict[str, ParamWidget] = {}  # the form's widgets by parameter
+        self._form_of = None  # (row, step id, Params class) the form shows
+        self._pending: dict = {}  # values entered but refused, sent again with the next edit
 
     def refresh(self):
         self.list.blockSignals(True)
@@ -70,66 +91,99 @@ class PipelineDock(QtWidgets.QDockWidget):
             it.setFlags(it.flags() | QtCore.Qt.ItemIsUserCheckable)
             it.setCheckState(QtCore.Qt.Checked if s.enabled else QtCore.Qt.Unchecked)
             self.list.addItem(it)
-        self.list.blockSignals(False)
         if self.list.count():
             self.list.setCurrentRow(min(max(row, 0), self.list.count() - 1))
-        self._show_form(self.list.currentRow())
+        self.list.blockSignals(False)
+        i = self.list.currentRow()
+        steps = self.win.session.recipe.steps
+        if self._form_of is not None and 0 <= i < len(steps) and self._form_of == self._key(i) \
+                and self._fill(steps[i]):
+            return  # the same step: its widgets follow the recipe, the one being typed in keeps focus
+        self._show_form(i)
+
+    def _key(self, i):
+        step = self.win.session.recipe.steps[i]
+        return (i, step.id, step.step_cls.Params)
+
+    def _values(self, step) -> dict:
+        """The values the form shows: the recipe's, the defaults where it sets none."""
+        return step.params.model_dump(mode="json")
 
     def _show_form(self, i):
-        import yaml
-
         from pointspro.core.forms import form_fields
 
-        while self.form.rowCount():
-            self.form.removeRow(0)
+        while self.form.rowCount():  # deleted later: this may run inside one of their signals
+            row = self.form.takeRow(0)
+            for item in (row.labelItem, row.fieldItem):
+                if item is not None and item.widget() is not None:
+                    item.widget().hide()
+                    item.widget().deleteLater()
         self.fields = {}
+        self._form_of = None
+        self._pending = {}
+        self._say("")
         steps = self.win.session.recipe.steps
         if i < 0 or i >= len(steps):
+            self.box.setTitle("Parameters")
             return
         step = steps[i]
-        cls = step.step_cls
-        values = step.to_yaml_entry()[step.id]  # the parameters the recipe sets (not the defaults)
-        for f in form_fields(cls.Params):
-            edit = QtWidgets.QLineEdit()
-            if f.key in values and isinstance(values[f.key], list) and len(values[f.key]) > 50:
-                # thousands of deleted rows are not for a text field: shown, kept, not edited here
-                edit.setPlaceholderText(f"{len(values[f.key]):,} values (kept; edit the recipe file)")
-                edit.setEnabled(False)
-                edit.setProperty("keep", values[f.key])
-            elif f.key in values:
-                edit.setText(yaml.safe_dump(values[f.key], default_flow_style=True).strip().removesuffix("..."
-                                                                                                       ).strip())
-            else:
-                edit.setPlaceholderText("" if f.default is None else str(f.default))
-            tip = f.help + (f" [{f.unit}]" if f.unit else "") + (f" ({f.bounds_text()})" if f.bounds_text() else "")
-            edit.setToolTip(tip)
-            self.form.addRow(f.key + (f" [{f.unit}]" if f.unit else ""), edit)
-            self.fields[f.key] = edit
+        self.box.setTitle(f"Parameters of {step.id}")
+        values = self._values(step)
+        for f in form_fields(step.step_cls.Params):
+            w = build_widget(f, values.get(f.key))
+            w.edited.connect(functools.partial(self._commit, f.key))
+            w.marked.connect(self._say)
+            shown_unit = f.unit and f.editor in ("table", "group", "pairs", "text", "file")
+            label = QtWidgets.QLabel(f.key + (f" [{f.unit}]" if shown_unit else "") + (" *" if f.required else ""))
+            label.setToolTip(f.tooltip())
+            self.form.addRow(label, w)
+            self.fields[f.key] = w
+        self._form_of = self._key(i)
 
-    def _apply(self):
-        import yaml
-
-        i = self.list.currentRow()
-        if i < 0:
-            return
-        params = {}
-        for k, edit in self.fields.items():
-            edit.setStyleSheet("")
-            if not edit.isEnabled():
-                params[k] = edit.property("keep")
+    def _fill(self, step) -> bool:
+        """Show the recipe's values in the form's widgets (not those holding a refused value);
+        False when a widget cannot show its new value (the form is built again)."""
+        values = self._values(step)
+        for k, w in self.fields.items():
+            if not fits(w, values.get(k)):
+                return False
+        for k, w in self.fields.items():
+            if k in self._pending:
                 continue
-            t = edit.text().strip()
-            if t:
-                params[k] = yaml.safe_load(t)
+            if w.value() != values.get(k):
+                w.set_value(values.get(k))
+            w.unmark()
+        return True
+
+    def _commit(self, key, value):
+        """A value entered in the form: to the recipe when the step's Params accept it (with the
+        values refused before), else marked with the message and kept to be sent again."""
+        i = self.list.currentRow()
+        steps = self.win.session.recipe.steps
+        if i < 0 or i >= len(steps) or self._form_of != self._key(i):
+            return
+        step = steps[i]
+        pending = self._pending | {key: value}
+        self._pending = {}  # the session's event refreshes the form: every widget from the recipe
         try:
-            self.win.session.set_params(i, params)
-        except PointsProError as e:
+            self.win.session.set_params(i, step.to_yaml_entry()[step.id] | pending)
+        except PointsProError as e:  # nothing changed
+            self._pending = pending
             msg = str(e)
-            for k, edit in self.fields.items():
-                if f"key '{k}'" in msg:
-                    edit.setStyleSheet("background:#ffd6d6")
-                    edit.setToolTip(msg)
+            for k, w in self.fields.items():
+                if k == key or f"key '{k}'" in msg or f"key '{k}." in msg:
+                    w.mark(msg)
+            self._say(msg)
             self.win.log(f"invalid: {msg}")
+            return
+        self._say("")
+
+    def _say(self, message: str):
+        """The last refusal, under the form ("" hides it)."""
+        if not message:
+            message = next((w.problem for w in self.fields.values() if w.problem), "")
+        self.message.setText(message)
+        self.message.setVisible(bool(message))
 
     def _remove(self):
         i = self.list.currentRow()

@@ -89,8 +89,7 @@ def test_run_in_worker_keeps_the_window_responsive_and_fills_the_report(qtbot):
     win.pipeline.add_button.click()
     assert win.session.steps[-1] == {"aperture": {}} and win.pipeline.list.count() == 5
     win.pipeline.list.setCurrentRow(4)
-    win.pipeline.fields["diameter"].setText("1290")
-    win.pipeline._apply()
+    win.pipeline.fields["diameter"].enter(1290.0)  # as typed: the form's edits go to the recipe
     assert win.session.steps[-1] == {"aperture": {"diameter": 1290}}
     gaps, last = [], [time.perf_counter()]
 
@@ -154,9 +153,9 @@ def test_select_delete_undo_redo_project_and_batch_replay(qtbot, tmp_path, run_c
     assert win.session.shown.n == n0 - k
     # the pipeline form marks an invalid value and keeps the old one
     win.pipeline.list.setCurrentRow(4)
-    win.pipeline.fields["diameter"].setText("-5")
-    win.pipeline._apply()
+    win.pipeline.fields["diameter"].enter(-5.0)
     assert "ffd6d6" in win.pipeline.fields["diameter"].styleSheet()
+    assert "diameter must be > 0 mm (got -5 mm)" in win.pipeline.message.text()
     assert win.session.steps[4] == {"aperture": {"diameter": 1290}}
     # save, reopen in a new window: the same cloud
     win.session.save_project(tmp_path / "p.pointspro.yaml")

@@ -1,0 +1,640 @@
+"""The widgets of a step's parameter form, one per ``core.forms.FormField`` (its ``editor``).
+
+- float: a spin box with the unit as suffix that shows the value's shortest exact text (repr:
+  0.00033333333, 7e-13, 1290) and reads scientific notation. A spin box rather than a line edit with
+  a QDoubleValidator: it keeps the arrows, the wheel and the suffix, and with Qt's largest
+  ``decimals`` (323) it rounds nothing a float64 holds above 1e-323, so values of any decade (a
+  7e-13 aspheric coefficient, a 1e6 smoothing) are shown and written back unchanged; an arrow moves
+  by a tenth of the value's decade.
+- int: a QSpinBox; bool: a QCheckBox; choice: a QComboBox; ``auto | int``: a combo with the choices
+  and "number" beside a spin box; text: a line edit (a file: with a "…" button).
+- a fixed pair (``centre: [x, y]``): two spin boxes; a list: a small table with + and − (a list of
+  known choices: a list of check boxes); a nested group (``initial``): a small form of its fields; a
+  mapping with free keys: a key/value table.
+- None ("automatic", "not given"): the widget and a box "auto" (or "none") that disables it.
+
+Bounds are enforced where the value is entered: the spin boxes' range is the field's inclusive
+bounds, a typed value outside them (or on a strict bound) is not taken and the message is shown while
+typing ("window must be > 0 mm (got -5 mm)"), an arrow never leaves them. Each widget emits
+``edited(value)`` when the user enters a value (a spin box: on Enter, leaving the field or an arrow);
+the dock validates it through the step's Params and marks the widget with the message when it is
+refused (``mark``); ``marked(message)`` tells the dock what to show.
+"""
+from __future__ import annotations
+
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from pointspro.core import forms
+from pointspro.core.forms import FormField
+
+INVALID = "background:#ffd6d6"
+_DBL_MAX = 1.7976931348623157e308
+_INT_MAX = 2 ** 31 - 1
+
+
+class ParamWidget(QtWidgets.QWidget):
+    """One field's editor. ``value()``/``set_value(v)`` (shown, nothing emitted) in the recipe's
+    terms (None where the field is automatic); ``enter(v)``: as if the user had entered ``v``."""
+
+    edited = QtCore.Signal(object)
+    marked = QtCore.Signal(str)
+
+    def __init__(self, field: FormField, parent=None):
+        super().__init__(parent)
+        self.field = field
+        self.problem = ""
+        self.lay = QtWidgets.QHBoxLayout(self)
+        self.lay.setContentsMargins(0, 0, 0, 0)
+        self.lay.setSpacing(4)
+        self.setToolTip(field.tooltip())
+
+    # -- the value --------------------------------------------------------------------------------
+    def value(self):
+        raise NotImplementedError
+
+    def set_value(self, v) -> None:
+        raise NotImplementedError
+
+    def check(self, v) -> str | None:
+        """The message when ``v`` cannot be entered here (out of bounds, not a choice), else None."""
+        return None
+
+    def enter(self, v) -> None:
+        """``v`` entered by the user: refused with the message when it cannot be, else shown and
+        emitted (the dock then validates it through the step's Params)."""
+        problem = self.check(v)
+        if problem:
+            self.mark(problem)
+            return
+        self.set_value(v)
+        self.unmark()
+        self._emit()
+
+    def _emit(self, *_):
+        self.edited.emit(self.value())
+
+    # -- marks ------------------------------------------------------------------------------------
+    def mark(self, message: str) -> None:
+        """Red with the message as tooltip ("" clears it)."""
+        if message == self.problem:
+            return
+        self.problem = message
+        self.setStyleSheet(INVALID if message else "")
+        tip = self.field.tooltip()
+        self.setToolTip(f"{message}\n\n{tip}" if message else tip)
+        self.marked.emit(message)
+
+    def unmark(self) -> None:
+        self.mark("")
+
+
+# --- numbers -------------------------------------------------------------------------------------
+
+class _SpinMixin:
+    """Shared by the float and int spin boxes: exact text, scientific notation, the unit as suffix,
+    bounds with the message while typing, arrows that stay inside the bounds."""
+
+    def _setup(self, owner: ParamWidget, field: FormField, kind: str, prefix: str = ""):
+        self.owner, self.field, self.kind = owner, field, kind
+        if kind == "float":
+            self.setDecimals(323)  # Qt's largest: nothing a float64 holds above 1e-323 is rounded
+        self.setKeyboardTracking(False)  # valueChanged on Enter, leaving the field or an arrow
+        self.setAccelerated(True)
+        self.setCorrectionMode(QtWidgets.QAbstractSpinBox.CorrectToPreviousValue)
+        if prefix:
+            self.setPrefix(prefix)
+        if field.unit:
+            self.setSuffix(" " + field.unit)
+        big = _DBL_MAX if kind == "float" else _INT_MAX
+        lo = field.minimum if field.minimum is not None else field.exclusive_minimum
+        hi = field.maximum if field.maximum is not None else field.exclusive_maximum
+        if kind == "int" and field.minimum is None and field.exclusive_minimum is not None:
+            lo = int(field.exclusive_minimum) + 1
+        if kind == "int" and field.maximum is None and field.exclusive_maximum is not None:
+            hi = int(-(-field.exclusive_maximum // 1)) - 1
+        self.setRange(max(lo, -big) if lo is not None else -big, min(hi, big) if hi is not None else big)
+        self.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Fixed)
+
+    def _number_text(self, text: str) -> str:
+        t = text
+        if self.prefix() and t.startswith(self.prefix()):
+            t = t[len(self.prefix()):]
+        unit = self.suffix().strip()
+        if unit and t.rstrip().endswith(unit):
+            t = t.rstrip()[:-len(unit)]
+        return t.strip()
+
+    def validate(self, text, pos):
+        t = self._number_text(text)
+        if forms.is_partial_number(t):
+            return QtGui.QValidator.Intermediate
+        try:
+            v = forms.parse_number(t, self.kind)
+        except ValueError:
+            return QtGui.QValidator.Invalid
+        problem = forms.bounds_problem(self.field, v)
+        self.owner.mark(problem or "")
+        return QtGui.QValidator.Intermediate if problem else QtGui.QValidator.Acceptable
+
+    def valueFromText(self, text):
+        try:
+            return forms.parse_number(self._number_text(text), self.kind)
+        except ValueError:
+            return self.value()
+
+    def textFromValue(self, v):
+        return forms.format_number(int(v) if self.kind == "int" else float(v))
+
+    def stepBy(self, steps):
+        v = self.value()
+        if self.kind == "int":
+            out = v + steps
+            out = v if forms.bounds_problem(self.field, out) else out
+        else:
+            out = forms.stepped(self.field, v, steps)
+        if out != v:
+            self.setValue(out)
+
+    def sizeHint(self):
+        h = super().sizeHint()
+        fm = self.fontMetrics()
+        w = fm.horizontalAdvance(self.prefix() + "-0.000123456" + self.suffix()) + 36
+        return QtCore.QSize(w, h.height())
+
+    def minimumSizeHint(self):
+        return QtCore.QSize(60, super().minimumSizeHint().height())
+
+
+class FloatSpin(_SpinMixin, QtWidgets.QDoubleSpinBox):
+    def __init__(self, owner, field, prefix=""):
+        super().__init__()
+        self._setup(owner, field, "float", prefix)
+
+
+class IntSpin(_SpinMixin, QtWidgets.QSpinBox):
+    def __init__(self, owner, field, prefix=""):
+        super().__init__()
+        self._setup(owner, field, "int", prefix)
+
+
+def _set_quietly(w, fn, *args):
+    w.blockSignals(True)
+    try:
+        fn(*args)
+    finally:
+        w.blockSignals(False)
+
+
+class NumberWidget(ParamWidget):
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        self.spin = (FloatSpin if field.editor == "float" else IntSpin)(self, field)
+        self.spin.valueChanged.connect(self._emit)
+        self.lay.addWidget(self.spin)
+
+    def value(self):
+        return int(self.spin.value()) if self.spin.kind == "int" else float(self.spin.value())
+
+    def set_value(self, v):
+        _set_quietly(self.spin, self.spin.setValue, v)
+
+    def check(self, v):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            return f"{self.field.key}: {v!r} is not a number"
+        if self.spin.kind == "int" and v != int(v):
+            return f"{self.field.key}: {v!r} is not a whole number"
+        return forms.bounds_problem(self.field, v)
+
+
+class BoolWidget(ParamWidget):
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        self.box = QtWidgets.QCheckBox()
+        self.box.toggled.connect(self._emit)
+        self.lay.addWidget(self.box)
+        self.lay.addStretch(1)
+
+    def value(self):
+        return self.box.isChecked()
+
+    def set_value(self, v):
+        _set_quietly(self.box, self.box.setChecked, bool(v))
+
+    def check(self, v):
+        return None if isinstance(v, bool) else f"{self.field.key}: {v!r} is not true or false"
+
+
+class ChoiceWidget(ParamWidget):
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        self.combo = QtWidgets.QComboBox()
+        self.combo.addItems([str(c) for c in field.choices])
+        self.combo.currentIndexChanged.connect(self._emit)
+        self.lay.addWidget(self.combo, 1)
+
+    def _index(self, v) -> int:
+        for i, c in enumerate(self.field.choices):
+            if c == v and type(c) is type(v) or str(c) == str(v):
+                return i
+        return -1
+
+    def value(self):
+        return self.field.choices[self.combo.currentIndex()]
+
+    def set_value(self, v):
+        _set_quietly(self.combo, self.combo.setCurrentIndex, max(self._index(v), 0))
+
+    def check(self, v):
+        if self._index(v) < 0:
+            return f"{self.field.key}: {v!r} is not one of {', '.join(map(str, self.field.choices))}"
+        return None
+
+
+class UnionWidget(ParamWidget):
+    """``auto | int``: the choices and "number" in a combo, the number in a spin box beside it."""
+
+    NUMBER = "number"
+
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        self.combo = QtWidgets.QComboBox()
+        self.combo.addItems([str(c) for c in field.choices] + [self.NUMBER])
+        self.spin = (FloatSpin if field.number == "float" else IntSpin)(self, field)
+        self.combo.currentIndexChanged.connect(self._combo_changed)
+        self.spin.valueChanged.connect(self._emit)
+        self.lay.addWidget(self.combo)
+        self.lay.addWidget(self.spin, 1)
+        _set_quietly(self.spin, self.spin.setValue, forms.initial_value(
+            FormField(**{**field.__dict__, "widget": field.number, "default": None})))
+
+    def _is_number(self) -> bool:
+        return self.combo.currentIndex() == len(self.field.choices)
+
+    def _combo_changed(self, *_):
+        self.spin.setEnabled(self._is_number())
+        self._emit()
+
+    def value(self):
+        if self._is_number():
+            return int(self.spin.value()) if self.spin.kind == "int" else float(self.spin.value())
+        return self.field.choices[self.combo.currentIndex()]
+
+    def set_value(self, v):
+        if v in self.field.choices and not isinstance(v, bool):
+            i = self.field.choices.index(v)
+        else:
+            i = len(self.field.choices)
+            _set_quietly(self.spin, self.spin.setValue, v)
+        _set_quietly(self.combo, self.combo.setCurrentIndex, i)
+        self.spin.setEnabled(self._is_number())
+
+    def check(self, v):
+        if v in self.field.choices:
+            return None
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            return f"{self.field.key}: {v!r} is neither {', '.join(map(str, self.field.choices))} nor a number"
+        return forms.bounds_problem(self.field, v)
+
+
+class TextWidget(ParamWidget):
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        self.edit = QtWidgets.QLineEdit()
+        self.edit.editingFinished.connect(self._finished)
+        self.lay.addWidget(self.edit, 1)
+        self._last = None
+        if field.editor == "file":
+            b = self.browse = QtWidgets.QToolButton()
+            b.setText("…")
+            b.setToolTip("choose the file")
+            b.clicked.connect(self._browse)
+            self.lay.addWidget(b)
+
+    def _finished(self):
+        if self.edit.text() != self._last:
+            self._last = self.edit.text()
+            self._emit()
+
+    def _browse(self):
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, self.field.key, self.edit.text())
+        if path:
+            self.enter(path)
+
+    def value(self):
+        return self.edit.text()
+
+    def set_value(self, v):
+        self._last = "" if v is None else str(v)
+        _set_quietly(self.edit, self.edit.setText, self._last)
+
+
+class TupleWidget(ParamWidget):
+    """A fixed number of numbers (``centre: [x, y]``): one spin box each, named x, y (z)."""
+
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        cls = FloatSpin if field.item == "float" else IntSpin
+        self.spins = [cls(self, field, prefix=f"{t} ") for t in field.column_titles()]
+        for s in self.spins:
+            s.valueChanged.connect(self._emit)
+            self.lay.addWidget(s, 1)
+
+    def value(self):
+        return [int(s.value()) if s.kind == "int" else float(s.value()) for s in self.spins]
+
+    def set_value(self, v):
+        for s, x in zip(self.spins, v or []):
+            _set_quietly(s, s.setValue, x)
+
+    def check(self, v):
+        if not isinstance(v, (list, tuple)) or len(v) != len(self.spins):
+            return f"{self.field.key}: give {len(self.spins)} numbers"
+        return None
+
+
+class _TableBase(ParamWidget):
+    """A small table with + (a row) and − (the selected rows) beside it."""
+
+    def __init__(self, field, titles, parent=None):
+        super().__init__(field, parent)
+        t = self.table = QtWidgets.QTableWidget(0, len(titles))
+        t.setHorizontalHeaderLabels(titles)
+        t.horizontalHeader().setSectionResizeMode(QtWidgets.QHeaderView.Stretch)
+        t.verticalHeader().setDefaultSectionSize(t.fontMetrics().height() + 8)
+        t.setMinimumHeight(t.verticalHeader().defaultSectionSize() * 3 + 4)
+        t.setMaximumHeight(t.verticalHeader().defaultSectionSize() * 6 + 4)
+        t.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Preferred)
+        t.cellChanged.connect(self._cells_changed)
+        self.lay.addWidget(t, 1)
+        col = QtWidgets.QVBoxLayout()
+        self.add_button = QtWidgets.QToolButton()
+        self.add_button.setText("+")
+        self.add_button.setToolTip("add a row (empty rows are left out)")
+        self.add_button.clicked.connect(self.add_row)
+        self.remove_button = QtWidgets.QToolButton()
+        self.remove_button.setText("−")
+        self.remove_button.setToolTip("remove the selected rows")
+        self.remove_button.clicked.connect(self.remove_rows)
+        col.addWidget(self.add_button)
+        col.addWidget(self.remove_button)
+        col.addStretch(1)
+        self.lay.addLayout(col)
+
+    def rows(self) -> list[list[str]]:
+        t = self.table
+        return [[(t.item(r, c).text() if t.item(r, c) else "") for c in range(t.columnCount())]
+                for r in range(t.rowCount())]
+
+    def set_rows(self, rows: list[list[str]]) -> None:
+        t = self.table
+        t.blockSignals(True)
+        try:
+            t.setRowCount(len(rows))
+            for r, cells in enumerate(rows):
+                for c in range(t.columnCount()):
+                    t.setItem(r, c, QtWidgets.QTableWidgetItem(cells[c] if c < len(cells) else ""))
+        finally:
+            t.blockSignals(False)
+
+    def add_row(self):
+        t = self.table
+        t.blockSignals(True)
+        t.insertRow(t.rowCount())
+        for c in range(t.columnCount()):
+            t.setItem(t.rowCount() - 1, c, QtWidgets.QTableWidgetItem(""))
+        t.blockSignals(False)
+        t.setCurrentCell(t.rowCount() - 1, 0)
+        if t.isVisible():
+            t.editItem(t.item(t.rowCount() - 1, 0))
+
+    def remove_rows(self):
+        t = self.table
+        rows = sorted({i.row() for i in t.selectedIndexes()} or ({t.rowCount() - 1} if t.rowCount() else set()),
+                      reverse=True)
+        if not rows:
+            return
+        t.blockSignals(True)
+        for r in rows:
+            t.removeRow(r)
+        t.blockSignals(False)
+        self._cells_changed()
+
+    def _parse(self, rows):
+        raise NotImplementedError
+
+    def _cells_changed(self, *_):
+        try:
+            self._parse(self.rows())
+        except ValueError as e:
+            self.mark(str(e))
+            return
+        self.unmark()
+        self._emit()
+
+    def value(self):
+        try:
+            return self._parse(self.rows())
+        except ValueError:
+            return None  # the dock never sends it: the cells are marked
+
+    def check(self, v):
+        return None
+
+
+class ListTable(_TableBase):
+    """A list of numbers or names, or of rows of numbers (``vertices``, a matrix): one entry a row."""
+
+    def __init__(self, field, parent=None):
+        super().__init__(field, field.column_titles(), parent)
+
+    def _parse(self, rows):
+        return forms.table_value(self.field, rows)
+
+    def set_value(self, v):
+        rows = forms.table_rows(self.field, v)
+        if self.field.item == "row" and self.field.columns is None:  # a matrix: as wide as its rows
+            n = max([len(r) for r in rows] + [4])
+            if n != self.table.columnCount():
+                self.table.setColumnCount(n)
+                self.table.setHorizontalHeaderLabels([str(j + 1) for j in range(n)])
+        self.set_rows(rows)
+
+    def check(self, v):
+        if not isinstance(v, list):
+            return f"{self.field.key}: {v!r} is not a list"
+        try:
+            forms.table_value(self.field, forms.table_rows(self.field, v))
+        except ValueError as e:
+            return str(e)
+        return None
+
+
+class PairsTable(_TableBase):
+    """A mapping with free keys (``A: {4: 7e-13}``): key and value a row; whole-number keys are ints."""
+
+    def __init__(self, field, parent=None):
+        super().__init__(field, ["key", "value" + (f" ({field.unit})" if field.unit else "")], parent)
+
+    def _parse(self, rows):
+        return forms.pairs_value(self.field, rows)
+
+    def set_value(self, v):
+        self.set_rows(forms.pairs_rows(v))
+
+
+class ChecksWidget(ParamWidget):
+    """A list of known choices: one check box each, in the choices' order."""
+
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        self.list = QtWidgets.QListWidget()
+        for c in field.item_choices:
+            it = QtWidgets.QListWidgetItem(str(c))
+            it.setFlags(it.flags() | QtCore.Qt.ItemIsUserCheckable)
+            it.setCheckState(QtCore.Qt.Unchecked)
+            self.list.addItem(it)
+        self.list.setMaximumHeight(self.list.sizeHintForRow(0) * min(len(field.item_choices), 6) + 6)
+        self.list.itemChanged.connect(self._emit)
+        self.lay.addWidget(self.list, 1)
+
+    def value(self):
+        return [c for i, c in enumerate(self.field.item_choices)
+                if self.list.item(i).checkState() == QtCore.Qt.Checked]
+
+    def set_value(self, v):
+        self.list.blockSignals(True)
+        for i, c in enumerate(self.field.item_choices):
+            self.list.item(i).setCheckState(QtCore.Qt.Checked if c in (v or []) else QtCore.Qt.Unchecked)
+        self.list.blockSignals(False)
+
+    def check(self, v):
+        bad = [x for x in v if x not in self.field.item_choices] if isinstance(v, list) else [v]
+        return f"{self.field.key}: {bad[0]!r} is not one of {', '.join(map(str, self.field.item_choices))}" \
+            if bad else None
+
+
+class KeptWidget(ParamWidget):
+    """A list too long for a form (thousands of deleted rows): shown by its length and kept."""
+
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        self.label = QtWidgets.QLabel()
+        self.label.setEnabled(False)
+        self.lay.addWidget(self.label, 1)
+        self._v = None
+
+    def value(self):
+        return self._v
+
+    def set_value(self, v):
+        self._v = v
+        self.label.setText(f"{len(v or []):,} values (kept; edit the recipe file)")
+
+
+class GroupWidget(ParamWidget):
+    """A nested parameter group (``initial: {dx: …}``, a pose): a small form of its fields."""
+
+    def __init__(self, field, parent=None):
+        super().__init__(field, parent)
+        box = QtWidgets.QFrame()
+        box.setFrameShape(QtWidgets.QFrame.StyledPanel)
+        form = QtWidgets.QFormLayout(box)
+        form.setContentsMargins(4, 2, 4, 2)
+        self.children_ = {}
+        for f in field.fields:
+            w = build_widget(f, f.default)
+            w.edited.connect(self._emit)
+            w.marked.connect(self.marked)
+            label = QtWidgets.QLabel(f.key)
+            label.setToolTip(f.tooltip())
+            form.addRow(label, w)
+            self.children_[f.key] = w
+        self.lay.addWidget(box, 1)
+
+    def value(self):
+        return forms.group_value({k: w.value() for k, w in self.children_.items()})
+
+    def set_value(self, v):
+        v = v or {}
+        for k, w in self.children_.items():
+            w.set_value(v.get(k, w.field.default))
+
+    def check(self, v):
+        if not isinstance(v, dict):
+            return f"{self.field.key}: {v!r} is not a mapping"
+        unknown = [k for k in v if k not in self.children_]
+        if unknown:
+            return f"{self.field.key}: unknown key '{unknown[0]}' (it has {', '.join(self.children_)})"
+        for k, x in v.items():
+            problem = self.children_[k].check(x)
+            if problem:
+                return problem
+        return None
+
+
+class NullableWidget(ParamWidget):
+    """A field where None means automatic or not given: the editor and a box "auto" ("none") that
+    disables it; unticking the box enters the editor's value (the default, or one inside the
+    bounds)."""
+
+    def __init__(self, field, inner: ParamWidget, parent=None):
+        super().__init__(field, parent)
+        self.inner = inner
+        self.auto = QtWidgets.QCheckBox(field.null_label)
+        self.auto.setToolTip("None: " + ("computed by the step" if field.null_label == "auto" else "not given"))
+        inner.set_value(forms.initial_value(field))
+        inner.edited.connect(self._inner_edited)
+        inner.marked.connect(self.marked)
+        self.auto.toggled.connect(self._toggled)
+        self.lay.addWidget(inner, 1)
+        self.lay.addWidget(self.auto, 0, QtCore.Qt.AlignTop)
+
+    def _inner_edited(self, v):
+        if not self.auto.isChecked():
+            self.edited.emit(v)
+
+    def _toggled(self, on):
+        self.inner.setEnabled(not on)
+        self._emit()
+
+    def value(self):
+        return None if self.auto.isChecked() else self.inner.value()
+
+    def set_value(self, v):
+        _set_quietly(self.auto, self.auto.setChecked, v is None)
+        self.inner.setEnabled(v is not None)
+        if v is not None:
+            self.inner.set_value(v)
+
+    def check(self, v):
+        return None if v is None else self.inner.check(v)
+
+
+_EDITORS = {"float": NumberWidget, "int": NumberWidget, "bool": BoolWidget, "choice": ChoiceWidget,
+            "union": UnionWidget, "text": TextWidget, "file": TextWidget, "tuple": TupleWidget,
+            "table": ListTable, "group": GroupWidget, "pairs": PairsTable}
+
+
+def build_widget(field: FormField, value=None, parent=None) -> ParamWidget:
+    """The editor of ``field`` showing ``value`` (the recipe's)."""
+    e = field.editor
+    if e == "table" and isinstance(value, list) and len(value) > forms.MAX_TABLE_ROWS:
+        w = KeptWidget(field)
+    elif e == "table" and field.item == "choice":
+        w = ChecksWidget(field)
+    else:
+        w = _EDITORS[e](field)
+    if field.nullable:
+        w = NullableWidget(field, w)
+    if parent is not None:
+        w.setParent(parent)
+    w.set_value(forms.initial_value(field) if value is None and not field.nullable else value)
+    return w
+
+
+def fits(w: ParamWidget, value) -> bool:
+    """Whether ``w`` can show ``value`` (a list that grew past MAX_TABLE_ROWS, or shrank below it,
+    needs another widget)."""
+    inner = w.inner if isinstance(w, NullableWidget) else w
+    long = isinstance(value, list) and len(value) > forms.MAX_TABLE_ROWS
+    return not (w.field.editor == "table" and long != isinstance(inner, KeptWidget))
