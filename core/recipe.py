@@ -8,9 +8,11 @@
       - manual_edit: {remove: [17, 4212]}
       - misalignment            # a step with all defaults may be written bare
 
-A recipe is parsed with a safe loader that remembers line numbers, and *all* of it is validated
-before anything runs: unknown keys, unknown steps, mistyped or out-of-range values are errors naming
-the file, line, step and key. Duplicate keys (which YAML would silently collapse) are errors too.
+A recipe is parsed with a safe loader that remembers line numbers and reads plain values by the
+YAML 1.2 core schema (core.yamlio: ``3e-4`` is a number, ``yes`` and ``on`` are words), and *all* of
+it is validated before anything runs: unknown keys, unknown steps, mistyped or out-of-range values
+are errors naming the file, line, step and key. Duplicate keys (which YAML would silently collapse)
+are errors too.
 A step entry may carry ``schema_version: N`` (written by the GUI when it saves) so that the step's
 ``Params.migrate`` can rewrite parameters saved by an older version.
 """
@@ -18,78 +20,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Hashable
+from typing import Any
 
-import yaml
 from pydantic import ValidationError
 
 from .errors import RecipeError
 from .registry import Registry
 from .surfaces import parse_surface_spec
+from .yamlio import LineDict, dump_yaml, load_yaml
 
 RECIPE_VERSION = 1
 TOP_KEYS = ("pointspro", "surface", "input", "inputs", "steps")
-
-
-class LineDict(dict):
-    """A mapping that remembers the YAML line of itself and of each key (1-based)."""
-
-    line: int | None = None
-    key_lines: dict
-
-
-class _LineLoader(yaml.SafeLoader):
-    def construct_object(self, node, deep=False):
-        """A value YAML's own constructors refuse (a date 2020-13-45, a bad !!int) is a RecipeError
-        naming its line, not a ValueError from deep inside PyYAML."""
-        try:
-            return super().construct_object(node, deep)
-        except (RecipeError, yaml.YAMLError, RecursionError):
-            raise
-        except Exception as e:  # noqa: BLE001 - PyYAML's constructors raise ValueError, TypeError,
-            # AttributeError (!!timestamp on a non-date) …
-            text = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            raise RecipeError(f"line {node.start_mark.line + 1}: cannot read the value {node.tag} "
-                              f"({text})") from None
-
-
-def _construct_mapping(loader: _LineLoader, node):
-    loader.flatten_mapping(node)
-    d = LineDict()
-    d.line = node.start_mark.line + 1
-    d.key_lines = {}
-    for knode, vnode in node.value:
-        key = loader.construct_object(knode, deep=True)
-        if not isinstance(key, Hashable):
-            raise RecipeError(f"line {knode.start_mark.line + 1}: a key must be a name or a number, "
-                              f"not a {type(key).__name__}")
-        if key in d:
-            raise RecipeError(f"line {knode.start_mark.line + 1}: duplicate key {key!r}")
-        d[key] = loader.construct_object(vnode, deep=True)
-        d.key_lines[key] = knode.start_mark.line + 1
-    return d
-
-
-_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
-
-
-def load_yaml(text: str, where: str) -> Any:
-    try:
-        loader = _LineLoader(text)  # a SafeLoader: plain data only, never objects or code
-        try:
-            return loader.get_single_data()
-        finally:
-            loader.dispose()
-    except RecipeError as e:
-        raise RecipeError(f"{where}, {e}") from None
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        pos = f", line {mark.line + 1}" if mark else ""
-        problem = getattr(e, "problem", None) or getattr(e, "reason", None) or str(e)
-        problem = " ".join(str(problem).split()) if str(problem).strip() else type(e).__name__
-        raise RecipeError(f"{where}{pos}: not valid YAML ({problem})") from None
-    except RecursionError:
-        raise RecipeError(f"{where}: not a recipe (nested too deeply)") from None
 
 
 def format_validation_error(e: ValidationError, prefix: str = "") -> str:
@@ -162,7 +103,7 @@ class Recipe:
         return d
 
     def to_yaml(self) -> str:
-        return yaml.safe_dump(self.to_dict(), sort_keys=False)
+        return dump_yaml(self.to_dict(), sort_keys=False)
 
     # -- edits: each returns a new Recipe (steps not edited are shared, never copied) ----------------
     def with_steps(self, steps) -> Recipe:
@@ -244,7 +185,7 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
             raise RecipeError(f"{at(key)}: unknown key '{key}' (a recipe has {', '.join(TOP_KEYS)})")
     if "pointspro" not in data:
         raise RecipeError(f"{where}: missing `pointspro: {RECIPE_VERSION}` (the recipe format version)")
-    if data["pointspro"] != RECIPE_VERSION:
+    if type(data["pointspro"]) is not int or data["pointspro"] != RECIPE_VERSION:  # true is not 1
         raise RecipeError(f"{at('pointspro')}: recipe format {data['pointspro']!r} is not supported "
                           f"(this PointsPro reads {RECIPE_VERSION})")
 

@@ -1,8 +1,8 @@
 """Project files: a measurement and its recipe saved together, and the recipe saved alone.
 
-Project file (YAML text): {pointspro_project: 1, input: <data file, relative to the project>,
-recipe: <the recipe mapping>}. Every file is written atomically (a crash mid-write never leaves
-half a file).
+Project file (YAML text, read by the YAML 1.2 core schema as recipes are: core.yamlio):
+{pointspro_project: 1, input: <data file, relative to the project>, recipe: <the recipe mapping>}.
+Every file is written atomically (a crash mid-write never leaves half a file).
 """
 from __future__ import annotations
 
@@ -11,14 +11,9 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..recipe import Recipe
+from ..yamlio import dump_yaml, read_yaml_mapping
 
 PROJECT_VERSION = 1
-
-
-def _dumper():
-    import yaml
-
-    return getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml: 20× faster on long edit lists
 
 
 def _mapping(recipe: Recipe | dict) -> dict:
@@ -27,16 +22,15 @@ def _mapping(recipe: Recipe | dict) -> dict:
 
 def project_text(recipe: Recipe | dict, input_path: Path | None, project_path: Path) -> str:
     """The project file's text: the data file relative to the project (absolute on another drive)."""
-    import yaml
-
     inp = None
     if input_path is not None:
         try:
             inp = os.path.relpath(Path(input_path).resolve(), Path(project_path).resolve().parent)
         except ValueError:  # another drive
             inp = str(Path(input_path).resolve())
-    return yaml.dump({"pointspro_project": PROJECT_VERSION, "input": inp, "recipe": _mapping(recipe)},
-                     Dumper=_dumper(), sort_keys=False)
+    # libyaml's emitter (fast = True): 20× faster on long edit lists
+    return dump_yaml({"pointspro_project": PROJECT_VERSION, "input": inp, "recipe": _mapping(recipe)},
+                     fast=True, sort_keys=False)
 
 
 def _write(path: Path, text: str) -> None:
@@ -56,25 +50,13 @@ def write_project(path: Path, recipe: Recipe | dict, input_path: Path | None) ->
 
 def write_recipe(path: Path, recipe: Recipe | dict) -> None:
     """The recipe alone (what `pointspro --batch` replays), written atomically."""
-    import yaml
-
-    _write(Path(path), yaml.dump(_mapping(recipe), Dumper=_dumper(), sort_keys=False))
+    _write(Path(path), dump_yaml(_mapping(recipe), fast=True, sort_keys=False))
 
 
 def load_project(path: Path) -> dict:
-    """A project file's mapping; InputError saying why the file is not a project."""
-    import yaml
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: project file not found")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as e:
-        raise InputError(f"{path}: not a PointsPro project ({str(e).splitlines()[0]})") from None
-    if not isinstance(data, dict) or data.get("pointspro_project") != PROJECT_VERSION:
-        raise InputError(f"{path}: not a PointsPro project (no 'pointspro_project: 1')")
-    return data
+    """A project file's mapping (YAML 1.2, lines remembered: core.yamlio); InputError saying why the
+    file is not a project."""
+    return read_yaml_mapping(path, "project", "pointspro_project", PROJECT_VERSION, InputError)
 
 
 def project_recipe(data: dict) -> dict:

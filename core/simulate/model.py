@@ -62,29 +62,26 @@ class ModelSpec(BaseModel):
         return surface_from_spec(self.surface, base_dir)
 
     def to_yaml(self) -> str:
-        import yaml
+        from ..yamlio import dump_yaml
 
-        return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False, default_flow_style=None)
+        return dump_yaml(self.model_dump(mode="json"), sort_keys=False, default_flow_style=None)
 
 
 def load_model(path) -> ModelSpec:
-    import yaml
+    """A measurement model file (YAML 1.2: core.yamlio); RecipeError naming the file, the line and the
+    key at fault."""
+    from ..yamlio import read_yaml_mapping
 
     path = Path(path)
-    if not path.is_file():
-        raise RecipeError(f"{path}: model file not found")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as e:
-        raise RecipeError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
-    if not isinstance(data, dict) or "pointspro_model" not in data:
-        raise RecipeError(f"{path}: not a PointsPro measurement model (no 'pointspro_model:' key)")
+    data = read_yaml_mapping(path, "measurement model", "pointspro_model", 1, RecipeError)
     try:
         return ModelSpec.model_validate(data)
     except ValidationError as e:
         err = e.errors()[0]
         key = ".".join(str(k) for k in err["loc"])
-        raise RecipeError(f"{path}: key '{key}': {err['msg']}") from None
+        line = data.key_lines.get(err["loc"][0]) if err["loc"] else None
+        at = f", line {line}" if line else ""
+        raise RecipeError(f"{path}{at}: key '{key}': {err['msg']}") from None
 
 
 def effects_dz(ctx: ScanContext, effects: list[dict]) -> np.ndarray:

@@ -1,0 +1,213 @@
+"""YAML as PointsPro reads and writes it: the YAML 1.2 core schema, line numbers, no duplicate keys.
+
+PyYAML resolves plain scalars by YAML 1.1, where ``c: 3e-4`` is the *string* '3e-4' (an exponent
+without a dot), ``yes``/``no``/``on``/``off``/``y``/``n`` are booleans, ``010`` is octal 8, ``1_000`` is
+1000 and ``1:20`` is the sexagesimal 80. Every YAML file PointsPro reads (recipes, projects,
+measurement models) is read here by the YAML 1.2 core schema instead:
+
+    int     [-+]?[0-9]+ (decimal, so 010 is 10), 0o[0-7]+, 0x[0-9a-fA-F]+
+    float   [-+]?(\\.[0-9]+|[0-9]+(\\.[0-9]*)?)([eE][-+]?[0-9]+)?, [-+]?.inf/.Inf/.INF, .nan/.NaN/.NAN
+    bool    true/True/TRUE, false/False/FALSE only
+    null    ~, null/Null/NULL, empty
+
+anything else is a string (``yes``, ``on``, ``1_000``, ``2020-01-01``). The merge key ``<<`` is kept.
+The loader is PyYAML's safe loader (plain data only, never objects or code); a mapping is a
+:class:`LineDict` that remembers the line of itself and of each key, and a duplicate key (which YAML
+would silently collapse) is an error naming its line.
+
+Writing: :func:`dump_yaml` quotes a string that *either* YAML 1.1 or 1.2 would read as something else
+('yes', 'on', 'y', '3e-4', '010'), so what PointsPro writes reads back the same here and in YAML
+1.1 readers; floats are written as PyYAML does (1e-05 as ``1.0e-05``, a float under both).
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any, Hashable
+
+import yaml
+
+from .errors import InputError, PointsProError, RecipeError
+
+# -- the YAML 1.2 core schema (https://yaml.org/spec/1.2.2/#1032-tag-resolution) ------------------------
+_INT10 = re.compile(r"[-+]?[0-9]+")
+_INT8 = re.compile(r"0o[0-7]+")
+_INT16 = re.compile(r"0x[0-9a-fA-F]+")
+_FLOAT = re.compile(r"[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?")
+_INF = re.compile(r"[-+]?\.(?:inf|Inf|INF)")
+_NAN = re.compile(r"\.(?:nan|NaN|NAN)")
+_BOOL = {"true": True, "True": True, "TRUE": True, "false": False, "False": False, "FALSE": False}
+
+CORE_RESOLVERS = (  # (tag, regexp, first characters), in the order they are tried
+    ("tag:yaml.org,2002:null", re.compile(r"^(?:~|null|Null|NULL|)$"), ["~", "n", "N", ""]),
+    ("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF")),
+    ("tag:yaml.org,2002:int", re.compile(r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$"), list("-+0123456789")),
+    ("tag:yaml.org,2002:float",
+     re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+                r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"), list("-+.0123456789")),
+    ("tag:yaml.org,2002:merge", re.compile(r"^(?:<<)$"), ["<"]),
+)
+
+
+class LineDict(dict):
+    """A mapping that remembers the YAML line of itself and of each key (1-based)."""
+
+    line: int | None = None
+    key_lines: dict
+
+
+class _Problem(Exception):
+    """A value the loader refuses, as "line N: why" (load_yaml names the file and the error class)."""
+
+
+class Loader(yaml.SafeLoader):
+    """PyYAML's safe loader with the YAML 1.2 core schema, line numbers and duplicate keys refused."""
+
+    yaml_implicit_resolvers: dict = {}
+
+    def construct_object(self, node, deep=False):
+        """A value YAML's own constructors refuse (a bad !!int, !!timestamp 2020-13-45) is an error
+        naming its line, not a ValueError from deep inside PyYAML."""
+        try:
+            return super().construct_object(node, deep)
+        except (_Problem, yaml.YAMLError, RecursionError):
+            raise
+        except Exception as e:  # noqa: BLE001 - PyYAML's constructors raise ValueError, TypeError,
+            # AttributeError (!!timestamp on a non-date) …
+            text = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            raise _Problem(f"line {node.start_mark.line + 1}: cannot read the value {node.tag} "
+                           f"({text})") from None
+
+
+for _tag, _regexp, _first in CORE_RESOLVERS:
+    Loader.add_implicit_resolver(_tag, _regexp, _first)
+
+
+def _construct_mapping(loader: Loader, node):
+    loader.flatten_mapping(node)
+    d = LineDict()
+    d.line = node.start_mark.line + 1
+    d.key_lines = {}
+    for knode, vnode in node.value:
+        key = loader.construct_object(knode, deep=True)
+        if not isinstance(key, Hashable):
+            raise _Problem(f"line {knode.start_mark.line + 1}: a key must be a name or a number, "
+                           f"not a {type(key).__name__}")
+        if key in d:
+            raise _Problem(f"line {knode.start_mark.line + 1}: duplicate key {key!r}")
+        d[key] = loader.construct_object(vnode, deep=True)
+        d.key_lines[key] = knode.start_mark.line + 1
+    return d
+
+
+def _construct_int(loader: Loader, node) -> int:
+    value = str(loader.construct_scalar(node)).strip()
+    if _INT10.fullmatch(value):
+        return int(value, 10)
+    if _INT8.fullmatch(value):
+        return int(value[2:], 8)
+    if _INT16.fullmatch(value):
+        return int(value[2:], 16)
+    raise ValueError(f"{value!r} is not a YAML 1.2 integer")
+
+
+def _construct_float(loader: Loader, node) -> float:
+    value = str(loader.construct_scalar(node)).strip()
+    if _FLOAT.fullmatch(value):
+        return float(value)
+    if _INF.fullmatch(value):
+        return -math.inf if value.startswith("-") else math.inf
+    if _NAN.fullmatch(value):
+        return math.nan
+    raise ValueError(f"{value!r} is not a YAML 1.2 number")
+
+
+def _construct_bool(loader: Loader, node) -> bool:
+    value = str(loader.construct_scalar(node)).strip()
+    if value in _BOOL:
+        return _BOOL[value]
+    raise ValueError(f"{value!r} is not true or false")
+
+
+Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+Loader.add_constructor("tag:yaml.org,2002:float", _construct_float)
+Loader.add_constructor("tag:yaml.org,2002:bool", _construct_bool)
+
+
+def load_yaml(text: str, where: str, error: type[PointsProError] = RecipeError) -> Any:
+    """The data of a YAML text by the YAML 1.2 core schema; ``error`` (RecipeError unless told) naming
+    ``where`` and the line when the text is not valid YAML, repeats a key or has an unreadable value."""
+    try:
+        loader = Loader(text)
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
+    except _Problem as e:
+        raise error(f"{where}, {e}") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        pos = f", line {mark.line + 1}" if mark else ""
+        problem = getattr(e, "problem", None) or getattr(e, "reason", None) or str(e)
+        problem = " ".join(str(problem).split()) if str(problem).strip() else type(e).__name__
+        raise error(f"{where}{pos}: not valid YAML ({problem})") from None
+    except RecursionError:
+        raise error(f"{where}: not valid YAML (nested too deeply)") from None
+
+
+def read_yaml_mapping(path, what: str, version_key: str, version: int = 1,
+                      error: type[PointsProError] = InputError) -> LineDict:
+    """A YAML file whose top level is a mapping with ``version_key: version`` (e.g. a project's
+    ``pointspro_project: 1``); ``error`` naming the file (and the line) when it is missing, unreadable,
+    not YAML, not such a mapping or of another format version. ``what`` names the kind of file
+    ("project", "measurement model")."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: {what} file not found")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise error(f"{path}: cannot read the {what} ({e})") from None
+    data = load_yaml(text, str(path), error)
+    if not isinstance(data, dict) or version_key not in data:
+        raise error(f"{path}: not a PointsPro {what} (no '{version_key}: {version}')")
+    found = data[version_key]
+    if type(found) is not int or found != version:  # true is not 1, nor is 1.0
+        line = data.key_lines.get(version_key) if isinstance(data, LineDict) else None
+        at = f", line {line}" if line else ""
+        raise error(f"{path}{at}: {what} format {found!r} is not supported (this PointsPro reads "
+                    f"'{version_key}: {version}')")
+    return data
+
+
+# -- writing ---------------------------------------------------------------------------------------------
+def _quoting(cls):
+    """``cls`` (a safe dumper) with the YAML 1.2 resolvers added after its YAML 1.1 ones: a string
+    that either would read as non-string is written quoted."""
+    for tag, regexp, first in CORE_RESOLVERS:
+        cls.add_implicit_resolver(tag, regexp, first)
+    # y/n: booleans to YAML 1.1 readers other than PyYAML
+    cls.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:y|Y|n|N)$"), list("yYnN"))
+    cls.add_representer(LineDict, yaml.representer.SafeRepresenter.represent_dict)  # data read back
+    return cls
+
+
+@_quoting
+class Dumper(yaml.SafeDumper):
+    pass
+
+
+if getattr(yaml, "__with_libyaml__", False):
+    @_quoting
+    class CDumper(yaml.CSafeDumper):  # libyaml's emitter: 20× faster on long edit lists
+        pass
+else:  # pragma: no cover - PyYAML without libyaml
+    CDumper = Dumper
+
+
+def dump_yaml(data, fast: bool = False, **kwargs) -> str:
+    """YAML text of plain data (dicts, lists, str, int, float, bool, None) that :func:`load_yaml`
+    reads back equal; ``fast`` uses libyaml's emitter; other keywords as yaml.dump's."""
+    return yaml.dump(data, Dumper=CDumper if fast else Dumper, **kwargs)
