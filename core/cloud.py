@@ -79,8 +79,86 @@ class PointCloud:
     # -- construction ---------------------------------------------------------------------------
     @classmethod
     def from_xyz(cls, x, y, z, **channels) -> "PointCloud":
+        """A cloud from three coordinate arrays (mm) and channels as keyword arrays."""
         return cls(np.column_stack([np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)]),
                    channels)
+
+    @classmethod
+    def from_numpy(cls, xyz, *, meta: Mapping[str, Any] | None = None, **channels) -> "PointCloud":
+        """A cloud from an (N, 3) array of x, y, z in mm (convert first: ``xyz_um * 1e-3``) and
+        channels as keyword arrays of length N (``residual=r_mm``); float64 copies are made where
+        the dtype differs. ``meta`` e.g. ``{"frame": "part"}`` for points already in the part frame."""
+        from .errors import InputError
+
+        xyz = np.asarray(xyz)
+        if xyz.ndim != 2 or xyz.shape[1] != 3:
+            raise InputError(f"from_numpy: xyz must have shape (N, 3), got {xyz.shape}")
+        try:
+            return cls(xyz, channels, dict(meta or {}))
+        except ValueError as e:
+            raise InputError(f"from_numpy: {e}") from None
+
+    @classmethod
+    def from_pandas(cls, df, *, meta: Mapping[str, Any] | None = None) -> "PointCloud":
+        """A cloud from a DataFrame with columns x, y, z (mm) and any numeric columns as channels
+        (``index``, when present, is the input row kept through the steps). ``df.attrs`` (as
+        ``to_pandas`` writes them: units, frame, source) become the cloud's metadata."""
+        from .errors import InputError
+
+        cols = [str(c) for c in df.columns]
+        missing = [c for c in "xyz" if c not in cols]
+        if missing:
+            raise InputError(f"from_pandas: column(s) {', '.join(missing)} missing (have "
+                             f"{', '.join(cols[:12])}); x, y, z in mm are required")
+        chans = {}
+        for c in cols:
+            if c in ("x", "y", "z"):
+                continue
+            s = df[c]
+            if s.dtype.kind not in "fiub":
+                raise InputError(f"from_pandas: column {c!r} is not numeric ({s.dtype}); drop it or "
+                                 "convert it")
+            chans[c] = s.to_numpy()
+        m = {k: v for k, v in dict(getattr(df, "attrs", {}) or {}).items() if isinstance(k, str)}
+        m.update(meta or {})
+        xyz = np.column_stack([df[c].to_numpy(dtype=np.float64) for c in "xyz"])
+        try:
+            return cls(xyz, chans, m)
+        except ValueError as e:
+            raise InputError(f"from_pandas: {e}") from None
+
+    # -- export ---------------------------------------------------------------------------------
+    def to_numpy(self) -> np.ndarray:
+        """A writable (N, 3) float64 copy of x, y, z (mm)."""
+        return np.array(self.xyz)
+
+    def to_pandas(self):
+        """A DataFrame (writable copies): x, y, z (mm), index, then every channel; ``df.attrs``
+        holds the metadata (units, frame, source, the reader's description)."""
+        import pandas as pd
+
+        data = {"x": self.x, "y": self.y, "z": self.z}
+        data.update({name: self[name] for name in self.column_names[3:]})
+        df = pd.DataFrame({k: np.array(v) for k, v in data.items()})
+        df.attrs.update({k: v for k, v in self.meta.items()})
+        return df
+
+    def to_pyvista(self):
+        """A pyvista PolyData of the points (float64, one vertex cell each) with every channel as a
+        point array and the metadata's units and frame as field arrays."""
+        import pyvista as pv
+
+        poly = pv.PolyData(np.array(self.xyz))
+        for name in self.column_names[3:]:
+            poly.point_data[name] = np.array(self[name])
+        poly.field_data["units"] = [str(self.meta.get("units", "mm"))]
+        poly.field_data["frame"] = [self.frame]
+        return poly
+
+    def _repr_html_(self) -> str:
+        from .notebook import cloud_html
+
+        return cloud_html(self)
 
     # -- access ---------------------------------------------------------------------------------
     def __len__(self) -> int:

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, ClassVar, Iterable, Mapping
@@ -149,3 +151,18 @@ class Step:
         """The contract test's cloud for this step: the generic one, plus what the step needs (e.g.
         the time channels of on-machine data)."""
         return cloud
+
+
+class _StepModule(types.ModuleType):
+    """This module is also the Python API's ``pp.step(step_id, **params)`` (core/api.py): the name
+    ``pointspro.core.step`` is both the step contract (``from pointspro.core.step import Step``, what
+    plugins import) and, called, one step ready to run on a cloud. A package's submodule attribute
+    always wins over a function of the same name, so the module itself answers the call."""
+
+    def __call__(self, step_id: str, /, **params):
+        from .api import step
+
+        return step(step_id, **params)
+
+
+sys.modules[__name__].__class__ = _StepModule
