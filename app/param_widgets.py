@@ -133,7 +133,8 @@ class _SpinMixin:
         except ValueError:
             return QtGui.QValidator.Invalid
         problem = forms.bounds_problem(self.field, v)
-        self.owner.mark(problem or "")
+        if problem or v != self.value():  # a refused value's message stays once the text reverts
+            self.owner.mark(problem or "")
         return QtGui.QValidator.Intermediate if problem else QtGui.QValidator.Acceptable
 
     def valueFromText(self, text):
