@@ -28,3 +28,62 @@ def format_length(v_mm: float, digits: int = 3) -> str:
         return f"{v} mm"
     scale, unit = length_unit(v)
     return f"{v / scale:.{digits}g} {unit}"
+
+
+# --- units stated in files (headers like ``x [µm]``) -----------------------------------------------
+# A length in a file's unit becomes mm in ONE IEEE operation, so it is correctly rounded: units below
+# the mm are divided by an exact power of ten (1234 µm / 1000 is the float64 nearest 1.234, the same
+# value as "1.234" written in mm — multiplying by 1e-3, itself inexact, can be one ulp off), units
+# above it are multiplied (m × 1000, cm × 10, in × 25.4). mm itself is left untouched (no operation),
+# so a file written in mm reads back bit for bit.
+_DIVIDE_TO_MM = {"um": 1e3, "µm": 1e3, "μm": 1e3, "micron": 1e3, "microns": 1e3, "nm": 1e6, "pm": 1e9}
+_MULTIPLY_TO_MM = {"mm": 1.0, "cm": 10.0, "dm": 100.0, "m": 1e3, "in": 25.4, "inch": 25.4}
+LENGTH_UNITS = tuple(sorted({*_DIVIDE_TO_MM, *_MULTIPLY_TO_MM}))
+
+#: channels PointsPro's steps make that hold lengths in mm (written ``name [mm]``): the residual and
+#: what the steps remove or add (docs/formats.md, Units in headers)
+LENGTH_CHANNELS = frozenset({"residual", "probe_residual", "kinematic_error", "dynamic_error", "z_raw",
+                             "u_x", "u_y", "u_z", "omega", "xd", "xc"})
+#: channels that are counts, labels or flags: never converted, written without a unit
+UNITLESS_CHANNELS = frozenset({"index", "row", "col", "line", "fiducial", "sensor", "flags", "flag",
+                               "outside_workspace", "classification", "point", "point_source_id",
+                               "return_number", "number_of_returns"})
+
+
+def _unit_key(unit: str) -> str:
+    u = unit.strip()
+    return u if u in ("µm", "μm") else u.lower()
+
+
+def is_length_unit(unit: str | None) -> bool:
+    """Whether ``unit`` (as a file writes it: ``µm``, ``um``, ``nm``, ``mm``, ``m``, ``in`` …) is a
+    length PointsPro converts to mm."""
+    if not unit:
+        return False
+    k = _unit_key(unit)
+    return k in _DIVIDE_TO_MM or k in _MULTIPLY_TO_MM
+
+
+def length_to_mm(values, unit: str):
+    """``values`` (float64 array) stated in ``unit`` as mm: one correctly rounded division (units
+    below the mm) or multiplication (above), none for mm. KeyError for a unit that is no length."""
+    import numpy as np
+
+    k = _unit_key(unit)
+    a = np.asarray(values, dtype=np.float64)
+    if k in _DIVIDE_TO_MM:
+        return a / _DIVIDE_TO_MM[k]
+    factor = _MULTIPLY_TO_MM[k]
+    return a if factor == 1.0 else a * factor
+
+
+def channel_unit(name: str, stated: str | None = None) -> str | None:
+    """The unit a written file states for channel ``name`` as PointsPro holds it: ``mm`` for x, y, z,
+    the steps' length channels and any channel read with a length unit (converted on reading); a
+    non-length unit the input stated (``s``, ``°C``) as it was; None for counts, labels, flags and
+    channels of unknown unit."""
+    if name in ("x", "y", "z") or name in LENGTH_CHANNELS:
+        return "mm"
+    if name in UNITLESS_CHANNELS or not stated:
+        return None
+    return "mm" if is_length_unit(stated) else stated

@@ -123,12 +123,12 @@ def test_map_files_round_trip(tmp_path):
     assert np.isnan(M[~v]).all()
     prof = np.genfromtxt(tmp_path / "profiles.csv", delimiter=",", names=True)
     assert set(prof["angle_deg"]) == {0.0, 90.0}
-    at0 = prof[prof["angle_deg"] == 0.0]
-    ok = np.isfinite(at0["z"])
-    assert np.allclose(at0["y"], 0.0) and np.allclose(at0["x"], at0["s"])
-    assert np.allclose(at0["z"][ok], smooth_form(at0["x"][ok], at0["y"][ok]), atol=0.05 * np.std(z))
+    at0 = prof[prof["angle_deg"] == 0.0]  # header "angle [deg],s [mm],…": numpy names it angle_deg, s_mm …
+    ok = np.isfinite(at0["z_mm"])
+    assert np.allclose(at0["y_mm"], 0.0) and np.allclose(at0["x_mm"], at0["s_mm"])
+    assert np.allclose(at0["z_mm"][ok], smooth_form(at0["x_mm"][ok], at0["y_mm"][ok]), atol=0.05 * np.std(z))
     psd = np.genfromtxt(tmp_path / "psd.csv", delimiter=",", names=True)
-    assert psd["f"][0] == 0 and np.all(psd["psd_x"] >= 0)
+    assert psd["f_1mm"][0] == 0 and np.all(psd["psd_x_mm3"] >= 0)
     for png in ("map.png", "profiles.png", "psd.png"):
         assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

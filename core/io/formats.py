@@ -12,7 +12,8 @@ read (see docs/formats.md for units and the pixel convention):
   A text file is told apart by content: x y z columns, a two-column x z profile (refused: profiles
   are not yet an input), or a height matrix with a header. A file whose extension lies about its
   content is read for what it is; one that matches no reader is refused naming what it looks like.
-write: .csv (all channels, `index` included, shortest round-trip decimal), .ply (binary, float64)
+write: .csv (all channels, `index` included, shortest round-trip decimal, each column's unit in the
+       header: ``x [mm],y [mm],z [mm],index,residual [mm]``), .ply (binary, float64)
 
 Reader options (``read_cloud(path, pixel_size_um=…, …)``, a recipe's ``input:`` block):
   pixel_size_um  lateral pixel size, one number or [x, y], for maps whose file has no calibration
@@ -33,6 +34,7 @@ import numpy as np
 
 from ..cloud import PointCloud
 from ..errors import InputError
+from ..units import channel_unit
 from .atomic import atomic_path
 
 TEXT_SUFFIXES = (".csv", ".txt", ".xyz", ".asc", ".dat")
@@ -209,7 +211,7 @@ def _zip_has(path: Path, name: str) -> bool:
         with zipfile.ZipFile(path) as zf:
             return name in zf.namelist()
     except (zipfile.BadZipFile, OSError, ValueError):
-        return path.suffix.lower() == ".x3p"  # a damaged X3P: its reader names the damage
+        return name == "main.xml" and path.suffix.lower() == ".x3p"  # a damaged X3P: its reader names it
 
 
 def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOptions):
@@ -266,13 +268,27 @@ def _format_column(a: np.ndarray) -> list[str]:
     return list(map(repr, a.tolist()))  # shortest string that reads back bit-exact
 
 
+def csv_header(cloud: PointCloud) -> list[str]:
+    """The column titles of ``cloud`` as write_csv writes them, each with its unit:
+    ``x [mm]``, ``y [mm]``, ``z [mm]``, ``index``, ``residual [mm]`` … (core.units.channel_unit: lengths
+    in mm, a non-length unit the input stated as it was, none for counts and flags)."""
+    stated = cloud.meta.get("channel_units") or {}
+    out = []
+    for n in cloud.column_names:
+        unit = channel_unit(n, stated.get(n) if isinstance(stated, dict) else None)
+        ok = unit and not any(c in unit for c in ',;[]()"\'\t\r\n')
+        out.append(f"{n} [{unit}]" if ok else n)
+    return out
+
+
 def write_csv(cloud: PointCloud, path) -> None:
-    """CSV with a header: x, y, z (mm), index, then the other channels; written atomically."""
+    """CSV with a header naming each column and its unit: x, y, z (mm), index, then the other
+    channels (csv_header); written atomically. Read back by read_cloud bit for bit."""
     names = cloud.column_names
     arrays = [cloud[n] for n in names]
     chunk = 100_000  # formatted strings cost ~50 bytes a value: bound the memory, not the speed
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
-        f.write(",".join(names) + "\n")
+        f.write(",".join(csv_header(cloud)) + "\n")
         for start in range(0, cloud.n, chunk):
             cols = [_format_column(a[start:start + chunk]) for a in arrays]
             f.writelines(",".join(row) + "\n" for row in zip(*cols))

@@ -2,13 +2,18 @@
 
 Accepted: a header line or none; preamble lines before the header (instrument, date...); comma,
 semicolon, tab or whitespace separators; decimal commas when the separator is a semicolon, tab or
-space (European exports); comment lines starting with #, //, % or !; a unit in brackets in the header
-(``X [µm]``) scales x, y, z to mm. Columns beyond x, y, z become channels named from the header (or
-``col4``, ``col5``... without one). Rows with a NaN/inf value are dropped and counted in
-``meta["invalid_dropped"]`` (reader option ``invalid: drop``, the default of read_cloud) or refused
-naming line and column (``invalid: error``). Two columns are a line profile (x, z): refused for now,
-by name. Height matrices with a header are core.io.matrix's. Parsing is numpy's C reader (``np.loadtxt``); only when it fails
-do we walk the lines in Python to name the exact line and column at fault.
+space (European exports); comment lines starting with #, //, % or !, except CloudCompare's
+``//X Y Z …`` line right above the data, which names the columns. A length unit in brackets in the
+header (``X [µm]``, ``residual [nm]``) converts that column to mm (core.units.length_to_mm: one
+correctly rounded operation, none at all for mm, so PointsPro's own files read back bit for bit);
+counts and flags (index, row, col …) are never converted; other units (``t [s]``) are kept as read.
+``meta["channel_units"]`` states each channel's unit as the file wrote it. Columns beyond x, y, z
+become channels named from the header (or ``col4``, ``col5``... without one). Rows with a NaN/inf
+value are dropped and counted in ``meta["invalid_dropped"]`` (reader option ``invalid: drop``, the
+default of read_cloud) or refused naming line and column (``invalid: error``). Two columns are a
+line profile (x, z): refused for now, by name. Height matrices with a header are core.io.matrix's.
+Parsing is numpy's C reader (``np.loadtxt``); only when it fails do we walk the lines in Python to
+name the exact line and column at fault.
 """
 from __future__ import annotations
 
@@ -20,10 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..units import LENGTH_UNITS, UNITLESS_CHANNELS, is_length_unit, length_to_mm
 
 COMMENTS = ("#", "//", "%", "!")
-_UNITS = {"mm": 1.0, "um": 1e-3, "µm": 1e-3, "μm": 1e-3, "micron": 1e-3, "nm": 1e-6, "m": 1e3,
-          "cm": 10.0, "in": 25.4, "inch": 25.4}
 _AXIS_ALIASES = {"x": "x", "y": "y", "z": "z", "px": "x", "py": "y", "pz": "z", "pos_x": "x",
                  "pos_y": "y", "pos_z": "z", "x_pos": "x", "y_pos": "y", "z_pos": "z",
                  "xcoord": "x", "ycoord": "y", "zcoord": "z", "x_coord": "x", "y_coord": "y",
@@ -62,8 +66,8 @@ def _sniff_delimiter(line: str) -> tuple[str | None, bool]:
     return delim, decimal_comma
 
 
-def _header_name(tok: str) -> tuple[str, float | None, str | None]:
-    """Normalised channel name, unit scale to mm (None if none), unit text."""
+def _header_name(tok: str) -> tuple[str, bool, str | None]:
+    """Normalised channel name, whether the unit is a length (converted to mm), unit text."""
     t = tok.strip().strip('"').strip("'").strip()
     unit = None
     m = re.match(r"^(.*?)\s*[\[(]\s*([^\])]*)\s*[\])]\s*$", t)
@@ -72,8 +76,7 @@ def _header_name(tok: str) -> tuple[str, float | None, str | None]:
     name = re.sub(r"[^0-9a-zA-Z_]+", "_", t.strip()).strip("_").lower()
     if name and name[0].isdigit():
         name = "c_" + name
-    scale = _UNITS.get(unit.lower() if unit else "", None) if unit else None
-    return name, scale, unit
+    return name, is_length_unit(unit), unit
 
 
 def read_table(path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
@@ -145,14 +148,16 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
                   "decimal_comma": lay.decimal_comma,
                   "header_line": lay.header[0] + 1 if lay.header else None}
     if lay.header:
-        names, scales, units = _header_columns(path, lay, need_xyz, quote)
+        names, lengths, units = _header_columns(path, lay, need_xyz, quote)
         if not need_xyz:
             _check_finite(path, lines, lay.first_data, data, names, quote)
-            return None, {n: data[:, j] for j, n in enumerate(names)}, meta
+            return None, {n: (length_to_mm(data[:, j], u) if is_len and n not in UNITLESS_CHANNELS
+                              else data[:, j])
+                          for j, (n, is_len, u) in enumerate(zip(names, lengths, units))}, meta
     else:
-        names, scales, units = _plain_columns(path, lay)
-    xyz, cols = _xyz_in_mm(path, lay, data, names, scales, units)
-    meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in "xyz"}
+        names, lengths, units = _plain_columns(path, lay)
+    xyz, cols = _xyz_in_mm(path, lay, data, names, lengths, units)
+    meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in ("x", "y", "z")}
     keep = _rows_to_keep(path, lines, lay.first_data, data, names, invalid, quote)
     meta["invalid_dropped"] = 0 if keep is None else int((~keep).sum())
     if keep is not None:
@@ -194,7 +199,33 @@ def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True)
     lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty)
     if candidates:
         lay.header = _find_header(path, lines, candidates[-1], lay, quote)
+    if lay.header is None:
+        lay.header = _comment_header(lines, first_data, lay)
     return lay
+
+
+def _comment_header(lines: "_LazyLines", first_data: int, lay: _Layout) -> tuple[int, list[str]] | None:
+    """CloudCompare's ASCII export names its columns in a comment right above the data:
+    ``//X Y Z SF`` or ``//X,Y,Z,R,G,B,Scalar field``. That line is the header when it names x, y and
+    z and has one name a column (a space inside the last name is kept: ``//X Y Z Scalar field``);
+    any other comment stays a comment."""
+    i = first_data - 1
+    while i >= 0 and not lines[i].strip():
+        i -= 1
+    if i < 0 or not lines[i].lstrip().startswith("//"):
+        return None
+    body = lines[i].lstrip()[2:].strip()
+    toks = _split(body, lay.delim)
+    if toks and toks[-1] == "":
+        toks = toks[:-1]
+    if len(toks) > lay.ncols and lay.delim is None and lay.ncols >= 4:
+        toks = toks[:lay.ncols - 1] + [" ".join(toks[lay.ncols - 1:])]
+    if len(toks) != lay.ncols:
+        return None
+    names = [_AXIS_ALIASES.get(n, n) for n, _, _ in map(_header_name, toks)]
+    if not {"x", "y", "z"} <= set(names) or len(set(names)) != len(names):
+        return None
+    return i, toks
 
 
 def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = True
@@ -278,9 +309,9 @@ def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layou
 
 
 def _header_columns(path, lay: _Layout, need_xyz: bool, quote: bool = True):
-    """(names, unit scales to mm, unit texts) from the header; x, y, z required when ``need_xyz``."""
+    """(names, whether each unit is a length, unit texts) from the header; x, y, z required when ``need_xyz``."""
     line, written = lay.header
-    names, scales, units = zip(*(_header_name(t) for t in written))
+    names, lengths, units = zip(*(_header_name(t) for t in written))
     names = [_AXIS_ALIASES.get(n, n) for n in names]
     for j, n in enumerate(names):
         if not n:
@@ -293,14 +324,14 @@ def _header_columns(path, lay: _Layout, need_xyz: bool, quote: bool = True):
     if dup:
         raise InputError(f"{path}, line {line + 1}: duplicate column name(s) {sorted(dup)}")
     if not need_xyz:
-        return names, scales, units
+        return names, lengths, units
     if lay.ncols == 2 and "y" not in names:
         _profile(path, line + 1, ", ".join(written))
     missing = [a for a in "xyz" if a not in names]
     if missing:
         raise InputError(f"{path}, line {line + 1}: no {'/'.join(missing)} column in the header "
                          f"(columns: {', '.join(written)})")
-    return names, scales, units
+    return names, lengths, units
 
 
 def _plain_columns(path, lay: _Layout):
@@ -314,17 +345,24 @@ def _plain_columns(path, lay: _Layout):
     return names, [None] * lay.ncols, [None] * lay.ncols
 
 
-def _xyz_in_mm(path, lay: _Layout, data, names, scales, units):
-    """(xyz (N,3) in mm, the other columns by name)."""
+def _xyz_in_mm(path, lay: _Layout, data, names, lengths, units):
+    """(xyz (N,3) in mm, the other columns by name). A length unit in the header (``X [µm]``,
+    ``residual [nm]``) converts that column to mm in one correctly rounded operation
+    (core.units.length_to_mm; mm itself is left as read, bit for bit); x, y, z with a unit that is
+    no length are refused; counts, labels and flags (index, row, col …) are never converted; other
+    units (``t [s]``) are kept as read and stated in ``meta["channel_units"]``."""
     cols = {n: data[:, j] for j, n in enumerate(names)}
     xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")])
     for a in "xyz":
         j = names.index(a)
         if units[j] is not None:
-            if scales[j] is None:
+            if not lengths[j]:
                 raise InputError(f"{path}, line {lay.header[0] + 1}: unknown unit [{units[j]}] for {a}; "
-                                 f"known: {', '.join(sorted(_UNITS))}")
-            xyz[:, "xyz".index(a)] *= scales[j]
+                                 f"known: {', '.join(LENGTH_UNITS)}")
+            xyz[:, "xyz".index(a)] = length_to_mm(xyz[:, "xyz".index(a)], units[j])
+    for j, n in enumerate(names):
+        if n in cols and lengths[j] and n not in UNITLESS_CHANNELS:
+            cols[n] = length_to_mm(cols[n], units[j])
     return xyz, cols
 
 

@@ -6,7 +6,8 @@ carries a value only inside the clear aperture and inside the measured region (c
 spacing that hold points, gaps of one cell closed); elsewhere it is NaN — a map never shows numbers
 the measurement did not support unless extrapolation is asked for.
 
-Files: ``map.csv`` (x, y, z in mm, one row per valid node, y-major rows), ``map.x3p`` (ISO 25178-72
+Files: ``map.csv`` (x, y, z in mm, the header ``x [mm],y [mm],z [mm]``, one row per valid node,
+y-major rows), ``map.x3p`` (ISO 25178-72
 through x3pio; heights in metres as the standard stores them, NaN = not measured), ``map.asc`` (plain
 ASCII matrix for polishing machines: a commented header with origin, spacing and units, one text row
 per grid row from the lowest y up, NaN outside).
@@ -19,6 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from .bspline import TensorBSpline
+
+#: map.csv's header: names and units (docs/formats.md, Files PointsPro writes)
+CSV_HEADER = "x [mm],y [mm],z [mm]\n"
 
 
 @dataclass(frozen=True)
@@ -39,10 +43,11 @@ class MapGrid:
         return X[v], Y[v], self.z[v]
 
     def write_csv(self, path: Path) -> None:
-        """x, y, z (mm) of the valid nodes, shortest round-trip decimals."""
+        """x, y, z (mm) of the valid nodes, shortest round-trip decimals; the header states the unit
+        (``x [mm],y [mm],z [mm]``), so read_cloud reads the file back bit for bit."""
         x, y, z = self.nodes()
         with open(path, "w", encoding="utf-8", newline="\n") as f:
-            f.write("x,y,z\n")
+            f.write(CSV_HEADER)
             for start in range(0, len(x), 100_000):
                 sl = slice(start, start + 100_000)
                 f.writelines(f"{a!r},{b!r},{c!r}\n" for a, b, c in

@@ -5,7 +5,9 @@ squares on uniform knots) → grid nodes at multiples of ``spacing`` inside the 
 measured region (core.maps.grid). Seed paper 000 builds its form maps the same way (B-splines).
 
 Artifacts: ``map.csv`` (x, y, z in mm per valid node), ``map.x3p`` (ISO 25178-72), ``map.asc``
-(ASCII matrix for polishing machines), and the figures ``map.png``, ``profiles.png``, ``psd.png``.
+(ASCII matrix for polishing machines), ``profiles.csv``, ``psd.csv`` (every CSV states its units in
+its header: ``x [mm]``, ``angle [deg]``, ``f [1/mm]``, ``psd_x [mm^3]``), and the figures
+``map.png``, ``profiles.png``, ``psd.png``.
 With ``mesh: ply|stl|obj``, ``map_mesh.<fmt>``: the map grid triangulated over its valid nodes for
 CAD/FEA (core.io.mesh.grid_mesh: two triangles per cell whose four nodes are valid; mm), z = the
 mapped value (``mesh_z: map``) or the nominal's sag plus it (``mesh_z: surface`` — the measured
@@ -172,12 +174,18 @@ def _map_mesh(grid, channel, params, ctx):
     return art
 
 
+#: the headers of profiles.csv and psd.csv: names and units (docs/formats.md, Files PointsPro writes)
+PROFILES_HEADER = "angle [deg],s [mm],x [mm],y [mm],z [mm]\n"
+PSD_HEADER = "f [1/mm],psd_x [mm^3],psd_y [mm^3]\n"
+
+
 def _write_profiles(path, grid, angles, center) -> None:
-    """angle_deg, s (mm along the cut through the centre), x, y, z (mm); one block per angle."""
+    """angle (degrees), s (mm along the cut through the centre), x, y, z (mm); one block per angle;
+    the header states the units (PROFILES_HEADER)."""
     from pointspro.core.metrics.profiles import profile
 
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write("angle_deg,s,x,y,z\n")
+        f.write(PROFILES_HEADER)
         for a in angles:
             s, z = profile(grid, a, center)
             t = np.deg2rad(a)
@@ -188,14 +196,15 @@ def _write_profiles(path, grid, angles, center) -> None:
 
 
 def _write_psd(path, grid) -> None:
-    """f (1/mm), PSD along x and along y (mm³ = mm² per 1/mm), one-sided, Hann window."""
+    """f (1/mm), PSD along x and along y (mm^3 = mm² per 1/mm), one-sided, Hann window; the header
+    states the units (PSD_HEADER)."""
     from pointspro.core.metrics.profiles import psd_1d
 
     fx, px = psd_1d(grid, "x")
     fy, py = psd_1d(grid, "y")
     n = min(len(fx), len(fy))
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write("f,psd_x,psd_y\n")
+        f.write(PSD_HEADER)
         for a, b, c in zip(fx[:n].tolist(), px[:n].tolist(), py[:n].tolist()):
             f.write(f"{a!r},{b!r},{c!r}\n")
 
