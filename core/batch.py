@@ -1,11 +1,18 @@
 """`pointspro --batch RECIPE INPUT… --out DIR`: the recipe on each input, one output folder each.
 
-For each input: ``DIR/<stem>/cloud.csv`` (with the `index` column), ``report.json``, ``report.html``
-and the steps' artifacts, written into a temporary folder that replaces ``DIR/<stem>`` only when
-complete. Inputs are never modified. Never starts Qt.
+For each input: ``DIR/<stem>/cloud.csv`` (with the `index` column; ``cloud.ply`` or ``cloud.npz``
+with ``--cloud-format``), ``report.json``, ``report.html`` and the steps' artifacts, written into a
+temporary folder that replaces ``DIR/<stem>`` only when complete. Inputs are never modified. Never
+starts Qt.
+
+``--set STEP.KEY=VALUE`` overrides (``load_batch_recipe``) are applied to the recipe's YAML before
+it is validated, in this process and in every worker, and listed in report.json's ``overrides``.
+The steps' log records (``ctx.log``, loggers ``pointspro.<step id>``) carry the input's name
+(``record.input``); a worker returns its records with its outcome for the parent to show.
 """
 from __future__ import annotations
 
+import contextvars
 import functools
 import logging
 import os
@@ -17,6 +24,8 @@ from typing import Callable
 from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
 from .io.background import BackgroundWrite
+from .io.formats import write_ply_cloud
+from .io.npz import write_npz_cloud
 from .pipeline import run_pipeline
 from .progress import CancelToken, Progress
 from .recipe import Recipe
@@ -32,6 +41,12 @@ class InputOutcome:
     out_dir: str | None = None
     summary: dict | None = None
     traceback: str | None = field(default=None, repr=False)
+    #: the log records of a worker (plain dicts, ``logging.makeLogRecord``'s input), for the parent
+    log: list = field(default_factory=list, repr=False)
+
+
+#: what ``--cloud-format`` may name: the processed cloud is written as ``cloud.<format>``
+CLOUD_FORMATS = ("csv", "ply", "npz")
 
 
 def check_output_folder(out: Path) -> None:
@@ -71,15 +86,22 @@ def write_artifact(folder: Path, name: str, art) -> None:
 
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
-                  timings: dict | None = None, fork_csv: bool = False) -> dict:
+                  timings: dict | None = None, fork_csv: bool = False, cloud_format: str = "csv",
+                  overrides=()) -> dict:
     """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
     artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
     and the window's File → Export report. ``figures``: "all", "summary" (form_error.png only) or
     "none" — the report says which were not drawn. ``timings``, when given, receives the seconds
     spent on each file (benchmarks/bench_input.py's stage table). ``fork_csv``: cloud.csv may be
     written by a forked process while the figures are drawn (core/io/background.py) — only the
-    batch's own single-threaded process asks for it."""
+    batch's own single-threaded process asks for it. ``cloud_format``: csv, ply (binary float64)
+    or npz — the cloud is ``cloud.<format>``, named in report.json's ``cloud_file``. ``overrides``:
+    the ``--set`` texts the recipe was run with, listed in report.json's ``overrides``."""
     from .report import SUMMARY_FIGURE, skipped_figures
+
+    if cloud_format not in CLOUD_FORMATS:
+        raise ValueError(f"cloud format {cloud_format!r} is not one of {', '.join(CLOUD_FORMATS)}")
+    cloud_name = f"cloud.{cloud_format}"
 
     timings = {} if timings is None else timings
     has_map = "residual" in result.cloud.channels and result.cloud.n
@@ -93,13 +115,18 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     t0 = time.perf_counter()
     report = build_report(input_path, recipe, result, figures, skipped)
     timings["report (summary)"] = time.perf_counter() - t0
+    report["cloud_file"] = cloud_name
+    if overrides:
+        report["overrides"] = [str(o) for o in overrides]
+    writer = {"csv": write_csv, "ply": write_ply_cloud, "npz": write_npz_cloud}[cloud_format]
     with atomic_dir(folder) as tmp:
         # cloud.csv is formatted in a forked process while the figures are drawn, where a core is
         # free (core/io/background.py); else here. Either way it is complete before the rename.
+        # The binary formats (ply, npz) are a memory copy: written here.
         t1 = time.perf_counter()
-        csv = BackgroundWrite(write_csv, result.cloud, tmp / "cloud.csv", what=f"{folder.name}/cloud.csv",
-                              fork=fork_csv)
-        timings["cloud.csv" + (" (started in a forked process)" if csv.forked else "")] = \
+        csv = BackgroundWrite(writer, result.cloud, tmp / cloud_name, what=f"{folder.name}/{cloud_name}",
+                              fork=fork_csv and cloud_format == "csv")
+        timings[cloud_name + (" (started in a forked process)" if csv.forked else "")] = \
             time.perf_counter() - t1
         try:
             for name, art in result.artifacts.items():
@@ -117,7 +144,7 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
             timed("report.html", lambda: (tmp / "report.html").write_text(render_html(report, tmp),
                                                                            encoding="utf-8"))
             if csv.forked:
-                timed("cloud.csv (waiting for the forked writer)", csv.wait)
+                timed(f"{cloud_name} (waiting for the forked writer)", csv.wait)
         finally:
             csv.cancel()  # only if still running: an error above; the folder is then removed
     return report
@@ -126,10 +153,23 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
 def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                   sink: Callable[[float, str], None] | None = None, token: CancelToken | None = None,
                   surface=None, log: logging.Logger | None = None,
-                  allowed_dirs=None, figures: str = "all", fork_csv: bool = False) -> InputOutcome:
+                  allowed_dirs=None, figures: str = "all", fork_csv: bool = False,
+                  cloud_format: str = "csv", overrides=()) -> InputOutcome:
     """Read, run, write one input. Any exception but Cancelled → a failed outcome for this input
     alone (one line naming the input and the step or stage; the traceback kept for summary.json and
-    --debug); Cancelled propagates."""
+    --debug); Cancelled propagates. The steps' log records carry the input's name
+    (``record.input``, see ``InputLogFilter``)."""
+    token_input = CURRENT_INPUT.set(Path(path).name)
+    try:
+        return _process_input(path, recipe, out_dir, stem, sink=sink, token=token, surface=surface,
+                              log=log, allowed_dirs=allowed_dirs, figures=figures, fork_csv=fork_csv,
+                              cloud_format=cloud_format, overrides=overrides)
+    finally:
+        CURRENT_INPUT.reset(token_input)
+
+
+def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, allowed_dirs, figures,
+                   fork_csv, cloud_format, overrides) -> InputOutcome:
     t0 = time.perf_counter()
     stage = "reading"
     try:
@@ -141,7 +181,7 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                               log=log, allowed_dirs=allowed_dirs)
         stage = "writing the outputs"
         report = write_outputs(out_dir / stem, str(path), recipe, result, figures=figures,
-                               fork_csv=fork_csv)
+                               fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides)
         progress.update(1.0, "written")
         return InputOutcome(str(path), True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"])
@@ -171,29 +211,216 @@ def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0
 
 
 def process_job(recipe_path: str, path: str, out_dir: str, stem: str,
-                allowed_dirs: list[str] | None = None, figures: str = "all") -> InputOutcome:
+                allowed_dirs: list[str] | None = None, figures: str = "all",
+                options: dict | None = None) -> InputOutcome:
     """One input in a worker (process pool or Dask): the recipe is read there from its file, so
     only plain strings cross process and machine boundaries — once per worker and recipe version
-    (``worker_recipe``), not once per input."""
-    try:
-        st = os.stat(recipe_path)
-        recipe, surface = worker_recipe(recipe_path, st.st_mtime_ns, st.st_size)
-    except Exception as e:  # noqa: BLE001 — e.g. the recipe changed or vanished since the start
-        return failed_outcome(path, "reading the recipe in the worker", e)
-    return process_input(Path(path), recipe, Path(out_dir), stem, surface=surface, figures=figures,
-                         allowed_dirs=None if allowed_dirs is None else [Path(d) for d in allowed_dirs])
+    (``worker_recipe``), not once per input. ``options`` (plain values): ``cloud_format``,
+    ``overrides`` (the ``--set`` texts) and ``log_level`` — the records at that level or above of
+    the ``pointspro`` loggers come back in the outcome's ``log`` instead of this process's stderr."""
+    options = options or {}
+    overrides = tuple(options.get("overrides") or ())
+    with capture_log(options.get("log_level")) as records:
+        try:
+            st = os.stat(recipe_path)
+            recipe, surface = worker_recipe(recipe_path, st.st_mtime_ns, st.st_size, overrides)
+        except Exception as e:  # noqa: BLE001 — e.g. the recipe changed or vanished since the start
+            oc = failed_outcome(path, "reading the recipe in the worker", e)
+        else:
+            oc = process_input(Path(path), recipe, Path(out_dir), stem, surface=surface, figures=figures,
+                               allowed_dirs=None if allowed_dirs is None else [Path(d) for d in allowed_dirs],
+                               cloud_format=options.get("cloud_format", "csv"), overrides=overrides)
+    oc.log = records
+    return oc
 
 
 @functools.lru_cache(maxsize=4)
-def worker_recipe(recipe_path: str, mtime_ns: int, size: int):
+def worker_recipe(recipe_path: str, mtime_ns: int, size: int, overrides: tuple = ()):
     """(Recipe, nominal surface) of a recipe file, parsed and built once per worker process for a
     given version of the file (its modification time and size are part of the key, so an edited
-    recipe is read again). A cache, not state: the same key always gives the same recipe, and the
-    steps never modify either (a step's Params are frozen; surfaces are immutable)."""
-    from .recipe import load_recipe
-
-    recipe = load_recipe(recipe_path)
+    recipe is read again) and the same ``--set`` overrides. A cache, not state: the same key always
+    gives the same recipe, and the steps never modify either (a step's Params are frozen; surfaces
+    are immutable)."""
+    recipe = load_batch_recipe(recipe_path, overrides)
     return recipe, (recipe.build_surface() if recipe.surface_spec is not None else None)
+
+
+# --- --set STEP.KEY=VALUE -------------------------------------------------------------------------
+
+def load_batch_recipe(path, overrides=()) -> Recipe:
+    """The recipe file with the ``--set`` overrides applied to its YAML, then validated as the file
+    itself is (core.recipe.parse_recipe): a bad value is the same RecipeError, naming the key, with
+    the overrides said. An override naming no step, an ambiguous step id or an unknown key is a
+    RecipeError naming the override."""
+    from .recipe import load_recipe, parse_recipe
+    from .yamlio import load_yaml
+
+    if not overrides:
+        return load_recipe(path)
+    path = Path(path)
+    load_recipe(path)  # the file as written first: its own errors name its lines, as without --set
+    data = load_yaml(path.read_text(encoding="utf-8"), str(path))
+    for text in overrides:
+        apply_override(data, text)
+    try:
+        return parse_recipe(data, str(path), base=path)
+    except RecipeError as e:
+        shown = " ".join(f"--set {o}" for o in overrides)
+        raise RecipeError(f"{e} (with {shown})") from None
+
+
+def parse_override(text: str) -> tuple[str, str, object]:
+    """``STEP.KEY=VALUE`` → (STEP, KEY, VALUE parsed as YAML: 10 → int, [1, 2] → list, true …)."""
+    from .yamlio import load_yaml
+
+    target, eq, value = str(text).partition("=")
+    step, dot, key = target.strip().partition(".")
+    if not (eq and dot and step and key.strip()):
+        raise RecipeError(f"--set {text}: write STEP.KEY=VALUE (e.g. --set knn_denoise.window=10, "
+                          "--set 2.window=10 by position, --set surface.k=-1)")
+    # read as the recipe file is (YAML 1.2 core schema: 3e-4 a number, yes a word)
+    return step.strip(), key.strip(), load_yaml(value, f"--set {text}")
+
+
+def _copy(d, **changes):
+    """A mapping of the recipe with ``changes``, keeping the line numbers a LineDict remembers."""
+    from .yamlio import LineDict
+
+    out = LineDict(d) if isinstance(d, dict) else LineDict()
+    out.line = getattr(d, "line", None)
+    out.key_lines = dict(getattr(d, "key_lines", {}) or {})
+    out.update(changes)
+    return out
+
+
+def _entry_id(entry):
+    if isinstance(entry, str):
+        return entry
+    if isinstance(entry, dict):
+        keys = [k for k in entry if k != "enabled"]
+        return keys[0] if len(keys) == 1 else None
+    return None
+
+
+def apply_override(data, text: str) -> None:
+    """Apply one ``--set`` to the recipe's YAML data in place (see ``load_batch_recipe``).
+
+    STEP is a 1-based position in ``steps:`` (``2.window``), a step id that occurs once
+    (``knn_denoise.window``), or ``surface`` / ``input`` for those blocks' keys. KEY ``enabled``
+    switches a step on or off."""
+    from .registry import Registry
+
+    step, key, value = parse_override(text)
+    if not isinstance(data, dict):
+        return  # not a recipe: parse_recipe says so
+    if step in ("surface", "input"):
+        block = data.get(step)
+        if block is not None and not isinstance(block, dict):
+            return  # parse_recipe names the block's own error
+        data[step] = _copy(block or {}, **{key: value})
+        return
+    steps = data.get("steps")
+    steps = steps if isinstance(steps, list) else []
+    ids = [_entry_id(e) for e in steps]
+    if step.isdigit():
+        i = int(step)
+        if not 1 <= i <= len(steps):
+            raise RecipeError(f"--set {text}: no step {i}; the recipe has {len(steps)} step(s)"
+                              + (f": {', '.join(f'{k} {s}' for k, s in enumerate(ids, 1))}" if ids else ""))
+    else:
+        where = [k for k, s in enumerate(ids, 1) if s == step]
+        if not where:
+            raise RecipeError(f"--set {text}: the recipe has no step '{step}' (its steps: "
+                              f"{', '.join(map(str, ids)) or 'none'}; surface.KEY and input.KEY set "
+                              "those blocks)")
+        if len(where) > 1:
+            raise RecipeError(f"--set {text}: step '{step}' occurs {len(where)} times (steps "
+                              f"{', '.join(map(str, where))}); name it by position, e.g. "
+                              f"--set {where[0]}.{key}=…")
+        i = where[0]
+    entry, sid = steps[i - 1], ids[i - 1]
+    if sid is None:
+        return  # a malformed entry: parse_recipe names it
+    reg = Registry()
+    if key != "enabled" and sid in reg:
+        fields = reg.load(sid).Params.model_fields
+        if key not in fields:
+            raise RecipeError(f"--set {text}: step {i} '{sid}' has no parameter '{key}' (its "
+                              f"parameters: {', '.join(fields) or 'none'})")
+    if isinstance(entry, str):
+        entry = _copy({}, **{sid: {}})
+        entry.line = getattr(steps[i - 1], "line", None)
+    if key == "enabled":
+        new = _copy(entry, enabled=value)
+    else:
+        params = entry.get(sid)
+        new = _copy(entry, **{sid: _copy(params if isinstance(params, dict) else {}, **{key: value})})
+    data["steps"][i - 1] = new
+
+
+# --- the steps' log records, with the input's name, across processes --------------------------------
+
+#: the input being processed in this thread (its file name), stamped on log records
+CURRENT_INPUT: "contextvars.ContextVar[str]" = contextvars.ContextVar("pointspro_input", default="")
+
+
+class InputLogFilter(logging.Filter):
+    """Sets ``record.input`` (the input's file name; "" outside an input) unless a worker set it."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not getattr(record, "input", None):
+            record.input = CURRENT_INPUT.get()
+        return True
+
+
+class _Collect(logging.Handler):
+    def __init__(self, level):
+        super().__init__(level)
+        self.records: list[dict] = []
+        self.addFilter(InputLogFilter())
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append({"name": record.name, "levelno": record.levelno,
+                             "levelname": record.levelname, "msg": record.getMessage(),
+                             "created": record.created, "input": getattr(record, "input", "")})
+
+
+class capture_log:
+    """``with capture_log(level) as records:`` the ``pointspro`` loggers' records at ``level`` or
+    above are collected as plain dicts (picklable, for the parent) and not shown here; ``level``
+    None: nothing collected, nothing changed."""
+
+    def __init__(self, level: int | None):
+        self.level = level
+        self.records: list[dict] = []
+
+    def __enter__(self) -> list[dict]:
+        if self.level is None:
+            return self.records
+        self.logger = logging.getLogger("pointspro")
+        self.saved = (self.logger.level, self.logger.propagate)
+        self.handler = _Collect(self.level)
+        self.handler.records = self.records
+        self.logger.addHandler(self.handler)
+        self.logger.setLevel(self.level)
+        self.logger.propagate = False
+        return self.records
+
+    def __exit__(self, *exc) -> None:
+        if self.level is None:
+            return
+        self.logger.removeHandler(self.handler)
+        self.logger.setLevel(self.saved[0])
+        self.logger.propagate = self.saved[1]
+
+
+def replay_log(records: list[dict]) -> None:
+    """A worker's records handed to this process's ``pointspro`` loggers (its handlers show them)."""
+    for r in records or ():
+        rec = logging.makeLogRecord({**r, "args": None})
+        logger = logging.getLogger(rec.name)
+        if logger.isEnabledFor(rec.levelno):
+            logger.handle(rec)
 
 
 def cleanup_partials(out_dir: Path) -> list[str]:
@@ -212,16 +439,19 @@ def cleanup_partials(out_dir: Path) -> list[str]:
     return gone
 
 
-def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe) -> dict | None:
+def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
+                cloud_format: str = "csv") -> dict | None:
     """The report of a complete earlier output of this input with this recipe, else None.
 
     Output folders appear only when complete (atomic rename); the report must also name the same
-    input and the same recipe (every parameter), so a changed recipe is run again."""
+    input, the same recipe (every parameter, ``--set`` overrides applied) and the same cloud file
+    (``--cloud-format``), so a changed recipe or format is run again."""
     import json
 
     folder = Path(out_dir) / stem
     rep = folder / "report.json"
-    if not (rep.is_file() and (folder / "cloud.csv").is_file()):
+    cloud_name = f"cloud.{cloud_format}"
+    if not (rep.is_file() and (folder / cloud_name).is_file()):
         return None
     try:
         data = json.loads(rep.read_text(encoding="utf-8"))
@@ -230,5 +460,7 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe) -> dict | 
     from .report import jsonable
 
     if data.get("input") != str(path) or data.get("recipe") != jsonable(recipe.to_dict(full=True)):
+        return None
+    if data.get("cloud_file", "cloud.csv") != cloud_name:
         return None
     return data

@@ -4,12 +4,15 @@
     pointspro [--run] --screenshot PNG [FILE…]          render the window to PNG and exit (--run:
                                                         run the recipe first)
     pointspro --batch RECIPE INPUT… --out DIR [--workers N] [--scheduler ADDRESS] [--resume]
-                                        [--allow-path DIR]…
+                                        [--allow-path DIR]… [--set STEP.KEY=VALUE]…
+                                        [--cloud-format csv|ply|npz] [-v|-vv] [--log-file FILE]
+    pointspro info FILE [--json]                        what a measurement file holds
     pointspro steps                                     list the installed steps
+    pointspro simulate / explain                        simulated measurements, missing effects
 
 Exit codes: 0 all done; 1 some inputs failed (the others are complete); 2 usage, recipe or input
-error — one line on stderr naming what is wrong, no traceback unless --debug.
-Only the window path imports Qt; the batch and `steps` paths never do.
+error — one line on stderr naming what is wrong, no traceback unless --debug; 130 interrupted.
+Only the window path imports Qt; the batch, `info` and `steps` paths never do.
 """
 from __future__ import annotations
 
@@ -20,7 +23,42 @@ from pathlib import Path
 
 from .errors import Cancelled, PointsProError
 
-EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+EPILOG = """\
+commands:
+  pointspro [FILE…]                   open the window (PySide6) with the files
+  pointspro --batch RECIPE INPUT… --out DIR
+                                      run RECIPE on each INPUT, no window: DIR/<stem>/cloud.csv,
+                                      report.json, report.html and the steps' files
+  pointspro info FILE [--json]        format, points, channels and units, extents (mm), grid or
+                                      spacing, RMS/PV of z after piston and tilt removal
+  pointspro steps [STEP…]             the installed steps and their parameters with units
+  pointspro simulate MODEL.yaml --out FILE
+                                      a simulated measurement from a model
+  pointspro explain --model MODEL.yaml --measured FILE --out DIR
+                                      the effects a simulation misses, and the gap they close
+
+examples:
+  pointspro info part.datx
+  pointspro --batch recipe.yaml scans/*.csv --out results --workers 4
+  pointspro --batch recipe.yaml part.csv --out results --set knn_denoise.window=10 \\
+            --set 2.diameter=1290 --set surface.k=-0.98 --cloud-format ply -v
+  pointspro --batch recipe.yaml scans/*.csv --out results --resume --log-file run.log
+  pointspro steps knn_denoise
+
+inputs (chosen by content, not by extension; docs/formats.md):
+  x y z text columns (.csv .txt .xyz .asc .dat), .ply, .pcd/.pts, a PointsPro cloud.npz,
+  Zygo .datx / MetroPro .dat, Digital Surf .sur, ISO 25178 .sdf and .x3p, Wyko .opd, Sensofar
+  .plu/.plux, Keyence .vk4/.zon, Gwyddion .gwy and the other SurfaceTopography formats, text
+  height matrices (Gwyddion, SPIP, Wyko, Nova headers)
+
+exit codes:
+  0    all done
+  1    some inputs failed (the others are complete; see summary.json)
+  2    usage, recipe or input error: one line on stderr naming the file, line, step or key
+  130  interrupted (Ctrl-C, SIGTERM): no partial output left; --resume finishes
+"""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -30,7 +68,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="pointspro", description="Form-error maps of aspheric and freeform optics.",
-                epilog="Subcommands: `pointspro steps` lists the installed steps.")
+                epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("files", nargs="*", metavar="FILE", help="measurement files (window), or with "
                    "--batch: RECIPE INPUT…")
     p.add_argument("--batch", action="store_true", help="run RECIPE on each INPUT without a window")
@@ -40,17 +78,30 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster (tcp://host:8786), "
                    "or `local` for a LocalCluster on this machine")
     p.add_argument("--resume", action="store_true", help="skip inputs whose outputs are complete "
-                   "(same input, same recipe)")
+                   "(same input, same recipe and --set, same --cloud-format)")
     p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
                    help="with --batch: let the recipe read parameter files (calibrations, models, "
                    "meshes) in DIR; by default only the recipe's folder and the inputs' folders "
                    "(repeatable)")
+    p.add_argument("--set", action="append", default=[], metavar="STEP.KEY=VALUE", dest="overrides",
+                   help="with --batch: override one recipe parameter, VALUE read as YAML (10, 0.5, "
+                   "[1, 2], true); STEP is a step id that occurs once, its 1-based position, or "
+                   "surface / input for those blocks; KEY enabled switches a step (repeatable; "
+                   "validated like the recipe file, listed in report.json's overrides)")
+    p.add_argument("--cloud-format", choices=["csv", "ply", "npz"], default=None,
+                   help="with --batch: the processed cloud as cloud.csv (default; every channel, "
+                   "shortest round-trip decimals), cloud.ply (binary float64) or cloud.npz (NumPy, "
+                   "with a pointspro_meta JSON entry)")
     p.add_argument("--screenshot", metavar="PNG", help="open the window, render, save PNG, exit")
     p.add_argument("--run", action="store_true", help="with a data file and a recipe: run the "
                    "recipe's steps in the window at once (before --screenshot's picture)")
     p.add_argument("--figures", choices=["all", "summary", "none"], default="all",
                    help="figures --batch draws: all (default), summary (form_error.png only) or none; "
                         "report.json says which were not drawn")
+    p.add_argument("-v", "--verbose", action="count", default=0,
+                   help="the steps' log on stderr: -v their key numbers (INFO), -vv DEBUG")
+    p.add_argument("--log-file", metavar="FILE", help="append the steps' log (INFO, or DEBUG with "
+                   "-vv) to FILE, each line with its time, step and input")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--version", action="store_true", help="print the version and exit")
@@ -61,8 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["steps"]:
         return _guard(lambda: cmd_steps(argv[1:]), "--debug" in argv)
-    if argv[:1] in (["simulate"], ["explain"]):
-        cmd = cmd_simulate if argv[0] == "simulate" else cmd_explain
+    if argv[:1] in (["simulate"], ["explain"], ["info"]):
+        cmd = {"simulate": cmd_simulate, "explain": cmd_explain, "info": cmd_info}[argv[0]]
         try:
             args = _sub_parser(argv[0]).parse_args(argv[1:])
         except SystemExit as e:
@@ -78,12 +129,80 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pointspro {__version__}")
         return EXIT_OK
     if args.batch:
-        return _guard(lambda: cmd_batch(args), args.debug)
-    if args.out or args.workers is not None or args.scheduler or args.resume or args.allow_path:
-        print("pointspro: --out, --workers, --scheduler, --resume and --allow-path go with --batch "
-              "(see pointspro --help)", file=sys.stderr)
+        return _guard(lambda: _with_logging(args, lambda: cmd_batch(args)), args.debug)
+    if (args.out or args.workers is not None or args.scheduler or args.resume or args.allow_path
+            or args.overrides or args.cloud_format):
+        print("pointspro: --out, --workers, --scheduler, --resume, --allow-path, --set and "
+              "--cloud-format go with --batch (see pointspro --help)", file=sys.stderr)
         return EXIT_USAGE
-    return _guard(lambda: cmd_window(args), args.debug)
+    return _guard(lambda: _with_logging(args, lambda: cmd_window(args)), args.debug)
+
+
+class _LogFormatter(logging.Formatter):
+    """"pointspro.knn_denoise: part.csv: 12 outliers removed …" — the input when there is one."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        name = getattr(record, "input", "")
+        record.where = f" {name}:" if name else ""
+        return super().format(record)
+
+
+class _StderrHandler(logging.Handler):
+    """Log lines on the stderr of the moment (so a test's capture sees them), through tqdm so an
+    overall progress bar is redrawn below them rather than torn."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            msg = self.format(record)
+            if "tqdm" in sys.modules:
+                from tqdm import tqdm
+
+                tqdm.write(msg, file=sys.stderr)
+            else:
+                sys.stderr.write(msg + "\n")
+                sys.stderr.flush()
+        except Exception:  # noqa: BLE001 — logging never stops the batch
+            self.handleError(record)
+
+
+def _with_logging(args, fn):
+    """Run ``fn`` with the ``pointspro`` loggers (the steps' ``ctx.log``) shown on stderr at
+    WARNING, INFO with -v, DEBUG with -vv, and written to --log-file (INFO, DEBUG with -vv); the
+    loggers are as they were afterwards (main() may be called again in the same process)."""
+    from .batch import InputLogFilter
+    from .errors import RecipeError
+
+    levels = {0: logging.WARNING, 1: logging.INFO}
+    shown = levels.get(args.verbose, logging.DEBUG)
+    handlers: list[logging.Handler] = []
+    err = _StderrHandler(shown)
+    err.setFormatter(_LogFormatter("%(name)s:%(where)s %(message)s"))
+    handlers.append(err)
+    level = shown
+    if args.log_file:
+        try:
+            fh = logging.FileHandler(args.log_file, mode="a", encoding="utf-8")
+        except OSError as e:
+            raise RecipeError(f"--log-file {args.log_file}: cannot write ({e.strerror or e})") from None
+        fh.setLevel(min(logging.INFO, shown))
+        fh.setFormatter(_LogFormatter("%(asctime)s %(levelname)s %(name)s:%(where)s %(message)s"))
+        handlers.append(fh)
+        level = min(level, fh.level)
+    logger = logging.getLogger("pointspro")
+    saved = (logger.level, logger.propagate)
+    logger.setLevel(level)
+    logger.propagate = False  # shown once, by these handlers
+    for h in handlers:
+        h.addFilter(InputLogFilter())
+        logger.addHandler(h)
+    try:
+        return fn()
+    finally:
+        for h in handlers:
+            logger.removeHandler(h)
+            h.close()
+        logger.setLevel(saved[0])
+        logger.propagate = saved[1]
 
 
 def _guard(fn, debug: bool) -> int:
@@ -102,7 +221,7 @@ def _guard(fn, debug: bool) -> int:
         return EXIT_OK
     except (Cancelled, KeyboardInterrupt):
         print("pointspro: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     except Exception as e:  # a bug, not the user's fault: still one line unless --debug
         if debug:
             raise
@@ -114,13 +233,12 @@ def _guard(fn, debug: bool) -> int:
 def cmd_batch(args) -> int:
     import time
 
-    from .batch import check_output_folder, output_stems
-    from .recipe import load_recipe
+    from .batch import check_output_folder, load_batch_recipe, output_stems
     from .summary import entry, table, write_summary
 
     _check_batch_args(args)
     recipe_path = Path(args.files[0])
-    recipe = load_recipe(recipe_path)
+    recipe = load_batch_recipe(recipe_path, tuple(args.overrides))  # --set applied, then validated
     inputs = [Path(f) for f in args.files[1:]]
     allowed = _allowed_dirs(recipe_path, inputs, args.allow_path)
     _check_recipe_files(recipe, allowed)  # before any file the recipe names is read
@@ -132,10 +250,19 @@ def cmd_batch(args) -> int:
     t0 = time.perf_counter()
     workers = args.workers or _cores()
 
-    results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume)
+    results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "csv")
     # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
     runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed)
-    interrupted = _drain(runner, _reporter(results, args), out)
+    progress = None
+    if not args.quiet and runner.__name__ != "run_sequential":  # workers: one overall bar
+        from .terminal import BatchProgress
+
+        progress = BatchProgress(len(jobs))
+    try:
+        interrupted = _drain(runner, _reporter(results, args, progress), out)
+    finally:
+        if progress is not None:
+            progress.close()
 
     entries = [results.get(str(p)) or entry(str(p), "not run") for p in inputs]
     write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
@@ -202,9 +329,11 @@ def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: bool):
+def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: bool,
+               cloud_format: str = "csv"):
     """(results of the inputs already complete, jobs (path, stem) left to run). With ``resume``,
-    what a killed run left behind is removed first and complete outputs are skipped."""
+    what a killed run left behind is removed first and complete outputs (same recipe, same cloud
+    format) are skipped."""
     from .batch import cleanup_partials, is_complete
     from .summary import entry
 
@@ -213,7 +342,7 @@ def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: 
     if resume:
         cleanup_partials(out)  # what a killed run left behind
     for path, stem in zip(inputs, stems):
-        done = is_complete(out, stem, path, recipe) if resume else None
+        done = is_complete(out, stem, path, recipe, cloud_format) if resume else None
         if done is not None:
             results[str(path)] = entry(str(path), "skipped", report=done)
         else:
@@ -221,14 +350,30 @@ def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: 
     return results, jobs
 
 
-def _reporter(results: dict, args):
-    """The callback for each finished input: records its summary entry and prints one line (ok on
-    stdout unless --quiet, failed on stderr, with the traceback under --debug)."""
+def _reporter(results: dict, args, progress=None):
+    """The callback for each finished input: shows a worker's log records, records its summary
+    entry and prints one line (ok on stdout unless --quiet, failed on stderr, with the traceback
+    under --debug); ``progress`` (workers' overall bar) counts it."""
+    from .batch import replay_log
     from .summary import entry
     from .units import format_length
 
+    def say(text: str, file=None):
+        if progress is not None:
+            progress.write(text, file or sys.stdout)
+        else:
+            print(text, file=file or sys.stdout, flush=True)
+
     def report(oc):
+        replay_log(getattr(oc, "log", None))
         results[oc.input] = entry(oc.input, "ok" if oc.ok else "failed", oc)
+        try:
+            _line(oc)
+        finally:
+            if progress is not None:
+                progress.advance(oc.ok, Path(oc.input).name)
+
+    def _line(oc):
         if oc.ok:
             s = oc.summary or {}
             what = "residual" if s.get("figures_of", "residual") == "residual" else "height"
@@ -236,12 +381,12 @@ def _reporter(results: dict, args):
                      f"PV {format_length(s['pv_um'] * 1e-3, 4)}"
                      if s.get("rms_um") is not None else "")
             if not args.quiet:
-                print(f"{oc.input}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} "
-                      f"points{extra}, {oc.seconds:.2f} s)", flush=True)
+                say(f"{oc.input}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} "
+                    f"points{extra}, {oc.seconds:.2f} s)")
         else:
             if args.debug and oc.traceback:
-                print(oc.traceback, file=sys.stderr, end="")
-            print(f"pointspro: {oc.error}", file=sys.stderr, flush=True)
+                say(oc.traceback.rstrip("\n"), sys.stderr)
+            say(f"pointspro: {oc.error}", sys.stderr)
 
     return report
 
@@ -252,16 +397,21 @@ def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, wo
     process (with a progress bar unless --quiet)."""
     from . import executors
 
+    # plain values for the workers: the cloud format, the --set texts (each worker applies them to
+    # the recipe file it reads) and the level of the log records they send back
+    options = {"cloud_format": args.cloud_format or "csv", "overrides": list(args.overrides),
+               "log_level": logging.getLogger("pointspro").getEffectiveLevel()}
     if args.scheduler:
-        return executors.run_dask(recipe_path, jobs, out, workers, args.scheduler, allowed, args.figures)
+        return executors.run_dask(recipe_path, jobs, out, workers, args.scheduler, allowed, args.figures,
+                                  options)
     if min(workers, len(jobs)) > 1:
         return executors.run_processes(recipe_path, jobs, out, min(workers, len(jobs)), allowed,
-                                       args.figures)
+                                       args.figures, options)
     from .terminal import TerminalProgress
 
     factory = None if args.quiet else (
         lambda k, p: TerminalProgress(label=f"[{k}/{len(jobs)}] {p.name}"))
-    return executors.run_sequential(recipe, surface, jobs, out, factory, allowed, args.figures)
+    return executors.run_sequential(recipe, surface, jobs, out, factory, allowed, args.figures, options)
 
 
 def _drain(runner, report, out: Path) -> bool:
@@ -312,7 +462,13 @@ def _batch_exit_code(entries: list[dict], interrupted: bool) -> int:
 
 def _sub_parser(name: str) -> argparse.ArgumentParser:
     p = _Parser(prog=f"pointspro {name}")
-    if name == "simulate":
+    if name == "info":
+        p.description = ("What a measurement file holds, read as --batch reads it: the reader chosen, "
+                         "points, channels with units, extents (mm), grid and pixel or mean "
+                         "nearest-neighbour spacing, RMS and PV of z after piston and tilt removal.")
+        p.add_argument("file", metavar="FILE")
+        p.add_argument("--json", action="store_true", help="the same as JSON (lengths in mm)")
+    elif name == "simulate":
         p.description = "Simulate a measurement from a model (surface, scan, probe, effects)."
         p.add_argument("model", metavar="MODEL.yaml")
         p.add_argument("--out", required=True, metavar="FILE", help="the simulated measurement (.csv/.ply)")
@@ -328,6 +484,21 @@ def _sub_parser(name: str) -> argparse.ArgumentParser:
                        help="bootstrap replicates for the stability of each choice (0: none)")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     return p
+
+
+def cmd_info(args) -> int:
+    from .info import describe, format_text
+
+    d = describe(Path(args.file))
+    if args.json:
+        import json
+
+        from .report import jsonable
+
+        print(json.dumps(jsonable(d), indent=2, ensure_ascii=False, allow_nan=False))
+    else:
+        print(format_text(d))
+    return EXIT_OK
 
 
 def cmd_simulate(args) -> int:

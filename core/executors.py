@@ -15,13 +15,19 @@ from .batch import InputOutcome, failed_outcome, process_input, process_job
 
 
 def run_sequential(recipe, surface, jobs, out_dir: Path, bar_factory=None,
-                   allowed_dirs=None, figures: str = "all") -> Iterator[InputOutcome]:
+                   allowed_dirs=None, figures: str = "all", options: dict | None = None
+                   ) -> Iterator[InputOutcome]:
+    """In this process, one input after the other (``options``: as ``batch.process_job``'s; the
+    log records go straight to this process's handlers)."""
+    options = options or {}
     for k, (path, stem) in enumerate(jobs, 1):
         bar = bar_factory(k, path) if bar_factory else None
         try:
             # the batch's own process: cloud.csv may be formatted by a fork beside the figures
             yield process_input(path, recipe, out_dir, stem, sink=bar, surface=surface,
-                                allowed_dirs=allowed_dirs, figures=figures, fork_csv=True)
+                                allowed_dirs=allowed_dirs, figures=figures, fork_csv=True,
+                                cloud_format=options.get("cloud_format", "csv"),
+                                overrides=tuple(options.get("overrides") or ()))
         finally:
             if bar is not None:
                 bar.done()
@@ -59,8 +65,10 @@ SINGLE_THREADED = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "
 
 
 def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
-                  allowed_dirs=None, figures: str = "all") -> Iterator[InputOutcome]:
-    """A pool of spawned processes (no inherited threads or locks); terminated on close."""
+                  allowed_dirs=None, figures: str = "all", options: dict | None = None
+                  ) -> Iterator[InputOutcome]:
+    """A pool of spawned processes (no inherited threads or locks); terminated on close.
+    ``options``: plain values for ``batch.process_job`` (cloud format, --set, log level)."""
     import multiprocessing
     import os
 
@@ -76,7 +84,7 @@ def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
                 os.environ[k] = v
     try:
         allowed = _strings(allowed_dirs)
-        args = [(str(recipe_path), str(p), str(out_dir), s, allowed, figures)
+        args = [(str(recipe_path), str(p), str(out_dir), s, allowed, figures, options)
                 for p, s in largest_first(jobs)]
         # one input per task (chunksize 1): inputs differ in size, and the largest go first so the
         # last round is short and no worker idles while one finishes a big map
@@ -88,7 +96,8 @@ def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
 
 
 def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str,
-             allowed_dirs=None, figures: str = "all") -> Iterator[InputOutcome]:
+             allowed_dirs=None, figures: str = "all", options: dict | None = None
+             ) -> Iterator[InputOutcome]:
     """On a Dask distributed cluster (`address`), or a LocalCluster of `workers` processes ("local").
 
     The workers must see the same files (a shared file system for a real cluster) and have pointspro
@@ -117,7 +126,7 @@ def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str,
         jobs = largest_first(jobs)
         # priority: Dask runs the largest inputs first too (higher priority first)
         futures = [client.submit(process_job, str(recipe_path), str(p), str(out_dir), s, allowed,
-                                 figures, pure=False, priority=len(jobs) - k,
+                                 figures, options, pure=False, priority=len(jobs) - k,
                                  key=f"pointspro-{s}-{k}") for k, (p, s) in enumerate(jobs)]
         path_of = {f.key: str(p) for f, (p, _) in zip(futures, jobs)}
         for fut in as_completed(futures):
