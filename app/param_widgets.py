@@ -133,8 +133,8 @@ class _SpinMixin:
         except ValueError:
             return QtGui.QValidator.Invalid
         problem = forms.bounds_problem(self.field, v)
-        if problem or v != self.value():  # a refused value's message stays once the text reverts
-            self.owner.mark(problem or "")
+        if self.lineEdit().isModified():  # typed (not Qt's own text): a refusal's message stays
+            self.owner.mark(problem or "")  # once the text reverts to the value
         return QtGui.QValidator.Intermediate if problem else QtGui.QValidator.Acceptable
 
     def valueFromText(self, text):
@@ -362,11 +362,12 @@ class _TableBase(ParamWidget):
         t.setHorizontalHeaderLabels(titles)
         t.horizontalHeader().setSectionResizeMode(QtWidgets.QHeaderView.Stretch)
         t.verticalHeader().setDefaultSectionSize(t.fontMetrics().height() + 8)
-        t.setMinimumHeight(t.verticalHeader().defaultSectionSize() * 3 + 4)
-        t.setMaximumHeight(t.verticalHeader().defaultSectionSize() * 6 + 4)
-        t.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Preferred)
+        t.horizontalHeader().setVisible(len(titles) > 1)  # one column: the label says what it holds
+        t.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Fixed)
+        self.setSizePolicy(QtWidgets.QSizePolicy.Preferred, QtWidgets.QSizePolicy.Fixed)
         t.cellChanged.connect(self._cells_changed)
         self.lay.addWidget(t, 1)
+        self._fit()
         col = QtWidgets.QVBoxLayout()
         self.add_button = QtWidgets.QToolButton()
         self.add_button.setText("+")
@@ -380,6 +381,13 @@ class _TableBase(ParamWidget):
         col.addWidget(self.remove_button)
         col.addStretch(1)
         self.lay.addLayout(col)
+
+    def _fit(self):
+        """As tall as its rows and one more to add (2 to 6 rows; more scroll)."""
+        t = self.table
+        n = min(max(t.rowCount() + 1, 2), 6)
+        head = t.horizontalHeader().sizeHint().height() if t.horizontalHeader().isVisible() else 0
+        t.setFixedHeight(n * t.verticalHeader().defaultSectionSize() + head + 2 * t.frameWidth())
 
     def rows(self) -> list[list[str]]:
         t = self.table
@@ -396,6 +404,7 @@ class _TableBase(ParamWidget):
                     t.setItem(r, c, QtWidgets.QTableWidgetItem(cells[c] if c < len(cells) else ""))
         finally:
             t.blockSignals(False)
+        self._fit()
 
     def add_row(self):
         t = self.table
@@ -404,6 +413,7 @@ class _TableBase(ParamWidget):
         for c in range(t.columnCount()):
             t.setItem(t.rowCount() - 1, c, QtWidgets.QTableWidgetItem(""))
         t.blockSignals(False)
+        self._fit()
         t.setCurrentCell(t.rowCount() - 1, 0)
         if t.isVisible():
             t.editItem(t.item(t.rowCount() - 1, 0))
@@ -418,6 +428,7 @@ class _TableBase(ParamWidget):
         for r in rows:
             t.removeRow(r)
         t.blockSignals(False)
+        self._fit()
         self._cells_changed()
 
     def _parse(self, rows):

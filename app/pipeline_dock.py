@@ -28,6 +28,7 @@ class PipelineDock(QtWidgets.QDockWidget):
         self.win = win
         self.registry = win.session.registry  # the session's: the entry points are read once
         w = QtWidgets.QWidget()
+        w.setMinimumWidth(w.fontMetrics().horizontalAdvance("m") * 34)  # a form's label, value and "auto"
         lay = QtWidgets.QVBoxLayout(w)
         self.list = QtWidgets.QListWidget()
         lay.addWidget(self.list, 1)
@@ -55,7 +56,7 @@ class PipelineDock(QtWidgets.QDockWidget):
         scroll.setFrameShape(QtWidgets.QFrame.NoFrame)
         scroll.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarAlwaysOff)
         scroll.setWidget(self.box)
-        lay.addWidget(scroll, 2)
+        lay.addWidget(scroll, 3)
         self.message = QtWidgets.QLabel()
         self.message.setWordWrap(True)
         self.message.setStyleSheet("color:#b00000")
