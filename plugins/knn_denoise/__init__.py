@@ -89,7 +89,11 @@ class KnnDenoiseStep(Step):
         else:
             removal = remove_by_peers(x, y, d, params)
         ctx.progress.update(0.95, "removing")
-        return _denoised(cloud, removal, params.method, channel)
+        res = _denoised(cloud, removal, params.method, channel)
+        ctx.log.info("%d of %d points removed (%s on %s, threshold %s µm)", res.report["removed"], cloud.n,
+                     params.method, channel, f"{res.report['threshold_um']:.4g}"
+                     if res.report.get("threshold_um") is not None else "none")
+        return res
 
     @staticmethod
     def _check_input(x, y, d, params):

@@ -66,6 +66,9 @@ class MisalignmentStep(Step):
                       warnings=list(fit.warnings) + ([note] if note else []))
         if fit.surface is not surface:
             report["surface"] = fit.surface.describe()
+        ctx.log.info("pose %s; residual RMS %.4g µm, PV %.4g µm (%d iterations)", ", ".join(
+            f"{k} {report[k]:.6g}" for k in ("alpha_deg", "beta_deg", "dx", "dy", "dz") if k in report),
+            report["residual_rms_um"], report["residual_pv_um"], report.get("iterations", 0))
         out = cloud.replace(xyz=part, channels={"residual": residual}, meta={"frame": "part"})
         from pointspro.core.figures import png_artifact
 

@@ -118,5 +118,8 @@ class ProbeRadiusStep(Step):
             warnings=list(fit.warnings) + ([note] if note else []))
         if fit.surface is not surface:
             report["surface"] = fit.surface.describe()
+        ctx.log.info("probe radius %.6g mm (side %+d, %s normals); distance residual RMS %.4g µm, "
+                     "PV %.4g µm", rho_b, s, params.normals, report["distance_residual_rms_um"],
+                     report["distance_residual_pv_um"])
         out = cloud.replace(xyz=contact, channels={"probe_residual": e})
         return StepResult(out, report)

@@ -138,6 +138,8 @@ class ZernikeStep(Step):
                                                 what="removing " + (", ".join(map(str, params.remove))
                                                                     or "nothing")),
         }
+        ctx.log.info("%d terms fitted (condition %.3g), %d removed; RMS %.4g → %.4g µm", len(pairs), cond,
+                     len(gone), rms_before * 1e3, rms_after * 1e3)
         out = cloud.replace(channels={"residual": after})
         return StepResult(out, report, arts)
 
