@@ -1,8 +1,10 @@
 """Reading and writing point clouds; the reader is chosen by the file's content, not its name.
 
 read (see docs/formats.md for units and the pixel convention):
-  point clouds   x y z text columns (.csv .txt .xyz .asc .dat … — core.io.text), .ply (all vertex
-                 properties kept), .pcd .pts (open3d)
+  point clouds   x y z text columns (.csv .txt .xyz .asc .dat … — core.io.text, CloudCompare's
+                 ``//X Y Z`` header included), .ply (all vertex properties kept), .pcd .pts
+                 (open3d), LAS/LAZ (core.io.las) and E57 (core.io.e57) of laser scanners — the
+                 optional extra ``pip install 'pointspro[scanners]'``; metres → mm
   height maps    every format SurfaceTopography reads — Zygo .datx and MetroPro .dat, Digital Surf
                  .sur, ISO 25178-71 .sdf, Wyko/Bruker .opd, Bruker .di, Sensofar .plu/.plux, Keyence
                  .vk4/.zon, Gwyddion .gwy, FRT .frt, Alicona .al3d, Igor .ibw, Agilent .mi … — found
@@ -41,7 +43,10 @@ TEXT_SUFFIXES = (".csv", ".txt", ".xyz", ".asc", ".dat")
 OPEN3D_SUFFIXES = (".pcd", ".pts")
 from .instruments import AREAL_SUFFIXES  # noqa: E402
 
-READ_SUFFIXES = tuple(dict.fromkeys(TEXT_SUFFIXES + (".ply",) + OPEN3D_SUFFIXES + AREAL_SUFFIXES))
+SCANNER_SUFFIXES = (".las", ".laz", ".e57")  # core.io.las, core.io.e57: the `scanners` extra
+
+READ_SUFFIXES = tuple(dict.fromkeys(TEXT_SUFFIXES + (".ply",) + OPEN3D_SUFFIXES + SCANNER_SUFFIXES
+                                    + AREAL_SUFFIXES))
 WRITE_SUFFIXES = (".csv", ".ply")
 
 #: length units accepted by ``height_unit`` → factor to mm
@@ -184,12 +189,16 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
             xyz, cols, meta = read_ply(path)
         except NotSimplePly:
             xyz, cols, meta = _read_open3d(path)
+    elif head.startswith(b"LASF"):  # LAS / LAZ (laspy, the `scanners` extra)
+        from .las import read_las
+
+        xyz, cols, meta = read_las(path)
+    elif head.startswith(b"ASTM-E57"):  # E57 (pye57, the `scanners` extra)
+        from .e57 import read_e57
+
+        xyz, cols, meta = read_e57(path)
     elif suffix in OPEN3D_SUFFIXES:
         xyz, cols, meta = _read_open3d(path)
-    elif head.startswith(b"PK\x03\x04") and _zip_has(path, "pointspro_meta.npy"):  # --cloud-format npz
-        from .npz import read_npz
-
-        xyz, cols, meta = read_npz(path)
     elif head.startswith(b"PK\x03\x04") and _zip_has(path, "main.xml"):
         from .instruments import read_x3p
 
