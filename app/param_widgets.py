@@ -85,6 +85,9 @@ class ParamWidget(QtWidgets.QWidget):
         self.marked.emit(message)
 
     def unmark(self) -> None:
+        """Clear the marks of this widget and of the ones inside it (a group's, an "auto" box's)."""
+        for w in self.findChildren(ParamWidget):
+            w.mark("")
         self.mark("")
 
 
