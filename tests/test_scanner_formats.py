@@ -68,7 +68,7 @@ def test_las_and_laz_read_in_mm_with_channels(tmp_path, name):
     assert "user_data" not in c.channels  # zero everywhere: left out
     assert np.array_equal(c.index, np.arange(200))
     assert c.meta["format"] == ("laz" if "laz" in name else "las")
-    assert c.meta["las_unit"] == "m (assumed: the file states no unit)"
+    assert c.meta["instrument_unit"] == "m (assumed: the file states no unit)"
 
 
 def test_las_in_us_survey_feet(tmp_path):
@@ -76,7 +76,7 @@ def test_las_in_us_survey_feet(tmp_path):
     c = read_cloud(tmp_path / "ft.las")
     assert np.allclose(c.x, np.asarray(src.x) * 1200 / 3937 * 1e3, rtol=1e-15)
     assert np.array_equal(c.z, np.asarray(src.z) * 1e3)
-    assert c.meta["las_unit"] == "US survey ft (x, y), m (z)"
+    assert c.meta["instrument_unit"] == "US survey ft (x, y), m (z)"
 
 
 def test_las_truncated_is_named(tmp_path):
@@ -118,7 +118,7 @@ def test_e57_two_scans_in_mm_with_pose_and_invalid_points(tmp_path):
     assert np.array_equal(c["scan"], np.r_[np.zeros(keep.sum()), np.ones(40)])
     assert np.allclose(c["intensity"][:keep.sum()], a["intensity"][keep])
     assert np.array_equal(c["red"][:keep.sum()], a["colorRed"][keep])
-    assert c.meta["format"] == "e57" and c.meta["e57_unit"] == "m"
+    assert c.meta["format"] == "e57" and c.meta["instrument_unit"] == "m"
 
 
 def test_e57_damaged_is_named(tmp_path):
@@ -135,3 +135,15 @@ def test_missing_library_says_what_to_install(tmp_path, monkeypatch, module, mag
         read_cloud(tmp_path / name)
     assert str(e.value).startswith(str(tmp_path / name))
     assert "pip install 'pointspro[scanners]'" in str(e.value) and "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("name,text,what", [
+    ("m.obj", "# Blender\no part\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n", "an OBJ mesh"),
+    ("m.txt", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "an OFF mesh"),
+    ("m.csv", "solid part\nfacet normal 0 0 1\nendfacet\nendsolid part\n", "an ASCII STL mesh"),
+])
+def test_a_mesh_given_as_measurement_is_named(tmp_path, name, text, what):
+    (tmp_path / name).write_text(text, encoding="utf-8")
+    with pytest.raises(InputError, match=rf"{name}: {what} \(a nominal for `register` or "
+                                         r"`surface: \{type: mesh\}`\), not a measurement file"):
+        read_cloud(tmp_path / name)

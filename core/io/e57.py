@@ -66,7 +66,7 @@ def read_e57(path: Path):
     if count > 1:
         cols["scan"] = np.concatenate([np.full(len(d["cartesianX"]), i, np.int64)
                                        for i, d in enumerate(parts)])
-    meta = {"format": "e57", "e57_scans": count, "e57_unit": "m", "invalid_dropped": int(dropped)}
+    meta = {"format": "e57", "e57_scans": count, "instrument_unit": "m", "invalid_dropped": int(dropped)}
     return xyz, cols, meta
 
 

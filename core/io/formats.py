@@ -28,6 +28,7 @@ Reader options (``read_cloud(path, pixel_size_um=…, …)``, a recipe's ``input
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -156,11 +157,21 @@ def _sniff(path: Path) -> tuple[bytes, bool]:
     return head, printable >= 0.95 * len(sample)
 
 
+_MESH_NOTE = " (a nominal for `register` or `surface: {type: mesh}`)"
+_OBJ_VERTEX = re.compile(rb"^v[ \t]+[-+.0-9]", re.M)
+_OBJ_FACE = re.compile(rb"^f[ \t]+[0-9]", re.M)
+
+
 def foreign_kind(head: bytes) -> str | None:
-    """What a file that is no measurement looks like (a PNG image, a PDF…), or None."""
+    """What a file that is no measurement looks like (a PNG image, a PDF, an STL, OBJ or OFF mesh…),
+    or None."""
     for magic, what in _FOREIGN_MAGICS:
         if head.startswith(magic):
-            return what
+            return what + (_MESH_NOTE if what.endswith("mesh") else "")
+    if re.match(rb"\s*OFF\s", head):
+        return "an OFF mesh" + _MESH_NOTE
+    if _OBJ_VERTEX.search(head) and _OBJ_FACE.search(head):  # Wavefront OBJ: `v x y z`, `f i j k`
+        return "an OBJ mesh" + _MESH_NOTE
     return None
 
 

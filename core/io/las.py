@@ -8,7 +8,8 @@ states no unit of its own; the unit is the coordinate reference system's:
   US survey foot — or the WKT's ``UNIT``/``LENGTHUNIT`` (its own factor to metres; a ``VERT_CS`` /
   ``VERTCRS`` part gives z its own);
 - none stated (a scanner's local frame, the common case): **metres** — the convention of LAS and of
-  scanner software; ``meta["las_unit"]`` says "m (assumed: the file states no unit)".
+  scanner software; ``meta["instrument_unit"]`` (in the report's ``input_file``) then says
+  "m (assumed: the file states no unit)".
 
 Then to mm in one multiplication per axis (× 1000 for metres, × 304.8 for feet). Every other point
 dimension becomes a channel: intensity, classification, return_number, number_of_returns, gps_time,
@@ -82,7 +83,7 @@ def read_las(path: Path):
     unit = hname if hname == vname else f"{hname} (x, y), {vname} (z)"
     meta = {"format": "laz" if las.header.are_points_compressed else "las",
             "las_version": str(las.header.version), "las_point_format": int(las.point_format.id),
-            "las_unit": unit if stated else f"{unit} (assumed: the file states no unit)",
+            "instrument_unit": unit if stated else f"{unit} (assumed: the file states no unit)",
             "invalid_dropped": 0}
     return xyz, cols, meta
 
