@@ -1,0 +1,320 @@
+"""Issue 21, everyday command line: `pointspro info`, --set overrides, --cloud-format, --help,
+overall progress with workers, -v / --log-file with the steps' log (from workers too)."""
+from __future__ import annotations
+
+import io
+import json
+import logging
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from pointspro.core.io import read_cloud
+
+from .conftest import EXAMPLE, ROOT, write
+
+RECIPE = EXAMPLE / "recipe.yaml"
+DATA = EXAMPLE / "asphere_cmm.csv"
+#: the example's recipe without the slow figures' steps: knn_denoise and its neighbours, for the log
+LOG_RECIPE = ("pointspro: 1\n"
+              "surface: {type: even_asphere, c: 3.3333333333333335e-4, k: -0.98, "
+              "A: {4: 7.0e-13, 6: 1.0e-19}, aperture: 1300}\n"
+              "steps:\n  - probe_radius: {radius: 4.0, side: +1}\n  - misalignment: {}\n"
+              "  - knn_denoise: {window: 15.0, remove: auto}\n"
+              "  - zernike: {ordering: fringe, terms: 36, remove: [piston, tilt]}\n")
+
+
+def _grid_csv(tmp_path, name="plane.csv", h=2e-5):
+    """A 20 × 20 mm grid, pitch 1 mm: a tilted plane plus a ±h checkerboard. On an even grid the
+    checkerboard is orthogonal to piston and both tilts, so after the plane's removal RMS = h and
+    PV = 2h exactly."""
+    i, j = np.meshgrid(np.arange(20), np.arange(20))
+    x, y = i.ravel() * 1.0, j.ravel() * 1.0
+    z = 0.1 + 2e-3 * x - 3e-3 * y + h * (-1.0) ** (i + j).ravel()
+    p = tmp_path / name
+    np.savetxt(p, np.column_stack([x, y, z]), delimiter=",", header="x,y,z", comments="", fmt="%.12g")
+    return p
+
+
+# --- 1. pointspro info -------------------------------------------------------------------------------
+
+def test_info_describes_a_scattered_cloud(run_cli, tmp_path):
+    p = _grid_csv(tmp_path)
+    code, out, err = run_cli("info", p)
+    assert code == 0, err
+    assert "points     400" in out
+    assert "x [mm], y [mm], z [mm], index" in out
+    assert "comma-delimited" in out
+    assert "0 … 19 mm" in out  # x and y extents
+    assert "mean nearest-neighbour spacing 1 mm" in out
+    assert "RMS 20 nm, PV 40 nm after piston and tilt removal" in out
+
+    code, out, err = run_cli("info", p, "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["points"] == 400 and d["format"] == "text" and d["grid"] is None
+    assert d["extent_mm"]["x"] == [0.0, 19.0] and d["extent_mm"]["y"] == [0.0, 19.0]
+    assert d["spacing_mm"] == pytest.approx(1.0, rel=1e-4)
+    assert d["z_plane_removed"]["rms_mm"] == pytest.approx(2e-5, rel=1e-6)
+    assert d["z_plane_removed"]["pv_mm"] == pytest.approx(4e-5, rel=1e-6)
+    assert {"name": "z", "unit": "mm"} in d["channels"]
+
+
+def test_info_describes_a_map_grid(run_cli):
+    code, out, err = run_cli("info", ROOT / "tests" / "data" / "realdata" / "sdf-1.sdf", "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["grid"] == {"rows": 4, "cols": 7, "pixel_mm": [pytest.approx(1e-3), pytest.approx(1e-3)]}
+    assert d["points"] == 28 and d["spacing_mm"] is None and "SDF" in d["reader"]
+    code, out, _ = run_cli("info", ROOT / "tests" / "data" / "realdata" / "sdf-1.sdf")
+    assert "grid       4 rows × 7 cols, pixel 1 µm × 1 µm" in out
+
+
+def test_info_bad_file_one_line_exit_2(run_cli, tmp_path):
+    bad = write(tmp_path / "notes.csv", "hello\nworld\n")
+    code, out, err = run_cli("info", bad)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "notes.csv" in err and "Traceback" not in err
+    code, _, err = run_cli("info", tmp_path / "missing.csv")
+    assert code == 2 and "file not found" in err and err.count("\n") == 1
+
+
+# --- 2. --set ---------------------------------------------------------------------------------------
+
+def _small_inputs(tmp_path, n=2):
+    rng = np.random.default_rng(5)
+    files = []
+    for k in range(n):
+        p = tmp_path / f"m{k}.csv"
+        np.savetxt(p, rng.uniform(-50, 50, (400, 3)), delimiter=",", header="x,y,z", comments="",
+                   fmt="%.9f")
+        files.append(p)
+    return files
+
+
+def _report(folder):
+    return json.loads((folder / "report.json").read_text(encoding="utf-8"))
+
+
+def test_set_overrides_by_id_position_and_surface(run_cli, tmp_path):
+    (m0,) = _small_inputs(tmp_path, 1)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsurface: {type: even_asphere, c: 0, k: 0, "
+                   "aperture: 100}\nsteps:\n  - aperture: {}\n  - manual_edit: {remove: [1]}\n")
+    assert run_cli("--batch", recipe, m0, "--out", tmp_path / "plain", "--quiet")[0] == 0
+    n_plain = _report(tmp_path / "plain" / "m0")["summary"]["points_out"]
+    code, _, err = run_cli("--batch", recipe, m0, "--out", tmp_path / "o", "--quiet",
+                           "--set", "aperture.diameter=60", "--set", "2.remove=[1, 2, 3]",
+                           "--set", "surface.k=-1")
+    assert code == 0, err
+    rep = _report(tmp_path / "o" / "m0")
+    assert rep["overrides"] == ["aperture.diameter=60", "2.remove=[1, 2, 3]", "surface.k=-1"]
+    steps = rep["recipe"]["steps"]
+    assert steps[0]["aperture"]["diameter"] == 60.0 and steps[1]["manual_edit"]["remove"] == [1, 2, 3]
+    assert rep["recipe"]["surface"]["k"] == -1
+    m = read_cloud(m0)
+    inside = int((np.hypot(m.x, m.y) <= 30).sum())
+    assert rep["steps"][0]["points_out"] == inside < n_plain
+    # surface.aperture reaches the step that uses it (no diameter: the surface's aperture)
+    code, _, err = run_cli("--batch", recipe, m0, "--out", tmp_path / "s", "--quiet",
+                           "--set", "surface.aperture=60")
+    assert code == 0, err
+    assert _report(tmp_path / "s" / "m0")["steps"][0]["points_out"] == inside
+
+
+@pytest.mark.parametrize("override, says", [
+    ("manual_edit.remove=[1]", "step 'manual_edit' occurs 2 times (steps 1, 3)"),
+    ("zernike.terms=10", "the recipe has no step 'zernike'"),
+    ("aperture.diam=10", "step 2 'aperture' has no parameter 'diam'"),
+    ("7.remove=[1]", "no step 7; the recipe has 3 step(s)"),
+    ("aperture.diameter=-5", "key 'diameter'"),
+    ("aperture=5", "write STEP.KEY=VALUE"),
+    ("aperture.diameter=[1, 2", "not valid YAML"),
+])
+def test_set_errors_one_line_exit_2(run_cli, tmp_path, override, says):
+    (m0,) = _small_inputs(tmp_path, 1)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - manual_edit: {remove: [1]}\n"
+                   "  - aperture: {diameter: 80}\n  - manual_edit: {remove: [2]}\n")
+    code, out, err = run_cli("--batch", recipe, m0, "--out", tmp_path / "o", "--set", override)
+    assert code == 2, err
+    assert says in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "o" / "m0").exists()
+
+
+def test_set_reaches_workers_and_resume_sees_it(run_cli, tmp_path):
+    files = _small_inputs(tmp_path, 2)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - aperture: {diameter: 90}\n")
+    args = ("--batch", recipe, *files, "--quiet", "--set", "aperture.diameter=50")
+    assert run_cli(*args, "--out", tmp_path / "seq", "--workers", "1")[0] == 0
+    code, _, err = run_cli(*args, "--out", tmp_path / "par", "--workers", "2")
+    assert code == 0, err
+    for k in range(2):
+        a, b = _report(tmp_path / "seq" / f"m{k}"), _report(tmp_path / "par" / f"m{k}")
+        assert a["summary"] == b["summary"] and b["recipe"]["steps"][0]["aperture"]["diameter"] == 50
+        assert b["overrides"] == ["aperture.diameter=50"]
+
+    def statuses():
+        s = json.loads((tmp_path / "seq" / "summary.json").read_text(encoding="utf-8"))
+        return [e["status"] for e in s["inputs"]]
+
+    assert run_cli(*args, "--out", tmp_path / "seq", "--workers", "1", "--resume")[0] == 0
+    assert statuses() == ["skipped", "skipped"]
+    code, _, _ = run_cli("--batch", recipe, *files, "--quiet", "--set", "aperture.diameter=60",
+                         "--out", tmp_path / "seq", "--workers", "1", "--resume")
+    assert code == 0 and statuses() == ["ok", "ok"]
+
+
+def test_set_and_cloud_format_go_with_batch(run_cli):
+    code, _, err = run_cli("--set", "aperture.diameter=5")
+    assert code == 2 and "go with --batch" in err
+
+
+# --- 3. --cloud-format ------------------------------------------------------------------------------
+
+def test_cloud_formats_read_back_identical(run_cli, tmp_path):
+    (m0,) = _small_inputs(tmp_path, 1)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - aperture: {diameter: 90}\n"
+                   "  - knn_denoise: {method: statistical, neighbours: 8}\n")
+    clouds = {}
+    for fmt in ("csv", "ply", "npz"):
+        code, _, err = run_cli("--batch", recipe, m0, "--out", tmp_path / fmt, "--quiet",
+                               "--cloud-format", fmt, "--figures", "none")
+        assert code == 0, err
+        folder = tmp_path / fmt / "m0"
+        assert sorted(p.name for p in folder.glob("cloud.*")) == [f"cloud.{fmt}"]
+        assert _report(folder)["cloud_file"] == f"cloud.{fmt}"
+        clouds[fmt] = read_cloud(folder / f"cloud.{fmt}")
+    ref = clouds["csv"]
+    assert "omega" in ref.channels and ref.n > 100
+    for fmt in ("ply", "npz"):
+        c = clouds[fmt]
+        assert np.array_equal(c.xyz, ref.xyz)
+        assert set(c.channels) == set(ref.channels)
+        for name in ref.channels:
+            assert np.array_equal(c[name], ref[name]), (fmt, name)
+            assert c[name].dtype == ref[name].dtype
+    # the npz loads with numpy alone: every column, float64 (integers int64), the metadata as JSON
+    with np.load(tmp_path / "npz" / "m0" / "cloud.npz", allow_pickle=False) as z:
+        meta = json.loads(str(z["pointspro_meta"]))
+        assert meta["units"] == "mm" and meta["frame"] == "measuring"
+        assert meta["columns"][:3] == ["x", "y", "z"] and "omega" in meta["columns"]
+        assert z["omega"].dtype == np.float64 and z["index"].dtype == np.int64
+        assert np.array_equal(z["z"], ref.z)
+
+
+def test_resume_reruns_an_output_of_another_cloud_format(run_cli, tmp_path):
+    (m0,) = _small_inputs(tmp_path, 1)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - aperture: {diameter: 90}\n")
+    base = ("--batch", recipe, m0, "--out", tmp_path / "o", "--quiet")
+    assert run_cli(*base, "--cloud-format", "npz")[0] == 0
+    summary = tmp_path / "o" / "summary.json"
+    assert run_cli(*base, "--cloud-format", "npz", "--resume")[0] == 0
+    assert json.loads(summary.read_text(encoding="utf-8"))["inputs"][0]["status"] == "skipped"
+    assert run_cli(*base, "--resume")[0] == 0  # csv now: not the output asked for, run again
+    assert json.loads(summary.read_text(encoding="utf-8"))["inputs"][0]["status"] == "ok"
+    assert (tmp_path / "o" / "m0" / "cloud.csv").is_file()
+    assert not (tmp_path / "o" / "m0" / "cloud.npz").exists()
+
+
+# --- 4. --help ----------------------------------------------------------------------------------------
+
+def test_help_lists_commands_formats_exit_codes_and_examples(run_cli):
+    code, out, _ = run_cli("--help")
+    assert code == 0
+    for word in ("pointspro info FILE", "pointspro steps", "pointspro simulate", "pointspro explain",
+                 "open the window", "--batch RECIPE INPUT", "--set", "--cloud-format", "--log-file",
+                 "--verbose"):
+        assert word in out, word
+    for fmt in (".csv", ".ply", ".datx", ".sur", ".x3p", ".sdf", "cloud.npz"):
+        assert fmt in out, fmt
+    codes = out.split("exit codes:")[1]
+    for line in ("0    all done", "1    some inputs failed", "2    usage, recipe or input error",
+                 "130  interrupted"):
+        assert line in codes
+    assert "examples:" in out and "pointspro --batch recipe.yaml scans/*.csv --out results" in out
+    code, out, _ = run_cli("info", "--help")
+    assert code == 0 and "--json" in out
+
+
+# --- 5. progress with workers -----------------------------------------------------------------------
+
+def test_workers_show_overall_progress_lines_not_on_a_tty(run_cli, tmp_path):
+    files = _small_inputs(tmp_path, 3)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - aperture: {diameter: 90}\n")
+    code, out, err = run_cli("--batch", recipe, *files, "--out", tmp_path / "o", "--workers", "2")
+    assert code == 0, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("[")]
+    assert [ln.split("]")[0] + "]" for ln in lines] == ["[1/3]", "[2/3]", "[3/3]"]
+    assert lines[-1].startswith("[3/3] 3 done, 0 failed")
+    assert "left" in lines[0]  # an ETA while inputs remain
+    code, out, err = run_cli("--batch", recipe, *files, "--out", tmp_path / "q", "--workers", "2",
+                             "--quiet")
+    assert code == 0 and err == "" and out == ""
+
+
+class _FakeTTY(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_workers_progress_bar_on_a_tty_counts_done_and_failed():
+    from pointspro.core.terminal import BatchProgress
+
+    tty = _FakeTTY()
+    bar = BatchProgress(3, stream=tty)
+    bar.advance(True, "a.csv")
+    bar.advance(False, "b.csv")
+    out = io.StringIO()
+    bar.write("a.csv: ok", out)
+    bar.close()
+    text = tty.getvalue()
+    assert "\r" in text and "2/3" in text and "1 done, 1 failed" in text
+    assert "a.csv: ok\n" in out.getvalue()
+    plain = io.StringIO()  # not a TTY: one plain line per input, no carriage returns
+    bar = BatchProgress(2, stream=plain)
+    bar.advance(True, "a.csv")
+    bar.advance(False, "b.csv")
+    assert "\r" not in plain.getvalue()
+    assert plain.getvalue().splitlines()[-1] == "[2/2] 1 done, 1 failed — b.csv failed"
+
+
+# --- 6. logging ---------------------------------------------------------------------------------------
+
+def test_verbose_shows_the_steps_log_and_log_file_keeps_it(run_cli, tmp_path):
+    recipe = write(tmp_path / "r.yaml", LOG_RECIPE)
+    data = shutil.copy(DATA, tmp_path / "part.csv")
+    code, out, err = run_cli("--batch", recipe, data, "--out", tmp_path / "q", "--quiet", "--figures", "none")
+    assert code == 0 and "pointspro.knn_denoise" not in err  # WARNING by default
+    log = tmp_path / "run.log"
+    logger = logging.getLogger("pointspro")
+    before = (list(logger.handlers), logger.level, logger.propagate)
+    code, out, err = run_cli("--batch", recipe, data, "--out", tmp_path / "o", "--quiet", "--figures", "none", "-v",
+                             "--log-file", log)
+    assert code == 0, err
+    assert re.search(r"pointspro\.knn_denoise: part\.csv: \d+ of 4680 points removed", err)
+    assert "pointspro.misalignment: part.csv: pose alpha_deg" in err
+    assert "pointspro.probe_radius: part.csv: probe radius 4 mm" in err
+    assert "pointspro.zernike: part.csv: 36 terms fitted" in err
+    text = log.read_text(encoding="utf-8")
+    assert re.search(r"INFO pointspro\.knn_denoise: part\.csv: \d+ of 4680 points removed", text)
+    # the loggers are as they were (main() may run again in this process)
+    assert (list(logger.handlers), logger.level, logger.propagate) == before
+    # --log-file alone: the file has the INFO lines, the terminal does not
+    code, out, err = run_cli("--batch", recipe, data, "--out", tmp_path / "f", "--quiet", "--figures", "none",
+                             "--log-file", tmp_path / "only.log")
+    assert code == 0 and "pointspro.knn_denoise" not in err
+    assert "pointspro.knn_denoise: part.csv:" in (tmp_path / "only.log").read_text(encoding="utf-8")
+
+
+def test_workers_send_their_log_records_to_the_parent(run_cli, tmp_path):
+    recipe = write(tmp_path / "r.yaml", LOG_RECIPE)
+    a = shutil.copy(DATA, tmp_path / "a.csv")
+    b = shutil.copy(DATA, tmp_path / "b.csv")
+    log = tmp_path / "run.log"
+    code, out, err = run_cli("--batch", recipe, a, b, "--out", tmp_path / "o", "--workers", "2",
+                             "--quiet", "--figures", "none", "-v", "--log-file", log)
+    assert code == 0, err
+    for name in ("a.csv", "b.csv"):
+        assert re.search(rf"pointspro\.knn_denoise: {name}: \d+ of 4680 points removed", err)
+        assert f"INFO pointspro.misalignment: {name}: pose" in log.read_text(encoding="utf-8")
