@@ -210,6 +210,10 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
         xyz, cols, meta = read_e57(path)
     elif suffix in OPEN3D_SUFFIXES:
         xyz, cols, meta = _read_open3d(path)
+    elif head.startswith(b"PK\x03\x04") and _zip_has(path, "pointspro_meta.npy"):  # --cloud-format npz
+        from .npz import read_npz
+
+        xyz, cols, meta = read_npz(path)
     elif head.startswith(b"PK\x03\x04") and _zip_has(path, "main.xml"):
         from .instruments import read_x3p
 
