@@ -1,0 +1,285 @@
+"""The correction the next run takes, from a form-error map (docs/conventions.md, Correction).
+
+    E      form error on the map grid, residual = z − sag (part frame, mm), piston and tilt removed
+           over the clear aperture (set-up, not form)
+    E_ext  E continued past the clear aperture: each node outside takes the value of the nearest node
+           inside (constant along the normal of the rim), so the filter and the tool path have data
+           to the run-out
+    F      E_ext low-passed by the areal Gaussian filter of ISO 16610-61 (the 1-D weighting function
+           of ISO 16610-21 in x and in y: σ = α λc / √(2π), α = √(ln 2 / π); 50 % transmission at the
+           cutoff wavelength λc)
+    dz     = −gain · F, its plane over the aperture removed: the height to ADD to the programmed
+           surface (cutting); removal = gain · F − min + bias ≥ 0: material to remove (polishing)
+    E'     = E + dz, plane removed: the error predicted after the correction — what the filter
+           (detail finer than λc), the edge (the continuation inside one cutoff of the rim) and a gain
+           below 1 leave behind.
+
+The radial program is the azimuthal mean of dz about the surface's axis, sampled on rings every map
+spacing (bilinear on the filtered grid, ≥ 8 and ~1.5 samples per spacing of circumference, so no
+lobe below the sampling leaks into it); ``refit_surface`` turns nominal + that mean into the recipe's
+own surface syntax (even asphere or Forbes Q-con).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: ISO 16610-21 Gaussian constant α = √(ln 2 / π)
+ALPHA = float(np.sqrt(np.log(2.0) / np.pi))
+#: the share of clear-aperture nodes that must carry measured data
+MIN_COVERAGE = 0.99
+
+
+class CorrectionInputError(ValueError):
+    """Bad input for a correction (the step turns it into a one-line StepError)."""
+
+
+def gaussian_sigma(cutoff_mm: float) -> float:
+    """σ (mm) of the ISO 16610-61 areal Gaussian filter with cutoff λc (mm)."""
+    return ALPHA * cutoff_mm / np.sqrt(2.0 * np.pi)
+
+
+def regular_grid(x, y, v, rtol: float = 1e-6):
+    """(xs, ys, Z (ny, nx) NaN where absent, spacing) when the points lie on one square lattice with
+    each node at most once (a map.csv read back, an instrument's map); else None."""
+    x, y, v = (np.asarray(a, dtype=np.float64) for a in (x, y, v))
+    if x.size < 16:
+        return None
+    out = []
+    for u in (x, y):
+        uu = np.unique(u)
+        if uu.size < 4 or uu.size > 20_000:
+            return None
+        h = float(np.median(np.diff(uu)))
+        if not h > 0:
+            return None
+        i = np.rint((u - uu[0]) / h)
+        if np.max(np.abs(u - uu[0] - i * h)) > rtol * h * max(1.0, i.max()) ** 0.5 + 1e-9 * h:
+            return None
+        out.append((uu[0], h, i.astype(np.intp)))
+    (x0, hx, ix), (y0, hy, iy) = out
+    if abs(hx - hy) > 1e-6 * hx:
+        return None
+    nx, ny = int(ix.max()) + 1, int(iy.max()) + 1
+    if nx * ny > 4 * x.size:
+        return None
+    flat = iy * nx + ix
+    if np.unique(flat).size != flat.size:
+        return None
+    Z = np.full(ny * nx, np.nan)
+    Z[flat] = v
+    return x0 + hx * np.arange(nx), y0 + hx * np.arange(ny), Z.reshape(ny, nx), float(hx)
+
+
+@dataclass
+class ErrorMap:
+    """The form error E (mm) on the working grid xs × ys (mm): NaN where not measured. ``covered``
+    marks the nodes the measurement supports (for the coverage check)."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    E: np.ndarray
+    covered: np.ndarray
+    spacing: float
+    source: str
+
+
+def working_axes(lo: float, hi: float, x0: float, h: float) -> np.ndarray:
+    """Nodes x0 + i·h covering [lo, hi]."""
+    i0 = int(np.floor((lo - x0) / h + 1e-9))
+    i1 = int(np.ceil((hi - x0) / h - 1e-9))
+    return x0 + h * np.arange(i0, i1 + 1, dtype=np.float64)
+
+
+def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
+              knot_spacing: float | None = None, smoothing: float = 1e-3, reg=False) -> ErrorMap:
+    """The error on a grid covering the disk of radius ``outer`` (mm, or a function of the spacing)
+    about ``center``. Points on a regular lattice (and no other ``spacing`` asked) are taken node for
+    node; scattered points are fitted by the smoothing bicubic B-spline of core.maps over the clear
+    aperture. ``reg``: regular_grid's answer when already known."""
+    from .. import maps
+
+    cx, cy = center
+    if reg is False:
+        reg = regular_grid(x, y, v)
+    if reg is not None and (spacing is None or abs(spacing - reg[3]) <= 1e-9 * reg[3]):
+        gx, gy, Z, h = reg
+        outer = outer(h) if callable(outer) else outer
+        xs = working_axes(cx - outer, cx + outer, gx[0], h)
+        ys = working_axes(cy - outer, cy + outer, gy[0], h)
+        E = np.full((ys.size, xs.size), np.nan)
+        ox = int(np.rint((gx[0] - xs[0]) / h))
+        oy = int(np.rint((gy[0] - ys[0]) / h))
+        # the overlap of the input lattice and the working grid
+        sx0, sy0 = max(0, -ox), max(0, -oy)
+        dx0, dy0 = max(0, ox), max(0, oy)
+        nx = min(Z.shape[1] - sx0, xs.size - dx0)
+        ny = min(Z.shape[0] - sy0, ys.size - dy0)
+        if nx > 0 and ny > 0:
+            E[dy0:dy0 + ny, dx0:dx0 + nx] = Z[sy0:sy0 + ny, sx0:sx0 + nx]
+        return ErrorMap(xs, ys, E, np.isfinite(E), h, f"the input's {h:g} mm grid, node for node")
+    x, y, v = (np.asarray(a, dtype=np.float64) for a in (x, y, v))
+    inside = (x - cx) ** 2 + (y - cy) ** 2 <= radius * radius
+    if inside.sum() < 16:
+        raise CorrectionInputError(f"{int(inside.sum())} points lie inside the {2 * radius:g} mm clear "
+                                   "aperture: too few for a map")
+    try:
+        spline = maps.fit_bspline(x[inside], y[inside], v[inside], knot_spacing=knot_spacing,
+                                  smoothing=smoothing,
+                                  bounds=(cx - radius, cx + radius, cy - radius, cy + radius))
+    except ValueError as e:
+        raise CorrectionInputError(str(e)) from None
+    h = spacing if spacing is not None else _nice(spline.h / 2)
+    outer = outer(h) if callable(outer) else outer
+    xs = working_axes(cx - outer, cx + outer, 0.0, h)
+    ys = working_axes(cy - outer, cy + outer, 0.0, h)
+    if xs.size * ys.size > 25_000_000:
+        raise CorrectionInputError(f"a {xs.size} × {ys.size} grid at spacing {h:g} mm is too large; "
+                                   "use a larger spacing")
+    from ..maps.grid import coverage_mask
+
+    covered = coverage_mask(x[inside], y[inside], xs, ys, spline.h / 2.0)
+    E = spline.grid(xs, ys)
+    disk = (xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2 <= radius * radius
+    E = np.where(disk, E, np.nan)
+    return ErrorMap(xs, ys, E, covered & disk, float(h),
+                    f"smoothing B-spline of the points (knots every {spline.h:.4g} mm)")
+
+
+def _nice(v: float) -> float:
+    e = np.floor(np.log10(v))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**e <= v:
+            return float(m * 10**e)
+    return float(10**e)
+
+
+def plane_fit(X, Y, Z):
+    """(piston, slope x, slope y) of the least-squares plane z = p + a x + b y."""
+    A = np.column_stack([np.ones_like(X), X, Y])
+    return np.linalg.lstsq(A, Z, rcond=None)[0]
+
+
+@dataclass
+class Correction:
+    """Everything the outputs are written from (lengths mm; grids (ny, nx), NaN outside)."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    spacing: float
+    center: tuple[float, float]
+    radius: float              # clear aperture radius
+    outer: float               # radius of the written region (aperture + extension)
+    cutoff: float
+    gain: float
+    E: np.ndarray              # the error, plane removed, over the aperture (NaN outside)
+    dz: np.ndarray             # the correction over the written region
+    predicted: np.ndarray      # the error predicted after it, over the aperture
+    filtered: np.ndarray       # F over the whole working grid (no NaN)
+    plane_error: tuple         # piston (mm), slopes of the error's plane
+    plane_dz: tuple            # what was removed from −gain·F
+    info: dict = field(default_factory=dict)
+
+    @property
+    def aperture_mask(self):
+        return ((self.xs[None, :] - self.center[0]) ** 2
+                + (self.ys[:, None] - self.center[1]) ** 2) <= self.radius ** 2
+
+
+def compute_correction(em: ErrorMap, *, center, radius: float, extend: float, cutoff: float,
+                       gain: float = 1.0) -> Correction:
+    """The correction of module doc from the error map ``em`` (which covers ``radius + extend``)."""
+    from scipy import ndimage
+
+    xs, ys, h = em.xs, em.ys, em.spacing
+    cx, cy = center
+    X = xs[None, :] - cx
+    Y = ys[:, None] - cy
+    R2 = X * X + Y * Y
+    inside = R2 <= radius * radius
+    n_in = int(inside.sum())
+    if n_in < 16:
+        raise CorrectionInputError(f"the {2 * radius:g} mm clear aperture holds {n_in} nodes at "
+                                   f"spacing {h:g} mm: too few")
+    cov = float(np.count_nonzero(em.covered & inside)) / n_in
+    if cov < MIN_COVERAGE:
+        miss = inside & ~em.covered
+        rmiss = float(np.sqrt(R2[miss].min()))
+        raise CorrectionInputError(
+            f"the map covers {cov:.1%} of the {2 * radius:g} mm clear aperture (≥ {MIN_COVERAGE:.0%} "
+            f"needed): no data from r = {rmiss:.4g} mm — measure the whole aperture, or give a "
+            "smaller diameter")
+    E = np.where(inside, em.E, np.nan)
+    holes = inside & ~np.isfinite(E)
+    # nearest-node continuation: holes inside (≤ 1 %) and everything outside the aperture
+    known = inside & np.isfinite(E)
+    idx = ndimage.distance_transform_edt(~known, return_distances=False, return_indices=True)
+    Ef = E[idx[0], idx[1]]
+    Xi = np.broadcast_to(X, E.shape)[known]
+    Yi = np.broadcast_to(Y, E.shape)[known]
+    p = plane_fit(Xi, Yi, Ef[known])
+    Ef = Ef - (p[0] + p[1] * X + p[2] * Y)
+    sigma_px = gaussian_sigma(cutoff) / h
+    F = ndimage.gaussian_filter(Ef, sigma_px, mode="nearest", truncate=4.0) if sigma_px > 0 else Ef
+    raw = -gain * F
+    q = plane_fit(Xi, Yi, raw[known])
+    written = R2 <= (radius + extend) ** 2 + 1e-9 * h * h
+    dz_full = raw - (q[0] + q[1] * X + q[2] * Y)
+    dz = np.where(written, dz_full, np.nan)
+    Ein = np.where(inside, Ef, np.nan)
+    pred = Ein + dz_full
+    w = plane_fit(Xi, Yi, pred[known])
+    pred = np.where(inside, pred - (w[0] + w[1] * X + w[2] * Y), np.nan)
+    info = {"coverage": cov, "holes_filled": int(holes.sum()), "nodes_aperture": n_in,
+            "nodes_written": int(written.sum()), "sigma_mm": gaussian_sigma(cutoff)}
+    return Correction(xs, ys, h, (cx, cy), radius, radius + extend, cutoff, gain, Ein, dz, pred,
+                      F, tuple(float(t) for t in p), tuple(float(t) for t in q), info)
+
+
+def rms(a) -> float:
+    a = np.asarray(a)[np.isfinite(a)]
+    return float(np.sqrt(np.mean((a - a.mean()) ** 2))) if a.size else float("nan")
+
+
+def pv(a) -> float:
+    a = np.asarray(a)[np.isfinite(a)]
+    return float(np.ptp(a)) if a.size else float("nan")
+
+
+def azimuthal_mean(cor: Correction, axis=(0.0, 0.0), field_name: str = "dz"):
+    """(r, mean of dz on the ring of radius r about ``axis``), r = 0, h, 2h, … up to the written
+    region's radius; bilinear on the full (unmasked) correction field."""
+    from scipy import ndimage
+
+    h = cor.spacing
+    full = (-cor.gain * cor.filtered - (cor.plane_dz[0] + cor.plane_dz[1] * (cor.xs[None, :] - cor.center[0])
+                                       + cor.plane_dz[2] * (cor.ys[:, None] - cor.center[1])))
+    rmax = cor.outer
+    r = h * np.arange(int(np.floor(rmax / h + 1e-9)) + 1, dtype=np.float64)
+    nth = np.maximum(8, np.ceil(2 * np.pi * r / h * 1.5)).astype(np.intp)
+    ring = np.repeat(np.arange(r.size), nth)
+    start = np.concatenate([[0], np.cumsum(nth)[:-1]])
+    k = np.arange(ring.size) - start[ring]
+    th = 2 * np.pi * k / nth[ring]
+    px = axis[0] + r[ring] * np.cos(th)
+    py = axis[1] + r[ring] * np.sin(th)
+    ci = (px - cor.xs[0]) / h
+    ri = (py - cor.ys[0]) / h
+    vals = ndimage.map_coordinates(full, [ri, ci], order=1, mode="nearest")
+    mean = np.bincount(ring, weights=vals, minlength=r.size) / nth
+    return r, mean
+
+
+def radial_remainder(cor: Correction, r, mean, axis=(0.0, 0.0)):
+    """dz minus its azimuthal mean over the clear aperture (the non-symmetric part: slow/fast tool
+    servo or polishing)."""
+    rr = np.hypot(cor.xs[None, :] - axis[0], cor.ys[:, None] - axis[1])
+    sym = np.interp(rr, r, mean)
+    return np.where(cor.aperture_mask, cor.dz - sym, np.nan)
+
+
+def removal_map(cor: Correction, bias_mm: float = 0.0):
+    """Material to remove (mm, ≥ 0) over the written region: gain·F about its minimum, plus bias."""
+    m = -cor.dz  # = gain·F less its plane: what is high is removed
+    return m - np.nanmin(m) + bias_mm

@@ -1,0 +1,414 @@
+"""`correction`: the form error turned into what the next cutting or polishing run takes.
+
+Sign convention (docs/conventions.md, Correction): residual = z − sag in the part frame (positive =
+material above the nominal, a high spot); the correction ``dz`` is the height to ADD to the
+programmed surface for the next run, dz = −gain × (the error low-passed), piston and tilt removed
+(set-up, not form). The material to remove (polishing) is gain × (the error low-passed) − its minimum
++ bias, ≥ 0 everywhere. The math is core.correction (module doc there).
+
+Input: a cloud with a ``residual`` (after `misalignment`, `probe_radius`, `register`…) or a map
+whose z is the error (a `bspline_map` map.csv read back, an instrument's error map). Points on one
+square lattice are taken node for node; scattered points are fitted by the smoothing B-spline of
+core.maps first (as `bspline_map` does).
+
+Outputs (``outputs``; empty: every one the inputs allow):
+- cutting:   ``correction.csv`` (x, y, dz; mm, part frame) and ``correction.x3p`` over the clear
+             aperture extended by ``extend_mm``;
+- radial:    ``correction_radial.csv`` (r, dz: the azimuthal mean about the axis) and
+             ``corrected_surface.yaml`` (the recipe's `surface:` syntax, even asphere or Forbes Q-con,
+             fitted to programmed + radial dz within ``fit_tolerance_nm`` RMS); the non-symmetric
+             remainder in the report (it needs a slow/fast tool servo or polishing); needs a
+             rotationally symmetric nominal;
+- freeform:  ``corrected_sag.csv`` (x, y, z = programmed sag + dz) and ``corrected_surface.stl``
+             (the same grid triangulated, mm) for CAM; needs a nominal;
+- polishing: ``removal.csv`` (x, y, removal in µm) and ``removal.x3p`` (metres, as the standard
+             stores heights), ≥ 0 everywhere, the total volume removed in the report.
+Figures: ``correction.png`` (dz and the predicted error after it), ``correction_radial.png``,
+``correction_history.png`` (RMS run by run with ``history_rms_um``). The cloud passes unchanged.
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import field_validator
+
+from pointspro.core.errors import DomainError, StepError
+from pointspro.core.params.pupil import PupilCentreParams
+from pointspro.core.step import Context, Step, StepResult, param
+
+OUTPUTS = ("cutting", "radial", "freeform", "polishing")
+#: files of each output, for messages
+FILES = {"cutting": "correction.csv, correction.x3p",
+         "radial": "correction_radial.csv, corrected_surface.yaml",
+         "freeform": "corrected_sag.csv, corrected_surface.stl",
+         "polishing": "removal.csv, removal.x3p"}
+SIGN = ("dz = height to ADD to the programmed surface for the next run (mm, part frame); "
+        "dz = -gain x low-passed form error, form error = residual = z - sag")
+
+
+class CorrectionParams(PupilCentreParams):
+    outputs: list[Literal["cutting", "radial", "freeform", "polishing"]] = param(
+        default_factory=list, help="what to write: cutting (correction.csv), radial (turning: "
+        "correction_radial.csv, corrected_surface.yaml), freeform (corrected sag grid and STL), "
+        "polishing (removal map); empty: every one the inputs allow")
+    channel: Literal["auto", "residual", "z"] = param(
+        "auto", help="the form error: the residual, or z of a map whose heights are the error (a "
+        "map.csv); auto: residual when present")
+    gain: float = param(1.0, gt=0, le=1.5, help="share of the error corrected per run (below 1: "
+                        "converges more gently through noise and process scatter)")
+    cutoff_mm: float | None = param(
+        None, unit="mm", gt=0, help="cutoff wavelength of the Gaussian low-pass (ISO 16610-61: 50 % "
+        "transmission): the finest detail the process can correct; empty: 2 × tool_radius_mm, else "
+        "4 × the map spacing")
+    tool_radius_mm: float | None = param(
+        None, unit="mm", gt=0, help="radius of the tool's footprint (polishing spot, or the nose "
+        "radius of a cutting tool): the cutoff defaults to its diameter")
+    extend_mm: float | None = param(
+        None, unit="mm", ge=0, help="continue the correction smoothly this far past the clear "
+        "aperture (the tool's run-out); empty: one cutoff")
+    diameter: float | None = param(None, unit="mm", gt=0,
+                                   help="clear-aperture diameter; empty: the surface's aperture")
+    spacing: float | None = param(None, unit="mm", gt=0, help="grid spacing of the outputs; empty: "
+                                  "the input grid's, or half the knot spacing for scattered points")
+    knot_spacing: float | None = param(None, unit="mm", gt=0, help="B-spline knot spacing for "
+                                       "scattered points; empty: automatic (as bspline_map)")
+    smoothing: float = param(1e-3, ge=0, le=1e6, help="B-spline penalty for scattered points "
+                             "(dimensionless, as bspline_map)")
+    bias_um: float = param(0.0, unit="µm", ge=0, help="uniform depth added to the removal map "
+                           "(polishing: a minimum removal everywhere)")
+    max_depth_um: float | None = param(None, unit="µm", gt=0, help="largest removal depth allowed; "
+                                       "a deeper removal map is refused (nothing written)")
+    fit_tolerance_nm: float = param(1.0, unit="nm", gt=0, help="corrected_surface.yaml must match "
+                                    "programmed + radial correction to this RMS over the aperture")
+    programmed_surface: dict | None = param(
+        None, help="the surface this run was cut with, in the recipe's surface syntax (a previous "
+        "corrected_surface.yaml's surface); empty: the recipe's nominal")
+    history_rms_um: list[float] = param(
+        default_factory=list, unit="µm", help="RMS form error of the previous runs over the clear "
+        "aperture, oldest first (from their reports' error_rms_um): plotted with this run")
+
+    @field_validator("programmed_surface")
+    @classmethod
+    def _surface(cls, v):
+        if v is not None:
+            from pointspro.core.surfaces import parse_surface_spec
+
+            parse_surface_spec(v)
+        return v
+
+    @field_validator("history_rms_um")
+    @classmethod
+    def _positive(cls, v):
+        if any(not (x > 0) for x in v):
+            raise ValueError("RMS values must be > 0")
+        return v
+
+
+def _rotational(surface) -> bool:
+    from pointspro.core.surfaces import SurfaceOfRevolution
+
+    return isinstance(surface, SurfaceOfRevolution) and not surface.is_flat()
+
+
+class CorrectionStep(Step):
+    id = "correction"
+    title = "Correction for the next run"
+    summary = ("Form error → what the machine or polishing tool takes: correction.csv (dz to add), "
+               "radial program and corrected surface, corrected sag + STL, removal map.")
+    Params = CorrectionParams
+
+    def run(self, cloud, params: CorrectionParams, ctx: Context) -> StepResult:
+        import time
+
+        from pointspro.core import correction as C
+        from pointspro.core.metrics.pupil import pupil_of
+
+        t0 = time.perf_counter()
+        ctx.progress.check()
+        channel = params.channel
+        if channel == "auto":
+            channel = "residual" if "residual" in cloud.channels else "z"
+        if channel == "residual" and "residual" not in cloud.channels:
+            raise StepError("channel 'residual' asked for, but the cloud has none (run misalignment "
+                            "first, or give a map with channel: z)")
+        v = cloud.z if channel == "z" else cloud[channel]
+        x, y = cloud.x, cloud.y
+        nominal = ctx.surface
+        programmed = nominal
+        if params.programmed_surface is not None:
+            from pointspro.core.surfaces import surface_from_spec
+
+            programmed = surface_from_spec(params.programmed_surface, ctx.base_dir)
+            if getattr(programmed, "aperture", None) is None and nominal is not None:
+                programmed.aperture = getattr(nominal, "aperture", None)
+        # which outputs: asked, else all the inputs allow
+        asked = list(dict.fromkeys(params.outputs))
+        skipped = {}
+        if asked:
+            for o in asked:
+                if o in ("radial", "freeform") and programmed is None:
+                    raise StepError(f"output '{o}' ({FILES[o]}) needs the nominal surface — give the "
+                                    "recipe's `surface:` (or programmed_surface)")
+                if o == "radial" and not _rotational(programmed):
+                    raise StepError(f"output 'radial' ({FILES['radial']}) needs a rotationally "
+                                    "symmetric nominal (even_asphere, qcon, qbfs); this one is "
+                                    f"{getattr(programmed, 'kind', '?')}")
+            outputs = asked
+        else:
+            outputs = ["cutting"]
+            if programmed is None:
+                skipped["radial"] = skipped["freeform"] = "no nominal surface"
+            else:
+                if _rotational(programmed):
+                    outputs.append("radial")
+                else:
+                    skipped["radial"] = f"the nominal ({programmed.kind}) is not a surface of revolution"
+                outputs.append("freeform")
+            outputs.append("polishing")
+        # the clear aperture
+        diameter = params.diameter
+        if diameter is None and nominal is not None:
+            diameter = getattr(nominal, "aperture", None)
+        if diameter is None:
+            raise StepError("the correction needs the clear aperture: give diameter: (mm) or the "
+                            "surface's aperture")
+        pupil = pupil_of(x, y, nominal, params.given_centre)
+        center = pupil.center
+        radius = diameter / 2.0
+        # the grid spacing and the cutoff, checked before any work
+        reg = None
+        spacing = params.spacing
+        if spacing is None:
+            reg = C.regular_grid(x, y, v)
+            if reg is not None:
+                spacing = reg[3]
+        cutoff = params.cutoff_mm
+        cutoff_from = "given"
+        if cutoff is None and params.tool_radius_mm is not None:
+            cutoff, cutoff_from = 2.0 * params.tool_radius_mm, "2 × tool_radius_mm (the footprint)"
+        if cutoff is not None and spacing is not None and cutoff < 2.0 * spacing:
+            raise StepError(f"cutoff_mm {cutoff:g} mm is below twice the map spacing ({spacing:g} mm): "
+                            f"the map holds no detail that fine — use cutoff_mm ≥ {2 * spacing:g} or a "
+                            "finer spacing")
+        ctx.progress.update(0.05, "error map")
+
+        def defaults(h):
+            c = cutoff if cutoff is not None else 4.0 * h
+            e = params.extend_mm if params.extend_mm is not None else c
+            return c, e
+
+        def outer(h):  # the working grid: aperture, extension and the filter's reach beyond it
+            c, e = defaults(h)
+            return radius + e + 3.0 * C.gaussian_sigma(c)
+
+        try:
+            em = C.error_map(x, y, v, center=center, radius=radius, outer=outer, spacing=spacing,
+                             knot_spacing=params.knot_spacing, smoothing=params.smoothing,
+                             reg=reg if params.spacing is None else False)
+        except C.CorrectionInputError as e:
+            raise StepError(str(e)) from None
+        h = em.spacing
+        if cutoff is None:
+            cutoff_from = "4 × the map spacing (default)"
+        cutoff, extend = defaults(h)
+        if cutoff < 2.0 * h:
+            raise StepError(f"cutoff_mm {cutoff:g} mm is below twice the map spacing ({h:g} mm): "
+                            f"the map holds no detail that fine — use cutoff_mm ≥ {2 * h:g} or a "
+                            "finer spacing")
+        ctx.progress.check()
+        ctx.progress.update(0.3, "filter")
+        try:
+            cor = C.compute_correction(em, center=center, radius=radius, extend=extend,
+                                       cutoff=cutoff, gain=params.gain)
+        except C.CorrectionInputError as e:
+            raise StepError(str(e)) from None
+        inside = cor.aperture_mask
+        RR = np.hypot(cor.xs[None, :] - center[0], cor.ys[:, None] - center[1])
+        inner = inside & (RR <= radius - cutoff)
+        rep = {
+            "outputs": outputs, "skipped": skipped, "sign": SIGN, "channel": channel,
+            "map_from": em.source, "spacing_mm": h, "grid": [int(cor.xs.size), int(cor.ys.size)],
+            "diameter_mm": diameter, **pupil.report(),
+            "gain": params.gain, "cutoff_mm": cutoff, "cutoff_from": cutoff_from,
+            "filter": "Gaussian, ISO 16610-61 (σ = α λc / √(2π), 50 % at the cutoff)",
+            "extend_mm": extend, "coverage": cor.info["coverage"],
+            "holes_filled": cor.info["holes_filled"],
+            "piston_removed_um": cor.plane_error[0] * 1e3,
+            "tilt_removed_urad": [cor.plane_error[1] * 1e6, cor.plane_error[2] * 1e6],
+            "error_rms_um": C.rms(cor.E) * 1e3, "error_pv_um": C.pv(cor.E) * 1e3,
+            "correction_rms_um": C.rms(np.where(inside, cor.dz, np.nan)) * 1e3,
+            "correction_pv_um": C.pv(cor.dz) * 1e3,
+            "predicted_rms_um": C.rms(cor.predicted) * 1e3,
+            "predicted_pv_um": C.pv(cor.predicted) * 1e3,
+            "predicted_inner_rms_um": C.rms(np.where(inner, cor.predicted, np.nan)) * 1e3,
+            "predicted_edge_rms_um": C.rms(np.where(inside & ~inner, cor.predicted, np.nan)) * 1e3,
+            "predicted_note": ("error left after the correction: detail finer than the cutoff, the "
+                               "continuation within one cutoff of the rim (edge), and (1 − gain) of "
+                               "the rest; inner = r ≤ aperture radius − cutoff"),
+            "warnings": [],
+        }
+        arts = {}
+        comments = [f"PointsPro correction: {SIGN}",
+                    f"gain {params.gain:g}; Gaussian low-pass cutoff {cutoff:g} mm (ISO 16610-61); "
+                    f"piston {rep['piston_removed_um']:.6g} um and tilt removed (set-up, not form)",
+                    f"clear aperture diameter {diameter:g} mm about ({center[0]:g}, {center[1]:g}) mm, "
+                    f"extended {extend:g} mm; grid spacing {h:g} mm; rows y-major"]
+        ctx.progress.update(0.5, "outputs")
+        if "cutting" in outputs:
+            from pointspro.core.correction.files import write_grid_csv
+            from pointspro.core.maps import MapGrid
+
+            arts["correction.csv"] = lambda p: write_grid_csv(
+                p, cor.xs, cor.ys, cor.dz, "x [mm],y [mm],dz [mm]\n", comments)
+            arts["correction.x3p"] = MapGrid(cor.xs, cor.ys, cor.dz, h).write_x3p
+        if "polishing" in outputs:
+            removal = C.removal_map(cor, params.bias_um * 1e-3)
+            depth_um = float(np.nanmax(removal)) * 1e3
+            vol = float(np.nansum(removal)) * h * h
+            vol_ap = float(np.nansum(np.where(inside, removal, 0.0))) * h * h
+            if params.max_depth_um is not None and depth_um > params.max_depth_um:
+                raise StepError(f"the removal map is {depth_um:.4g} µm deep (bias {params.bias_um:g} µm "
+                                f"included), more than max_depth_um {params.max_depth_um:g} µm: nothing "
+                                "written — cut instead of polishing, or lower gain/bias")
+            rep["removal"] = {"max_depth_um": depth_um, "min_depth_um": float(np.nanmin(removal)) * 1e3,
+                              "bias_um": params.bias_um, "volume_mm3": vol,
+                              "volume_aperture_mm3": vol_ap,
+                              "sign": "removal = material to remove (µm, ≥ 0) = gain × low-passed "
+                                      "error − its minimum + bias"}
+            rcom = [f"PointsPro removal map (polishing): removal = material to REMOVE, um, >= 0 "
+                    f"everywhere = gain x low-passed form error - its minimum + bias {params.bias_um:g} um",
+                    comments[1], comments[2],
+                    f"max depth {depth_um:.6g} um; volume removed {vol:.6g} mm^3"]
+            from pointspro.core.correction.files import write_grid_csv
+            from pointspro.core.maps import MapGrid
+
+            arts["removal.csv"] = lambda p: write_grid_csv(
+                p, cor.xs, cor.ys, removal, "x [mm],y [mm],removal [um]\n", rcom, scale=1e3,
+                decimals=9)
+            arts["removal.x3p"] = MapGrid(cor.xs, cor.ys, removal, h).write_x3p
+        ctx.progress.check()
+        if "radial" in outputs:
+            ctx.progress.update(0.6, "radial program")
+            self._radial(cor, programmed, params, rep, arts, comments, radius, h)
+        if "freeform" in outputs:
+            ctx.progress.update(0.8, "corrected sag")
+            self._freeform(cor, programmed, rep, arts, comments)
+        from pointspro.core.correction.figures import correction_figure, history_figure
+        from pointspro.core.figures import png_artifact
+
+        arts["correction.png"] = png_artifact(correction_figure, cor, rep)
+        runs = [*params.history_rms_um, rep["error_rms_um"]]
+        rep["runs_rms_um"] = runs
+        if len(runs) > 1:
+            ratios = [b / a for a, b in zip(runs[:-1], runs[1:])]
+            rep["run_ratios"] = ratios
+            if ratios[-1] > 1.0:
+                rep["warnings"].append(f"the form error grew from run {len(runs) - 1} to run "
+                                       f"{len(runs)} ({runs[-2]:.4g} → {runs[-1]:.4g} µm RMS): lower "
+                                       "the gain or check the sign of the correction the machine took")
+            arts["correction_history.png"] = png_artifact(history_figure, runs, rep["predicted_rms_um"])
+        rep["seconds"] = time.perf_counter() - t0
+        return StepResult(cloud.replace(), rep, arts)
+
+    def _radial(self, cor, programmed, params, rep, arts, comments, radius, h):
+        from pointspro.core import correction as C
+        from pointspro.core.correction.figures import radial_figure
+        from pointspro.core.correction.files import write_radial_csv
+        from pointspro.core.figures import png_artifact
+
+        axis = (0.0, 0.0)  # the surface's axis in the part frame
+        r, mean = C.azimuthal_mean(cor, axis)
+        rem = C.radial_remainder(cor, r, mean, axis)
+        rep["radial"] = {"non_symmetric_rms_um": C.rms(rem) * 1e3, "non_symmetric_pv_um": C.pv(rem) * 1e3,
+                         "symmetric_rms_um": float(np.sqrt(np.average(
+                             (mean[r <= radius] - np.average(mean[r <= radius], weights=np.maximum(
+                                 r[r <= radius], h / 4))) ** 2, weights=np.maximum(r[r <= radius], h / 4))))
+                         * 1e3,
+                         "note": "the non-symmetric remainder needs a slow/fast tool servo "
+                                 "(freeform output) or polishing", "rings": int(r.size)}
+        try:
+            fit = C.refit_surface(programmed, r, mean, radius, h, norm_radius=cor.outer,
+                                  tol_mm=params.fit_tolerance_nm * 1e-6)
+        except DomainError as e:
+            raise StepError(f"output 'radial': the corrected surface: {e}") from None
+        surf = fit["surface"]
+        rcom = [f"PointsPro radial correction (turning): {SIGN}",
+                "dz(r) = azimuthal mean of dz about the surface's axis; r in mm", comments[1]]
+        arts["correction_radial.csv"] = lambda p: write_radial_csv(p, r, mean, rcom)
+        label = ""
+        fitted = None
+        if surf is not None:
+            sel = r <= cor.outer
+            try:
+                fitted = surf.sag_r(r) - programmed.sag_r(r)
+            except DomainError:
+                fitted = None
+            ins = r <= radius
+            w = np.maximum(r[ins], h / 4)
+            err = (fitted[ins] - mean[ins]) if fitted is not None else np.array([np.inf])
+            rms_area = float(np.sqrt(np.average(err ** 2, weights=w))) if fitted is not None else np.inf
+            rep["corrected_surface"] = {
+                "type": fit["type"], "why": fit["why"], "fit_rms_nm": rms_area * 1e6,
+                "fit_max_nm": float(np.max(np.abs(err))) * 1e6,
+                "tried_rms_nm": {k: e * 1e6 for k, e in fit["tried"].items()},
+                "surface": C.spec_of(surf)}
+            if fitted is not None and sel.any():
+                out = sel & ~ins
+                if out.any():
+                    rep["corrected_surface"]["extension_rms_nm"] = float(
+                        np.sqrt(np.mean((fitted[out] - mean[out]) ** 2))) * 1e6
+            label = f"{fit['type']} fit ({rms_area * 1e6:.2g} nm RMS)"
+            if rms_area * 1e6 > params.fit_tolerance_nm:
+                rep["warnings"].append(
+                    f"corrected_surface.yaml matches nominal + radial correction to {rms_area * 1e6:.3g} nm "
+                    f"RMS only (tolerance {params.fit_tolerance_nm:g} nm): program correction_radial.csv")
+            arts["corrected_surface.yaml"] = _surface_yaml(surf, rep["corrected_surface"], comments)
+        else:
+            rep["warnings"].append(f"no corrected surface could be fitted: {fit['why']}")
+        arts["correction_radial.png"] = png_artifact(radial_figure, r, mean, radius, fitted, label)
+
+    def _freeform(self, cor, programmed, rep, arts, comments):
+        from pointspro.core.correction.files import write_grid_csv
+        from pointspro.core.io.mesh import MeshArtifact, grid_mesh
+
+        ok = np.isfinite(cor.dz)
+        X, Y = np.meshgrid(cor.xs, cor.ys)
+        Zs = np.full(cor.dz.shape, np.nan)
+        try:
+            Zs[ok] = programmed.sag(X[ok], Y[ok]) + cor.dz[ok]
+        except DomainError as e:
+            raise StepError(f"output 'freeform': the nominal is not defined over the extended "
+                            f"correction (lower extend_mm): {e}") from None
+        fcom = ["PointsPro corrected surface (freeform / tool servo): z = programmed sag + dz (mm, "
+                "part frame); program this surface for the next run", comments[1], comments[2]]
+        arts["corrected_sag.csv"] = lambda p: write_grid_csv(
+            p, cor.xs, cor.ys, Zs, "x [mm],y [mm],z [mm]\n", fcom)
+        V, F = grid_mesh(cor.xs, cor.ys, Zs)
+        art = MeshArtifact(V, F, "stl")
+        arts["corrected_surface.stl"] = art
+        rep["freeform"] = {"nodes": int(ok.sum()), "faces": int(len(F)),
+                           "z": "programmed sag + dz (mm)"}
+
+    @classmethod
+    def example_params(cls) -> dict:
+        return {"diameter": 1000.0, "cutoff_mm": 200.0}
+
+    @classmethod
+    def example_cloud(cls, cloud):
+        # the generic raster on the 002 asphere, with a smooth form error as its residual
+        r = np.hypot(cloud.x, cloud.y) / 650.0
+        return cloud.replace(channels={**cloud.channels, "residual": 1e-4 * (2 * r**2 - 1)
+                                       + 5e-5 * r**2 * np.cos(2 * np.arctan2(cloud.y, cloud.x))})
+
+
+def _surface_yaml(surface, info, comments) -> str:
+    from pointspro.core.correction import spec_of
+    from pointspro.core.yamlio import dump_yaml
+
+    head = ["PointsPro corrected nominal for a turning program: sag = programmed sag + radial dz",
+            f"form: {info['type']} ({info['why']}); matches programmed + dz(r) to "
+            f"{info['fit_rms_nm']:.3g} nm RMS over the clear aperture",
+            comments[0], comments[1]]
+    body = dump_yaml({"surface": spec_of(surface)}, sort_keys=False, default_flow_style=None)
+    return "".join(f"# {h}\n" for h in head) + body
