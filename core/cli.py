@@ -43,7 +43,7 @@ examples:
   pointspro info part.datx
   pointspro --batch recipe.yaml scans/*.csv --out results --workers 4
   pointspro --batch recipe.yaml part.csv --out results --set knn_denoise.window=10 \\
-            --set 2.diameter=1290 --set surface.k=-0.98 --cloud-format ply -v
+            --set 5.diameter=1290 --set surface.k=-0.98 --cloud-format ply -v
   pointspro --batch recipe.yaml scans/*.csv --out results --resume --log-file run.log
   pointspro steps knn_denoise
 

@@ -103,8 +103,25 @@ def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str,
     The workers must see the same files (a shared file system for a real cluster) and have pointspro
     installed. Each input is one task; results come back as they complete.
     """
+    import logging
+
     from distributed import Client, LocalCluster, as_completed  # lazy: only for --scheduler
 
+    # the scheduler's and nannies' INFO chatter (clients, workers coming and going) is not the
+    # batch's progress: shown with -vv (DEBUG) only
+    dlog = logging.getLogger("distributed")
+    saved_level = dlog.level
+    if logging.getLogger("pointspro").getEffectiveLevel() > logging.DEBUG:
+        dlog.setLevel(logging.WARNING)
+    try:
+        yield from _run_dask(recipe_path, jobs, out_dir, workers, address, allowed_dirs, figures,
+                             options, Client, LocalCluster, as_completed)
+    finally:
+        dlog.setLevel(saved_level)
+
+
+def _run_dask(recipe_path, jobs, out_dir, workers, address, allowed_dirs, figures, options,
+              Client, LocalCluster, as_completed):
     cluster = None
     if address == "local":
         import dask
