@@ -41,46 +41,56 @@ def _solve(J, res, w):
     return step
 
 
-def fit_even_asphere(r, T, base, w, aperture, max_power=40, fit_conic=True):
-    """(EvenAsphere, weighted RMS mm) of T(r) with powers up to ``max_power``."""
-    c, k = float(base.c), float(base.k)
-    A = dict(getattr(base, "A", {}) or {})
-    powers = sorted(set(A) | set(range(4, max_power + 1, 2)))
-    names = (["c", "k"] if fit_conic else []) + [f"A{n}" for n in powers]
-    surf = EvenAsphere(c, k, {n: A.get(n, 0.0) for n in powers}, aperture)
-    surf.A = {n: A.get(n, 0.0) for n in powers}  # keep zero terms as unknowns
-    best = None
-    for _ in range(4):
+def _gauss_newton(make, values: dict, free: list, columns, r, T, w, iters=5):
+    """Least squares of T(r) ≈ make(values).sag_r(r) + p over the parameters ``free`` and a piston p
+    (the vertex's z offset: set-up, which no sag with z(0) = 0 can carry), Jacobian
+    ``columns(surface, free)``; returns (surface, weighted RMS) of the best iterate, or (None, inf);
+    the surface's ``piston`` attribute is p."""
+    best = (None, float("inf"))
+    vals = {**values, "_p": float(values.get("_p", 0.0))}
+    for _ in range(iters + 1):
         try:
-            res = T - surf.sag_r(r)
-            J = np.column_stack([surf.parameter_derivatives(r, [nm])[nm] for nm in names])
+            surf = make(vals)
+            res = T - surf.sag_r(r) - vals["_p"]
+            e = _wrms(res, w)
+            if e < best[1]:
+                surf.piston = vals["_p"]
+                best = (surf, e)
+            J = np.column_stack([columns(surf, free), np.ones_like(r)])
         except DomainError:
             break
         d = _solve(J, res, w)
-        vals = {}
-        if fit_conic:
-            vals["c"] = surf.c + d[0]
-            vals["k"] = surf.k + d[1]
-        off = 2 if fit_conic else 0
-        for i, n in enumerate(powers):
-            vals[f"A{n}"] = surf.A.get(n, 0.0) + d[off + i]
-        new = EvenAsphere(vals.get("c", surf.c), vals.get("k", surf.k),
-                          {n: vals[f"A{n}"] for n in powers}, aperture)
-        new.A = {n: vals[f"A{n}"] for n in powers}
-        try:
-            e = _wrms(T - new.sag_r(r), w)
-        except DomainError:
-            break
-        surf = new
-        if best is None or e < best[1]:
-            best = (surf, e)
-        if np.max(np.abs(d)) == 0 or (best and e < 1e-12):
-            break
-    if best is None:
+        vals = {**vals, **{n: vals[n] + d[i] for i, n in enumerate([*free, "_p"])}}
+    return best
+
+
+def fit_even_asphere(r, T, base, w, aperture, max_power=40):
+    """(EvenAsphere, weighted RMS mm) of T(r): c and A4 … A<max_power> first (k kept: it and A4 are
+    nearly the same function), then k freed too when that lowers the RMS."""
+    A0 = dict(getattr(base, "A", {}) or {})
+    powers = sorted(set(A0) | set(range(4, max_power + 1, 2)))
+    values = {"c": float(base.c), "k": float(base.k), **{f"A{n}": A0.get(n, 0.0) for n in powers}}
+
+    def make(v):
+        s = EvenAsphere(v["c"], v["k"], {}, aperture)
+        s.A = {n: v[f"A{n}"] for n in powers}  # zero terms stay unknowns
+        return s
+
+    def columns(s, free):
+        d = s.parameter_derivatives(r, free)
+        return np.column_stack([d[n] for n in free])
+
+    free = ["c"] + [f"A{n}" for n in powers]
+    s1, e1 = _gauss_newton(make, values, free, columns, r, T, w)
+    if s1 is not None:
+        start = {"c": s1.c, "k": s1.k, "_p": s1.piston, **{f"A{n}": s1.A[n] for n in powers}}
+        s2, e2 = _gauss_newton(make, start, ["k"] + free, columns, r, T, w)
+        if s2 is not None and e2 < 0.9 * e1:
+            s1, e1 = s2, e2
+    if s1 is None:
         return None, float("inf")
-    s = best[0]
-    s.A = {n: a for n, a in s.A.items() if a != 0.0}
-    return s, best[1]
+    s1.A = {n: a for n, a in s1.A.items() if a != 0.0}
+    return s1, e1
 
 
 def _qcon_columns(r, rn, M):
@@ -94,32 +104,30 @@ def _qcon_columns(r, rn, M):
 
 
 def fit_qcon(r, T, base, w, aperture, norm_radius, terms):
-    """(QConAsphere, weighted RMS mm) with ``terms`` coefficients a_0…a_{terms−1}; c and k re-fitted."""
-    c, k = float(base.c), float(base.k)
-    a = np.zeros(terms)
+    """(QConAsphere, weighted RMS mm) with ``terms`` coefficients a_0…a_{terms−1} on u = r/norm_radius:
+    c and the a_m (k kept; then freed when that lowers the RMS)."""
+    a0 = np.zeros(terms)
     if isinstance(base, QConAsphere) and abs(base.rn - norm_radius) < 1e-12 * norm_radius:
-        a[: min(terms, len(base.a))] = base.a[:terms]
+        a0[: min(terms, len(base.a))] = base.a[:terms]
     Q = _qcon_columns(r, norm_radius, terms)
-    best = None
-    for _ in range(4):
-        surf = QConAsphere(c, k, a, norm_radius, aperture)
-        try:
-            res = T - surf.sag_r(r)
-            conic = EvenAsphere(c, k)
-            d = conic.parameter_derivatives(r, ["c", "k"])
-        except DomainError:
-            break
-        J = np.column_stack([d["c"], d["k"], Q])
-        step = _solve(J, res, w)
-        c, k, a = c + step[0], k + step[1], a + step[2:]
-        try:
-            surf = QConAsphere(c, k, a, norm_radius, aperture)
-            e = _wrms(T - surf.sag_r(r), w)
-        except DomainError:
-            break
-        if best is None or e < best[1]:
-            best = (surf, e)
-    return (None, float("inf")) if best is None else best
+    names = [f"a{m}" for m in range(terms)]
+    values = {"c": float(base.c), "k": float(base.k), **{n: a0[i] for i, n in enumerate(names)}}
+
+    def make(v):
+        return QConAsphere(v["c"], v["k"], [v[n] for n in names], norm_radius, aperture)
+
+    def columns(s, free):
+        d = EvenAsphere(s.c, s.k).parameter_derivatives(r, [n for n in free if n in ("c", "k")])
+        return np.column_stack([d[n] if n in d else Q[:, int(n[1:])] for n in free])
+
+    free = ["c"] + names
+    s1, e1 = _gauss_newton(make, values, free, columns, r, T, w)
+    if s1 is not None:
+        start = {"c": s1.c, "k": s1.k, "_p": s1.piston, **{n: s1.a[i] for i, n in enumerate(names)}}
+        s2, e2 = _gauss_newton(make, start, ["k"] + free, columns, r, T, w)
+        if s2 is not None and e2 < 0.9 * e1:
+            s1, e1 = s2, e2
+    return (None, float("inf")) if s1 is None else (s1, e1)
 
 
 def fit_qbfs(r, T, base, w, aperture, norm_radius, terms):
@@ -134,10 +142,12 @@ def fit_qbfs(r, T, base, w, aperture, norm_radius, terms):
         return None, float("inf")
     v = (r / norm_radius) ** 2
     phi = np.sqrt(1.0 - c * c * r * r)
-    cols = np.column_stack([v * (1 - v) * Q / phi for Q, _, _ in qbfs_polynomials(terms - 1, v)])
+    cols = np.column_stack([v * (1 - v) * Q / phi for Q, _, _ in qbfs_polynomials(terms - 1, v)]
+                           + [np.ones_like(r)])
     a = _solve(cols, res, w)
-    surf = QBfsAsphere(c, list(a), norm_radius, aperture)
-    return surf, _wrms(T - surf.sag_r(r), w)
+    surf = QBfsAsphere(c, list(a[:-1]), norm_radius, aperture)
+    surf.piston = float(a[-1])
+    return surf, _wrms(T - surf.sag_r(r) - surf.piston, w)
 
 
 def spec_of(surface) -> dict:
@@ -162,7 +172,7 @@ def refit_surface(programmed, r, dz, radius: float, spacing: float, norm_radius:
     without costing the aperture its accuracy; the RMS judged is over r ≤ radius. Returns
     {"surface", "type", "rms_mm", "tried": {...}, "why"}; "surface" is None when no form could be
     fitted (a domain problem)."""
-    sel = r <= norm_radius + 1e-9 * spacing
+    sel = r <= norm_radius + 1e-9 * spacing  # piston: see _gauss_newton
     rr, target = r[sel], programmed.sag_r(r[sel]) + dz[sel]
     w = _weights(rr, spacing) * np.where(rr <= radius + 1e-9 * spacing, 1.0, extension_weight)
     w = w / w.sum()
@@ -176,7 +186,8 @@ def refit_surface(programmed, r, dz, radius: float, spacing: float, norm_radius:
     if own != "qbfs":
         for top in range(8, 41, 4):
             s, e = fit_even_asphere(rr, target, programmed if own == "even_asphere" else
-                                    EvenAsphere(programmed.c, programmed.k), w, aperture, top)
+                                    EvenAsphere(programmed.c, getattr(programmed, "k", 0.0)), w,
+                                    aperture, top)
             if s is not None and ("even_asphere" not in cands or e < cands["even_asphere"][1]):
                 cands["even_asphere"] = (s, e)
             if e <= tol_mm / 4:
@@ -196,7 +207,7 @@ def refit_surface(programmed, r, dz, radius: float, spacing: float, norm_radius:
             if e <= tol_mm / 4:
                 break
     for name, (srf, _) in list(cands.items()):
-        e = _wrms(target[ins] - srf.sag_r(rr[ins]), wi)
+        e = _wrms(target[ins] - srf.sag_r(rr[ins]) - srf.piston, wi)
         cands[name] = (srf, e)
         tried[name] = e
     if not cands:
@@ -207,6 +218,6 @@ def refit_surface(programmed, r, dz, radius: float, spacing: float, norm_radius:
     else:
         kind = min(cands, key=lambda n: cands[n][1])
         why = (f"{kind} fits best ({cands[kind][1] * 1e6:.3g} nm RMS" +
-               "".join(f"; {n} {e * 1e6:.3g} nm" for n, e in cands.items() if n != kind) + ")")
+               "".join(f"; {n} {e * 1e6:.3g} nm" for n, (_, e) in cands.items() if n != kind) + ")")
     s, e = cands[kind]
     return {"surface": s, "type": kind, "rms_mm": e, "tried": tried, "why": why}

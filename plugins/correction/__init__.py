@@ -341,7 +341,7 @@ class CorrectionStep(Step):
         if surf is not None:
             sel = r <= cor.outer
             try:
-                fitted = surf.sag_r(r) - programmed.sag_r(r)
+                fitted = surf.sag_r(r) + surf.piston - programmed.sag_r(r)
             except DomainError:
                 fitted = None
             ins = r <= radius
@@ -351,6 +351,10 @@ class CorrectionStep(Step):
             rep["corrected_surface"] = {
                 "type": fit["type"], "why": fit["why"], "fit_rms_nm": rms_area * 1e6,
                 "fit_max_nm": float(np.max(np.abs(err))) * 1e6,
+                "vertex_offset_um": float(surf.piston) * 1e3,
+                "vertex_offset_note": "the radial correction's piston: the new surface has its vertex "
+                                      "at z = 0, so program it with this z offset (or leave it: "
+                                      "piston is set-up, not form)",
                 "tried_rms_nm": {k: e * 1e6 for k, e in fit["tried"].items()},
                 "surface": C.spec_of(surf)}
             if fitted is not None and sel.any():
