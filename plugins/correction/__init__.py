@@ -81,7 +81,7 @@ class CorrectionParams(PupilCentreParams):
                                        "a deeper removal map is refused (nothing written)")
     fit_tolerance_nm: float = param(1.0, unit="nm", gt=0, help="corrected_surface.yaml must match "
                                     "programmed + radial correction to this RMS over the aperture")
-    programmed_surface: dict | None = param(
+    programmed_surface: dict[str, float | bool | str | list[float] | dict[int | str, float]] | None = param(
         None, help="the surface this run was cut with, in the recipe's surface syntax (a previous "
         "corrected_surface.yaml's surface); empty: the recipe's nominal")
     history_rms_um: list[float] = param(
