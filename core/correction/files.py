@@ -56,10 +56,11 @@ def fixed_point_bytes(v, decimals: int) -> np.ndarray:
     lead = np.arange(wi)[None, :] < (wi - nd)[:, None]
     ib = np.where(lead, np.uint8(0), idig)
     fdig = _digits(fp, decimals)
-    tz = np.zeros(fp.shape, np.int64)  # trailing zeros of the fraction, one decimal kept
-    for k in range(1, decimals):
-        tz += fp % (10 ** k) == 0
-    trail = np.arange(decimals)[None, :] >= (decimals - tz)[:, None]
+    # trailing zeros of the fraction dropped, one decimal kept: the digits after the last non-zero
+    # one (read from the digit bytes, not by `decimals` integer remainders over the whole column)
+    keep = np.maximum(decimals - np.argmax(fdig[:, ::-1] != ord("0"), axis=1), 1)
+    keep[fp == 0] = 1
+    trail = np.arange(decimals)[None, :] >= keep[:, None]
     fb = np.where(trail, np.uint8(0), fdig)
     sign = np.where(neg, ord("-"), 0).astype(np.uint8)[:, None]
     dot = np.full((v.size, 1), ord("."), np.uint8)
