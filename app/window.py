@@ -360,6 +360,25 @@ class MainWindow(QtWidgets.QMainWindow):
         self.log(f"exported the map as a mesh to {path} ({len(art.vertices):,} vertices, "
                  f"{len(art.faces):,} triangles)")
 
+    def export_correction(self):
+        """File → Export correction…: the correction step's form, a preview of dz and of the error
+        predicted after it, and Export… (app/correction_dialog.py). Needs a run that formed a
+        residual; the parameters start from a `correction` step of the recipe when there is one."""
+        res = self.last_report
+        if res is None or "residual" not in res.cloud.channels:
+            self.log("export correction: run the pipeline first (a step that forms a residual, e.g. "
+                     "misalignment)")
+            return None
+        from .correction_dialog import CorrectionDialog
+
+        values = next((s.params.model_dump(mode="json", exclude_defaults=True)
+                       for s in self.session.recipe.steps if s.id == "correction"), {})
+        dlg = CorrectionDialog(res.cloud, getattr(res, "surface", None), values, self)
+        dlg.setModal(False)
+        dlg.show()
+        self.correction_dialog = dlg
+        return dlg
+
     def export_report(self, folder) -> None:
         """The batch's outputs for the last run (cloud.csv, artifacts, report.json, report.html), drawn
         in a worker thread."""
@@ -369,6 +388,12 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         from pointspro.core.batch import write_outputs
 
+        target = Path(folder)
+        # the report replaces the folder as a whole (all or nothing): never a folder of other files
+        if target.is_dir() and any(target.iterdir()) and not (target / "report.json").exists():
+            self.log(f"export report: {target} holds other files — choose a new or empty folder "
+                     "(an earlier report's folder is replaced)")
+            return
         recipe = s.recipe  # typed and immutable: safe in the exporter's thread
         inp = str(s.input_path)
 
@@ -482,6 +507,7 @@ class MainWindow(QtWidgets.QMainWindow):
             "Export map", "Maps (*.png *.x3p *.csv *.asc)", self.export_map))
         fm.addAction("Export mesh…").triggered.connect(lambda: self._ask_save(
             "Export the map as a mesh (CAD/FEA, mm)", "Meshes (*.ply *.stl *.obj)", self.export_mesh))
+        fm.addAction("Export correction…").triggered.connect(self.export_correction)
         fm.addAction("Export report…").triggered.connect(lambda: (lambda d: d and self.export_report(d))(
             QtWidgets.QFileDialog.getExistingDirectory(self, "Export report into (a new folder)")))
         fm.addSeparator()

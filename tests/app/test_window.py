@@ -302,6 +302,13 @@ def test_exports(qtbot, tmp_path):
     win.export_report(tmp_path / "rep")
     qtbot.waitUntil(lambda: not win.exporter.busy, timeout=60_000)
     assert (tmp_path / "rep" / "report.html").is_file() and (tmp_path / "rep" / "map.csv").is_file()
+    # a folder of other files is never replaced by a report (the export is all or nothing)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep", encoding="utf-8")
+    win.export_report(mine)
+    assert not win.exporter.busy and "holds other files" in win.log_widget.toPlainText()
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]
 
 
 def test_explain_panel_names_the_missing_effects(qtbot, tmp_path, run_cli):
