@@ -145,7 +145,9 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
                                    "use a larger spacing")
     from ..maps.grid import coverage_mask
 
-    covered = coverage_mask(x[inside], y[inside], xs, ys, spline.h / 2.0)
+    # a node is supported when its knot cell (or a neighbour, closed) holds points: the spline is
+    # determined there by data — a star pattern's rim between spokes is, a missing sector is not
+    covered = coverage_mask(x[inside], y[inside], xs, ys, spline.h)
     E = spline.grid(xs, ys)
     disk = (xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2 <= radius * radius
     E = np.where(disk, E, np.nan)

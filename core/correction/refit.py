@@ -182,9 +182,12 @@ def refit_surface(programmed, r, dz, radius: float, spacing: float, norm_radius:
     tried = {}
     cands = {}
     own = getattr(programmed, "kind", "")
-    # even asphere: add powers until within a quarter of the tolerance
+    # even asphere: add powers until within a quarter of the tolerance, up to A20 — beyond it the
+    # monomials cancel each other (A40·r⁴⁰ of a 650 mm radius is 1e-110 × 1e112), which a CAM
+    # printing coefficients to a fixed number of digits cannot take; Forbes Q-con (orthogonal,
+    # coefficients of the size of the sag they add) takes over there
     if own != "qbfs":
-        for top in range(8, 41, 4):
+        for top in range(8, 21, 4):
             s, e = fit_even_asphere(rr, target, programmed if own == "even_asphere" else
                                     EvenAsphere(programmed.c, getattr(programmed, "k", 0.0)), w,
                                     aperture, top)

@@ -68,7 +68,8 @@ class CorrectionParams(PupilCentreParams):
         None, unit="mm", ge=0, help="continue the correction smoothly this far past the clear "
         "aperture (the tool's run-out); empty: one cutoff")
     diameter: float | None = param(None, unit="mm", gt=0,
-                                   help="clear-aperture diameter; empty: the surface's aperture")
+                                   help="clear-aperture diameter; empty: the outer diameter of the "
+                                   "last circular `aperture` step applied, else the surface's aperture")
     spacing: float | None = param(None, unit="mm", gt=0, help="grid spacing of the outputs; empty: "
                                   "the input grid's, or half the knot spacing for scattered points")
     knot_spacing: float | None = param(None, unit="mm", gt=0, help="B-spline knot spacing for "
@@ -168,6 +169,8 @@ class CorrectionStep(Step):
             outputs.append("polishing")
         # the clear aperture
         diameter = params.diameter
+        if diameter is None:  # the clear aperture the recipe applied, else the surface's
+            diameter = applied_aperture(cloud)
         if diameter is None and nominal is not None:
             diameter = getattr(nominal, "aperture", None)
         if diameter is None:
@@ -416,3 +419,16 @@ def _surface_yaml(surface, info, comments) -> str:
             comments[0], comments[1]]
     body = dump_yaml({"surface": spec_of(surface)}, sort_keys=False, default_flow_style=None)
     return "".join(f"# {h}\n" for h in head) + body
+
+
+def applied_aperture(cloud) -> float | None:
+    """The outer diameter (mm) of the last circular or annular `aperture` step in the cloud's
+    provenance that gave one: the clear aperture the recipe kept, which the correction must cover
+    (the surface's own aperture may be larger than the measured zone)."""
+    for entry in reversed(cloud.provenance):
+        if entry.get("id") == "aperture":
+            p = entry.get("params") or {}
+            if p.get("shape", "circle") in ("circle", "annulus") and p.get("diameter"):
+                return float(p["diameter"])
+            return None
+    return None
