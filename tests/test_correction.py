@@ -345,3 +345,27 @@ def test_fixed_point_csv_roundtrip(tmp_path):
     w = np.random.default_rng(0).normal(0, 1e-3, 1000)
     rows = [bytes(r[r != 0]).decode() for r in fixed_point_bytes(w, 12)]
     assert np.max(np.abs(np.array([float(s) for s in rows]) - w)) <= 5e-13
+
+
+def test_example_star_pattern_gets_a_correction_a_cam_can_take():
+    """The example's CMM star (36 spokes, gaps of ~110 mm at the rim) after its recipe: the clear
+    aperture is the recipe's `aperture` step (1290 mm, not the surface's 1300), the spline covers the
+    rim between spokes, and the turning program is a polynomial with no coefficient a CAM must print
+    to 1e-110 (even asphere at most to A20, else Forbes Q-con), within 1 nm RMS."""
+    import yaml
+
+    import pointspro.core as pp
+
+    from .conftest import EXAMPLE
+
+    recipe = yaml.safe_load((EXAMPLE / "recipe.yaml").read_text(encoding="utf-8"))
+    recipe["steps"].append({"correction": {}})
+    res = pp.run(recipe, EXAMPLE / "asphere_cmm.csv")
+    rep = res.steps[-1].report
+    assert rep["diameter_mm"] == 1290.0 and rep["coverage"] >= 0.99
+    cs = rep["corrected_surface"]
+    assert cs["fit_rms_nm"] <= 1.0
+    spec = cs["surface"]
+    if spec["type"] == "even_asphere":
+        assert max(int(k) for k in spec.get("A", {4: 0})) <= 20
+    assert rep["predicted_rms_um"] < 0.2 * rep["error_rms_um"]
