@@ -9,7 +9,7 @@ _STEPS = ((1e3, "m"), (1.0, "mm"), (1e-3, "µm"), (1e-6, "nm"))  # sub-nm stays 
 
 def length_unit(v_mm: float) -> tuple[float, str]:
     """(scale, unit) so that v_mm / scale lies in [1, 1000) — below 1 nm still nm, and mm up to 10 m
-    (a 1300 mm mirror is "1.3e+03 mm" in a drawing's unit)."""
+    (a 1300 mm mirror is "1300 mm", in a drawing's unit)."""
     a = abs(v_mm)
     if not math.isfinite(a) or a == 0:
         return 1.0, "mm"
@@ -27,7 +27,10 @@ def format_length(v_mm: float, digits: int = 3) -> str:
     if not math.isfinite(v):
         return f"{v} mm"
     scale, unit = length_unit(v)
-    return f"{v / scale:.{digits}g} {unit}"
+    w = v / scale
+    if abs(w) >= 10 ** digits:  # 1300 mm reads "1300 mm" (a drawing's figure), never "1.3e+03 mm"
+        return f"{w:.0f} {unit}"
+    return f"{w:.{digits}g} {unit}"
 
 
 # --- units stated in files (headers like ``x [µm]``) -----------------------------------------------

@@ -10,7 +10,7 @@ from pointspro.core.units import format_length
 
 
 @pytest.mark.parametrize("mm, text", [(4.39e-5, "43.9 nm"), (1.3634e-3, "1.36 µm"), (0.0, "0 mm"),
-                                      (2.5, "2.5 mm"), (1300.0, "1.3e+03 mm"), (15000.0, "15 m"),
+                                      (2.5, "2.5 mm"), (1300.0, "1300 mm"), (1292.7, "1293 mm"), (15000.0, "15 m"),
                                       (-7.2e-7, "-0.72 nm"), (3e-10, "0.0003 nm")])
 def test_format_length(mm, text):
     assert format_length(mm) == text
