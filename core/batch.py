@@ -87,7 +87,7 @@ def write_artifact(folder: Path, name: str, art) -> None:
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
                   timings: dict | None = None, fork_csv: bool = False, cloud_format: str = "csv",
-                  overrides=()) -> dict:
+                  overrides=(), paths=None) -> dict:
     """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
     artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
     and the window's File → Export report. ``figures``: "all", "summary" (form_error.png only) or
@@ -96,7 +96,8 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     written by a forked process while the figures are drawn (core/io/background.py) — only the
     batch's own single-threaded process asks for it. ``cloud_format``: csv, ply (binary float64)
     or npz — the cloud is ``cloud.<format>``, named in report.json's ``cloud_file``. ``overrides``:
-    the ``--set`` texts the recipe was run with, listed in report.json's ``overrides``."""
+    the ``--set`` texts the recipe was run with, listed in report.json's ``overrides``. ``paths``: a
+    ``cluster.PathMap`` that names a worker's private files as the client does, in the report."""
     from .report import SUMMARY_FIGURE, skipped_figures
 
     if cloud_format not in CLOUD_FORMATS:
@@ -114,6 +115,8 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
 
     t0 = time.perf_counter()
     report = build_report(input_path, recipe, result, figures, skipped)
+    if paths is not None:
+        report = paths.deep(report)
     timings["report (summary)"] = time.perf_counter() - t0
     report["cloud_file"] = cloud_name
     if overrides:
@@ -154,8 +157,11 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                   sink: Callable[[float, str], None] | None = None, token: CancelToken | None = None,
                   surface=None, log: logging.Logger | None = None,
                   allowed_dirs=None, figures: str = "all", fork_csv: bool = False,
-                  cloud_format: str = "csv", overrides=()) -> InputOutcome:
-    """Read, run, write one input. Any exception but Cancelled → a failed outcome for this input
+                  cloud_format: str = "csv", overrides=(), shown: str | None = None,
+                  paths=None) -> InputOutcome:
+    """Read, run, write one input (``path``; ``shown``: its name in the report and the messages,
+    as the user typed it, when ``path`` is where a worker reads it; ``paths``: see write_outputs).
+    Any exception but Cancelled → a failed outcome for this input
     alone (one line naming the input and the step or stage; the traceback kept for summary.json and
     --debug); Cancelled propagates. The steps' log records carry the input's name
     (``record.input``, see ``InputLogFilter``)."""
@@ -163,13 +169,14 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
     try:
         return _process_input(path, recipe, out_dir, stem, sink=sink, token=token, surface=surface,
                               log=log, allowed_dirs=allowed_dirs, figures=figures, fork_csv=fork_csv,
-                              cloud_format=cloud_format, overrides=overrides)
+                              cloud_format=cloud_format, overrides=overrides,
+                              shown=str(path) if shown is None else str(shown), paths=paths)
     finally:
         CURRENT_INPUT.reset(token_input)
 
 
 def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, allowed_dirs, figures,
-                   fork_csv, cloud_format, overrides) -> InputOutcome:
+                   fork_csv, cloud_format, overrides, shown, paths) -> InputOutcome:
     t0 = time.perf_counter()
     stage = "reading"
     try:
@@ -180,20 +187,23 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
         result = run_pipeline(cloud, recipe, progress=progress.sub(0.05, 0.9), surface=surface,
                               log=log, allowed_dirs=allowed_dirs)
         stage = "writing the outputs"
-        report = write_outputs(out_dir / stem, str(path), recipe, result, figures=figures,
-                               fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides)
+        report = write_outputs(out_dir / stem, shown, recipe, result, figures=figures,
+                               fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides,
+                               paths=paths)
         progress.update(1.0, "written")
-        return InputOutcome(str(path), True, None, time.perf_counter() - t0, str(out_dir / stem),
+        return InputOutcome(shown, True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"])
     except Cancelled:
         raise
     except Exception as e:  # noqa: BLE001 — isolation is the point: one bug must not sink the night
-        return failed_outcome(str(path), stage, e, time.perf_counter() - t0)
+        return failed_outcome(shown, stage, e, time.perf_counter() - t0, paths)
 
 
-def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0) -> InputOutcome:
+def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0,
+                   paths=None) -> InputOutcome:
     """The outcome of an input that failed with ``e`` while ``stage``: a PointsProError's own line, or
-    "internal error … — please report" for a bug; prefixed with the input; traceback kept."""
+    "internal error … — please report" for a bug; prefixed with the input; traceback kept.
+    ``paths``: a ``cluster.PathMap`` naming a worker's files as the client does."""
     import traceback
 
     from .pipeline import internal_message
@@ -205,6 +215,8 @@ def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0
         msg = f"{stage}:{where} {e.strerror or e}"
     else:
         msg = internal_message(stage, e)
+    if paths is not None:
+        msg = paths.text(msg)
     if not msg.startswith(path):
         msg = f"{path}: {msg}"
     return InputOutcome(path, False, msg, seconds, traceback="".join(traceback.format_exception(e)))

@@ -3,7 +3,8 @@
     pointspro [FILE…]                                   open the window with the files
     pointspro [--run] --screenshot PNG [FILE…]          render the window to PNG and exit (--run:
                                                         run the recipe first)
-    pointspro --batch RECIPE INPUT… --out DIR [--workers N] [--scheduler ADDRESS] [--resume]
+    pointspro --batch RECIPE INPUT… --out DIR [--workers N] [--scheduler ADDRESS [--ship]]
+                                        [--check-only] [--resume]
                                         [--allow-path DIR]… [--set STEP.KEY=VALUE]…
                                         [--cloud-format csv|ply|npz] [-v|-vv] [--log-file FILE]
     pointspro info FILE [--json]                        what a measurement file holds
@@ -45,6 +46,7 @@ examples:
   pointspro --batch recipe.yaml part.csv --out results --set knn_denoise.window=10 \\
             --set 5.diameter=1290 --set surface.k=-0.98 --cloud-format ply -v
   pointspro --batch recipe.yaml scans/*.csv --out results --resume --log-file run.log
+  pointspro --batch recipe.yaml scans/*.csv --out results --scheduler tcp://HOST:8786 --check-only
   pointspro steps knn_denoise
 
 inputs (chosen by content, not by extension; docs/formats.md):
@@ -77,6 +79,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="inputs processed in parallel (default: the number of cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster (tcp://host:8786), "
                    "or `local` for a LocalCluster on this machine")
+    p.add_argument("--ship", action="store_true", help="with --scheduler, for workers that see no "
+                   "shared folder: send each input's bytes to the worker (at most 2 GiB each) and "
+                   "write the outputs it sends back here")
+    p.add_argument("--check-only", action="store_true", help="with --batch: only check, on every "
+                   "worker of --scheduler (else this machine), the PointsPro version, the recipe's "
+                   "steps and their versions, the inputs readable and --out writable; exit 0 when "
+                   "ready, 2 with one line per problem")
     p.add_argument("--resume", action="store_true", help="skip inputs whose outputs are complete "
                    "(same input, same recipe and --set, same --cloud-format)")
     p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
@@ -131,9 +140,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.batch:
         return _guard(lambda: _with_logging(args, lambda: cmd_batch(args)), args.debug)
     if (args.out or args.workers is not None or args.scheduler or args.resume or args.allow_path
-            or args.overrides or args.cloud_format):
-        print("pointspro: --out, --workers, --scheduler, --resume, --allow-path, --set and "
-              "--cloud-format go with --batch (see pointspro --help)", file=sys.stderr)
+            or args.overrides or args.cloud_format or args.ship or args.check_only):
+        print("pointspro: --out, --workers, --scheduler, --ship, --check-only, --resume, --allow-path, "
+              "--set and --cloud-format go with --batch (see pointspro --help)", file=sys.stderr)
         return EXIT_USAGE
     return _guard(lambda: _with_logging(args, lambda: cmd_window(args)), args.debug)
 
@@ -250,19 +259,26 @@ def cmd_batch(args) -> int:
     t0 = time.perf_counter()
     workers = args.workers or _cores()
 
-    results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "csv")
-    # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
-    runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed)
-    progress = None
-    if not args.quiet and runner.__name__ != "run_sequential":  # workers: one overall bar
-        from .terminal import BatchProgress
-
-        progress = BatchProgress(len(jobs))
+    session = _cluster_session(args, recipe_path, recipe, inputs, out, workers)  # --scheduler
+    if args.check_only:
+        return _check_only(args, recipe, inputs, out, session)
     try:
-        interrupted = _drain(runner, _reporter(results, args, progress), out)
+        results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "csv")
+        # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
+        runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed, session)
+        progress = None
+        if not args.quiet and runner.__name__ != "run_sequential":  # workers: one overall bar
+            from .terminal import BatchProgress
+
+            progress = BatchProgress(len(jobs))
+        try:
+            interrupted = _drain(runner, _reporter(results, args, progress), out)
+        finally:
+            if progress is not None:
+                progress.close()
     finally:
-        if progress is not None:
-            progress.close()
+        if session is not None:
+            session.close()
 
     entries = [results.get(str(p)) or entry(str(p), "not run") for p in inputs]
     write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
@@ -283,6 +299,64 @@ def _check_batch_args(args) -> None:
         raise RecipeError("--batch needs --out DIR")
     if args.workers is not None and args.workers < 1:
         raise RecipeError("--workers must be ≥ 1")
+    if args.ship and not args.scheduler:
+        raise RecipeError("--ship goes with --scheduler ADDRESS (it sends the inputs to a cluster's "
+                          "workers)")
+
+
+def _cluster_session(args, recipe_path: Path, recipe, inputs: list[Path], out: Path, workers: int):
+    """With --scheduler: the connection to the cluster, after the pre-flight on every worker
+    (core/cluster.py) found nothing wrong — else one line per problem naming the worker, exit 2,
+    before any input runs. The recipe bundle is kept on the session for the runner."""
+    if not args.scheduler:
+        return None
+    from . import cluster
+    from .errors import PointsProError
+    from .executors import DaskSession
+
+    bundle = cluster.recipe_bundle(recipe_path, recipe, tuple(args.overrides))
+    if args.ship:
+        cluster.check_ship_sizes(inputs)
+    session = DaskSession(args.scheduler, workers)
+    try:
+        session.bundle = bundle
+        problems = cluster.check_workers(session.client,
+                                         cluster.expectations(recipe, bundle, inputs, out, args.ship))
+        if problems:
+            for line in problems[:-1]:
+                print(f"pointspro: {line}", file=sys.stderr)
+            raise PointsProError(f"{problems[-1]}" + (f" ({len(problems)} problems on the cluster; "
+                                                       "nothing was run)" if len(problems) > 1 else
+                                                       " (nothing was run)"))
+    except BaseException:
+        session.close()
+        raise
+    return session
+
+
+def _check_only(args, recipe, inputs: list[Path], out: Path, session) -> int:
+    """--check-only: the pre-flight alone (on the cluster it already ran in _cluster_session; here
+    on this machine). Exit 0 when ready, 2 with one line per problem."""
+    from . import cluster
+    from .errors import PointsProError
+
+    if session is not None:
+        n = len(session.client.scheduler_info().get("workers", {}))
+        session.close()
+        where = f"{n} worker(s) at {args.scheduler}"
+    else:
+        problems = cluster.preflight(cluster.expectations(recipe, {}, inputs, out, False))
+        for line in problems[:-1]:
+            print(f"pointspro: this machine: {line}", file=sys.stderr)
+        if problems:
+            raise PointsProError(f"this machine: {problems[-1]}")
+        where = "this machine"
+    from . import __version__
+
+    print(f"pointspro: ready on {where}: PointsPro {__version__}, the recipe's {len(recipe.steps)} "
+          f"step(s) installed alike, {len(inputs)} input(s) readable"
+          + (" here (--ship)" if args.ship else f", {out} writable"))
+    return EXIT_OK
 
 
 def _allowed_dirs(recipe_path: Path, inputs: list[Path], extra: list[str]) -> list[Path]:
@@ -392,7 +466,7 @@ def _reporter(results: dict, args, progress=None):
 
 
 def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, workers: int,
-                   allowed: list[Path]):
+                   allowed: list[Path], session=None):
     """The executor: Dask with --scheduler, a process pool for several jobs and workers, else this
     process (with a progress bar unless --quiet)."""
     from . import executors
@@ -401,9 +475,9 @@ def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, wo
     # the recipe file it reads) and the level of the log records they send back
     options = {"cloud_format": args.cloud_format or "csv", "overrides": list(args.overrides),
                "log_level": logging.getLogger("pointspro").getEffectiveLevel()}
-    if args.scheduler:
-        return executors.run_dask(recipe_path, jobs, out, workers, args.scheduler, allowed, args.figures,
-                                  options)
+    if session is not None:  # --scheduler: the recipe travels as data, the paths as absolute ones
+        return executors.run_dask(session, session.bundle, jobs, out, allowed, args.figures, options,
+                                  ship=args.ship)
     if min(workers, len(jobs)) > 1:
         return executors.run_processes(recipe_path, jobs, out, min(workers, len(jobs)), allowed,
                                        args.figures, options)

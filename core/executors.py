@@ -1,9 +1,10 @@
 """Ways to run a batch's inputs: in this process, in a pool of processes, on a Dask cluster.
 
 Each is a generator of `InputOutcome`s in completion order; closing it (the caller does on Ctrl-C or
-SIGTERM) stops its workers at once — the caller then removes the temporary folders they leave, so
-every output folder is complete or absent. Every input is processed by the same function
-(`batch.process_input`) from the same recipe file, so all three give the same results.
+SIGTERM) stops its workers — the caller then removes the temporary folders they leave, so every
+output folder is complete or absent. Every input is processed by the same function
+(`batch.process_input`) with the same recipe, so all three give the same results (on Dask the
+recipe travels as data: core/cluster.py).
 """
 from __future__ import annotations
 
@@ -95,65 +96,160 @@ def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
         pool.join()
 
 
-def run_dask(recipe_path: Path, jobs, out_dir: Path, workers: int, address: str,
-             allowed_dirs=None, figures: str = "all", options: dict | None = None
+class DaskSession:
+    """A connection to a Dask cluster (``address``) or a LocalCluster of ``workers`` processes
+    ("local"). A scheduler that does not answer is one line naming it within
+    ``cluster.CONNECT_TIMEOUT`` seconds. The scheduler's and nannies' INFO chatter (clients, workers
+    coming and going) is not the batch's progress: shown with -vv (DEBUG) only."""
+
+    def __init__(self, address: str, workers: int = 1):
+        import logging
+        import time
+
+        # lazy: only for --scheduler; it sets its loggers' levels as it is first imported, so
+        # before ours are set below
+        from distributed import Client, LocalCluster
+
+        from .cluster import CONNECT_TIMEOUT, probe_scheduler
+        from .errors import PointsProError
+
+        self.address, self.cluster, self.client = address, None, None
+        self._dlog = logging.getLogger("distributed")
+        self._saved_level = self._dlog.level
+        if logging.getLogger("pointspro").getEffectiveLevel() > logging.DEBUG:
+            self._dlog.setLevel(logging.WARNING)
+        try:
+            if address == "local":
+                import dask
+
+                # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 for its workers, which stops glibc
+                # from raising its mmap threshold: every large numpy temporary is then a fresh mmap
+                # with page faults — 30 % slower here than the process pool. Keep its
+                # single-threaded BLAS settings.
+                env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+                env.pop("MALLOC_TRIM_THRESHOLD_", None)
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+                    self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                dashboard_address=None, host="127.0.0.1")
+                self.client = Client(self.cluster)
+            else:
+                t0 = time.monotonic()
+                probe_scheduler(address, CONNECT_TIMEOUT)  # nothing listening: said at once
+                left = max(CONNECT_TIMEOUT - (time.monotonic() - t0), 1.0)
+                try:
+                    self.client = Client(address, timeout=f"{left:.0f}s")
+                except (OSError, TimeoutError) as e:
+                    raise PointsProError(f"--scheduler {address}: no Dask scheduler answers there "
+                                         f"within {CONNECT_TIMEOUT:.0f} s ({e})") from None
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Disconnect (and stop a LocalCluster); may be called again."""
+        client, cluster, self.client, self.cluster = self.client, self.cluster, None, None
+        try:
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+        finally:
+            self._dlog.setLevel(self._saved_level)
+
+
+def run_dask(session: DaskSession, bundle: dict, jobs, out_dir: Path, allowed_dirs=None,
+             figures: str = "all", options: dict | None = None, ship: bool = False
              ) -> Iterator[InputOutcome]:
-    """On a Dask distributed cluster (`address`), or a LocalCluster of `workers` processes ("local").
+    """The inputs on a Dask cluster (``session``), one task each, largest first; outcomes as they
+    complete. The recipe travels as data (``bundle``: ``cluster.recipe_bundle``), the inputs and
+    ``out_dir`` as absolute paths (the workers must see them: a shared file system), or with
+    ``ship`` the inputs' bytes go to the workers and their output folders come back to be written
+    here. Closing the generator (Ctrl-C, SIGTERM) stops the inputs at their next progress update,
+    cancels the rest and closes the session; every output folder is then complete or absent."""
+    import os
+    import uuid
 
-    The workers must see the same files (a shared file system for a real cluster) and have pointspro
-    installed. Each input is one task; results come back as they complete.
-    """
-    import logging
+    from distributed import Event, as_completed, wait
 
-    from distributed import Client, LocalCluster, as_completed  # lazy: only for --scheduler
+    from . import cluster
 
-    # the scheduler's and nannies' INFO chatter (clients, workers coming and going) is not the
-    # batch's progress: shown with -vv (DEBUG) only
-    dlog = logging.getLogger("distributed")
-    saved_level = dlog.level
-    if logging.getLogger("pointspro").getEffectiveLevel() > logging.DEBUG:
-        dlog.setLevel(logging.WARNING)
-    try:
-        yield from _run_dask(recipe_path, jobs, out_dir, workers, address, allowed_dirs, figures,
-                             options, Client, LocalCluster, as_completed)
-    finally:
-        dlog.setLevel(saved_level)
+    client = session.client
+    run_id = uuid.uuid4().hex[:12]
+    out_abs = os.path.abspath(out_dir)
+    allowed = _strings(allowed_dirs)
+    jobs = largest_first(jobs)
+    event = Event(f"pointspro-cancel-{run_id}", client=client)
+    bundle_f = client.scatter([bundle], broadcast=True, hash=False)[0]  # once, not once per input
+    futures: dict = {}  # future → (path as typed, stem)
+    pending = list(enumerate(jobs))
+    finished = False
 
-
-def _run_dask(recipe_path, jobs, out_dir, workers, address, allowed_dirs, figures, options,
-              Client, LocalCluster, as_completed):
-    cluster = None
-    if address == "local":
-        import dask
-
-        # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 for its workers, which stops glibc from
-        # raising its mmap threshold: every large numpy temporary is then a fresh mmap with page
-        # faults — 30 % slower here than the process pool. Keep its single-threaded BLAS settings.
-        env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-        env.pop("MALLOC_TRIM_THRESHOLD_", None)
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, host="127.0.0.1")
-        client = Client(cluster)
-    else:
-        client = Client(address, timeout="30s")
-    futures = []
-    try:
-        allowed = _strings(allowed_dirs)
-        jobs = largest_first(jobs)
-        # priority: Dask runs the largest inputs first too (higher priority first)
-        futures = [client.submit(process_job, str(recipe_path), str(p), str(out_dir), s, allowed,
-                                 figures, options, pure=False, priority=len(jobs) - k,
-                                 key=f"pointspro-{s}-{k}") for k, (p, s) in enumerate(jobs)]
-        path_of = {f.key: str(p) for f, (p, _) in zip(futures, jobs)}
-        for fut in as_completed(futures):
+    def submit(k, path, stem):
+        shown = str(path)
+        kw = dict(pure=False, priority=len(jobs) - k, key=f"pointspro-{run_id}-{k}-{stem}")
+        if ship:
             try:
-                yield fut.result()
+                data = Path(path).read_bytes()
+            except OSError as e:
+                return failed_outcome(shown, "reading", e)
+            fut = client.submit(cluster.cluster_job, bundle_f, Path(path).name, shown, out_abs, stem,
+                                allowed, figures, options, data, event.name, **kw)
+        else:
+            fut = client.submit(cluster.cluster_job, bundle_f, os.path.abspath(path), shown, out_abs, stem,
+                                allowed, figures, options, None, event.name, **kw)
+        futures[fut] = (path, stem)
+        return fut
+
+    try:
+        # with --ship at most two inputs per worker are in flight: the client reads each input's
+        # bytes only when it is sent, so its memory holds a few inputs, not the night's
+        window = max(2, 2 * len(client.scheduler_info().get("workers", {}))) if ship else len(jobs)
+        ac = as_completed()
+        early = []
+        while pending and ac.count() < window:
+            k, (p, s) = pending.pop(0)
+            got = submit(k, p, s)
+            if isinstance(got, InputOutcome):  # --ship: the client could not read it
+                early.append(got)
+            else:
+                ac.add(got)
+        yield from early
+        for fut in ac:
+            path, stem = futures.pop(fut)
+            try:
+                res = fut.result()
             except Exception as e:  # noqa: BLE001 — the task itself died (KilledWorker, lost data…)
-                yield failed_outcome(path_of[fut.key], "on the cluster", e)
+                oc = failed_outcome(str(path), "on the cluster", e)
+            else:
+                oc, files = res if ship else (res, None)
+                if ship and oc.ok:
+                    try:
+                        cluster.write_shipped(Path(out_dir), stem, files)
+                    except OSError as e:
+                        oc = failed_outcome(str(path), "writing the outputs sent back", e)
+                if oc.ok:
+                    oc.out_dir = str(Path(out_dir) / stem)
+            fut.release()
+            yield oc
+            while pending and ac.count() < window:
+                k, (p, s) = pending.pop(0)
+                got = submit(k, p, s)
+                if isinstance(got, InputOutcome):
+                    yield got
+                else:
+                    ac.add(got)
+        finished = True
     finally:
-        if futures:
-            client.cancel(futures, force=True)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        try:
+            if not finished and futures:
+                event.set()  # the running inputs stop at their next progress update, the queued at once
+                try:
+                    wait(list(futures), timeout=15)
+                except Exception:  # noqa: BLE001 — a timeout or a lost worker: cancel below anyway
+                    pass
+            if futures:
+                client.cancel(list(futures), force=True)
+            if not ship:  # what a worker lost in the middle of an input left (it was run again)
+                cluster.cleanup_stems(Path(out_abs), [s for _, s in jobs])
+        finally:
+            session.close()
