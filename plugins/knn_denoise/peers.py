@@ -27,3 +27,14 @@ def statistical_open3d(x, y, d, k: int, std_ratio: float) -> np.ndarray:
     mask = np.ones(len(x), dtype=bool)
     mask[np.asarray(kept, dtype=np.int64)] = False
     return mask
+
+
+def hampel(x, y, d, k: int = 25, n_sigma: float = 8.0) -> np.ndarray:
+    """Boolean mask of the points a Hampel filter flags: |D − median of its k nearest neighbours'
+    D| > n_sigma · 1.4826 · MAD of those neighbours' D (the point itself not among them)."""
+    pts = np.column_stack([x, y])
+    _, idx = cKDTree(pts).query(pts, k=k + 1, workers=-1)
+    nb = np.asarray(d)[idx[:, 1:]]
+    med = np.median(nb, axis=1)
+    mad = 1.4826 * np.median(np.abs(nb - med[:, None]), axis=1)
+    return np.abs(np.asarray(d) - med) > n_sigma * mad
