@@ -383,14 +383,14 @@ def _check_recipe_files(recipe, allowed: list[Path]) -> None:
     spec = recipe.surface_spec or {}
     if spec.get("type") == "mesh" and isinstance(spec.get("path"), str):
         named.append(("surface: key 'path'", spec["path"]))
-    named += [(f"inputs: key '{k}'", str(v)) for k, v in recipe.inputs.items()]
     for i, rs in enumerate(recipe.steps, 1):
         loc = f"line {rs.line}: " if rs.line else ""
         named += [(f"{loc}step {i} '{rs.id}': parameter '{k}'", v)
                   for k, v in file_parameters(rs.params).items()]
-    for what, value in named:
+    resolved = [(f"inputs: key '{k}'", str(v)) for k, v in recipe.inputs.items()]  # already joined
+    for what, value in [*named, *resolved]:
         p = Path(value)
-        p = p if p.is_absolute() or base is None else base / p
+        p = p if p.is_absolute() or base is None or (what, value) in resolved else base / p
         why = outside_allowed(p, allowed)
         if why:
             raise RecipeError(f"{where}, {what}: {why}" if what.startswith("line") else

@@ -413,15 +413,24 @@ def probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
                              "one with `dask scheduler` or check the address") from None
 
 
-def check_ship_sizes(inputs, limit: int = SHIP_LIMIT) -> None:
+def check_ship_sizes(inputs, limit: int | None = None) -> None:
     """--ship: every input at most ``limit`` bytes (one line naming the first larger one). A missing
     input is not refused here: it fails alone, as in a local run."""
+    limit = SHIP_LIMIT if limit is None else limit
     for p in inputs:
         try:
             size = os.stat(p).st_size
         except OSError:
             continue
         if size > limit:
-            raise PointsProError(f"{p}: {size / 1024 ** 3:.2f} GiB is more than --ship sends "
-                                 f"({limit / 1024 ** 3:.0f} GiB per input); put the inputs on a folder "
-                                 "the workers share and run without --ship")
+            raise PointsProError(f"{p}: {_size(size)} is more than --ship sends ({_size(limit)} per "
+                                 "input); put the inputs in a folder the workers share and run "
+                                 "without --ship")
+
+
+def _size(n: int) -> str:
+    for f, unit in ((1024 ** 3, "GiB"), (1024 ** 2, "MiB"), (1024, "KiB")):
+        if n >= f:
+            return f"{n / f:.3g} {unit}"
+    return f"{n} bytes"
+
