@@ -199,3 +199,51 @@ def omega_map(x, y, omega_mm, removed_mask, title="ω after denoising"):
                 label=f"removed ({int((~keep).sum())})")
         ax.legend(fontsize=8, loc="upper right")
     return fig
+
+
+def _length_axis(values_mm):
+    """(scale, unit) to show lengths of this size: nm below 1 µm, else µm."""
+    v = np.asarray(values_mm, dtype=np.float64)
+    big = float(np.max(np.abs(v))) if v.size else 0.0
+    return (1e6, "nm") if big < 1e-3 else (1e3, "µm")
+
+
+def stylus_profile_figure(items, title="Form error along the profile"):
+    """Residual against the position along the profile, and the slope error (µrad); ``items`` are
+    dicts with label, u (mm, part frame), residual (mm), slope (rad)."""
+    fig = _figure(11, 4.2)
+    ax1, ax2 = fig.subplots(1, 2)
+    scale, unit = _length_axis(np.concatenate([np.asarray(it["residual"]) for it in items]))
+    for it in items:
+        o = np.argsort(it["u"])
+        u = np.asarray(it["u"])[o]
+        r = np.asarray(it["residual"])[o]
+        rms = np.sqrt(np.mean((r - r.mean()) ** 2)) * scale
+        ax1.plot(u, r * scale, lw=0.8, label=f"{it['label']}: PV {np.ptp(r) * scale:.4g}, RMS {rms:.4g} {unit}")
+        ax2.plot(u, np.asarray(it["slope"])[o] * 1e6, lw=0.8, label=it["label"])
+    ax1.set_xlabel("position along the profile, part frame (mm)")
+    ax1.set_ylabel(f"form error ({unit})")
+    ax1.axhline(0, color="k", lw=0.5)
+    ax1.legend(fontsize=7)
+    ax1.set_title(title, fontsize=10)
+    ax2.set_xlabel("position along the profile, part frame (mm)")
+    ax2.set_ylabel("slope error (µrad)")
+    ax2.axhline(0, color="k", lw=0.5)
+    ax2.legend(fontsize=7)
+    ax2.set_title("slope error (local line fit)", fontsize=10)
+    return fig
+
+
+def stylus_psd_figure(items):
+    """1-D PSD of each profile's residual (nm²·mm); ``items``: dicts with label, f (1/mm), psd (mm³)."""
+    fig = _figure()
+    ax = fig.add_subplot()
+    for it in items:
+        f, p = np.asarray(it["f"]), np.asarray(it["psd"])
+        ok = (f > 0) & (p > 0)
+        ax.loglog(f[ok], p[ok] * 1e12, lw=0.8, label=it["label"])
+    ax.set_xlabel("spatial frequency (1/mm)")
+    ax.set_ylabel("PSD (nm²·mm)")
+    ax.legend(fontsize=8)
+    ax.set_title("1-D PSD of the form error along the profile", fontsize=10)
+    return fig

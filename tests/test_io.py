@@ -56,9 +56,8 @@ def test_headerless_extra_columns_and_index_column(tmp_path):
     ("x,y,z\n1,2,3\n# c\n4,5,inf\n", r"m.csv, line 4, column 3 \(z\): inf is not a finite number"),
     ("a,b,c\n1,2,3\n", r"m.csv, line 1: no x/y/z column in the header \(columns: a, b, c\)"),
     ("x,y,q\n1,2,3\n", r"m.csv, line 1: no z column"),
-    ("1,2\n3,4\n", r"m.csv, line 1: 2 columns \(x, z\) — a line profile x, z; profiles are not yet "
-                   r"supported as input"),
-    ("x,z\n1,2\n3,4\n", r"m.csv, line 1: 2 columns \(x, z\) — a line profile"),
+    ("1,2\n1,4\n", r"m.csv, line 2: x = 1 mm repeats line 1's — a profile holds one height"),  # x, z
+    ("x,z\n1,2\n", r"m.csv: a profile of 1 point"),
     ("7\n8\n", r"m.csv, line 1: 1 column\(s\); need at least x, y, z"),
     ("x [furlong],y,z\n1,2,3\n", r"unknown unit \[furlong\] for x"),
     ("x,y,z,x\n1,2,3,4\n", r"duplicate column name"),

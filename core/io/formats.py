@@ -11,8 +11,8 @@ read (see docs/formats.md for units and the pixel convention):
                  by content (core.io.instruments); .x3p through x3pio (and our own reader for
                  Sensofar's namespace-less main.xml); text height matrices with a Gwyddion / SPIP /
                  Wyko / Nova header (core.io.matrix)
-  A text file is told apart by content: x y z columns, a two-column x z profile (refused: profiles
-  are not yet an input), or a height matrix with a header. A file whose extension lies about its
+  A text file is told apart by content: x y z columns, a stylus profile (x, z columns: core.io.text,
+  core.profiles), or a height matrix with a header. A file whose extension lies about its
   content is read for what it is; one that matches no reader is refused naming what it looks like.
 write: .csv (all channels, `index` included, shortest round-trip decimal, each column's unit in the
        header: ``x [mm],y [mm],z [mm],index,residual [mm]``), .ply (binary, float64)
@@ -24,6 +24,7 @@ Reader options (``read_cloud(path, pixel_size_um=…, …)``, a recipe's ``input
   invalid        drop (default) or error: x y z rows with NaN/inf; the dropped count is in
                  ``cloud.meta["invalid_dropped"]`` (instrument maps always drop invalid pixels and
                  count them the same way)
+  profile_angle_deg  the azimuth of a stylus profile (x, z columns; or an x, y, z line): core.profiles
 """
 from __future__ import annotations
 
@@ -63,8 +64,9 @@ class ReaderOptions:
     wavelength_nm: float | None = None
     height_unit: str | None = None
     invalid: str = "drop"
+    profile_angle_deg: float | None = None
 
-    KEYS = ("pixel_size_um", "wavelength_nm", "height_unit", "invalid")
+    KEYS = ("pixel_size_um", "wavelength_nm", "height_unit", "invalid", "profile_angle_deg")
 
     @classmethod
     def parse(cls, data: Mapping[str, Any] | None) -> "ReaderOptions":
@@ -97,7 +99,12 @@ class ReaderOptions:
         inv = data.get("invalid", "drop")
         if not isinstance(inv, str) or inv not in INVALID_POLICIES:
             raise ValueError(f"key 'invalid': drop or error (got {inv!r})")
-        return cls(px, wl, hu, inv)
+        pa = data.get("profile_angle_deg")
+        if pa is not None:
+            if (not isinstance(pa, (int, float)) or isinstance(pa, bool) or not np.isfinite(float(pa))):
+                raise ValueError(f"key 'profile_angle_deg': the profile's azimuth in degrees (got {pa!r})")
+            pa = float(pa)
+        return cls(px, wl, hu, inv, pa)
 
     def to_dict(self) -> dict:
         """The options that differ from the defaults, as a recipe would write them."""
@@ -111,6 +118,8 @@ class ReaderOptions:
             d["height_unit"] = self.height_unit
         if self.invalid != "drop":
             d["invalid"] = self.invalid
+        if self.profile_angle_deg is not None:
+            d["profile_angle_deg"] = self.profile_angle_deg
         return d
 
 
@@ -257,7 +266,7 @@ def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOpti
     from .text import read_text
 
     try:
-        return read_text(path, invalid=opts.invalid)
+        return read_text(path, invalid=opts.invalid, profile_angle_deg=opts.profile_angle_deg)
     except InputError as e:
         what = foreign_kind(head)
         if what:

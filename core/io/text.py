@@ -10,8 +10,14 @@ counts and flags (index, row, col …) are never converted; other units (``t [s]
 ``meta["channel_units"]`` states each channel's unit as the file wrote it. Columns beyond x, y, z
 become channels named from the header (or ``col4``, ``col5``... without one). Rows with a NaN/inf
 value are dropped and counted in ``meta["invalid_dropped"]`` (reader option ``invalid: drop``, the
-default of read_cloud) or refused naming line and column (``invalid: error``). Two columns are a
-line profile (x, z): refused for now, by name. Height matrices with a header are core.io.matrix's.
+default of read_cloud) or refused naming line and column (``invalid: error``). A stylus profile —
+two columns without a header, or a header with x and z but no y — reads as points on the vertical
+plane at azimuth θ, x = s·cos θ, y = s·sin θ (s the file's x), with the channel ``angle`` = θ (the
+reader option ``profile_angle_deg``, or the file's own ``angle`` column, default 0°); a ``profile``
+column keeps several profiles of one part apart (core.profiles). Each profile's x must be strictly
+monotonic: a repeated x or a scan that turns back is refused naming its line. On an x, y, z file
+``profile_angle_deg`` names the scan direction of a line of points (the ``angle`` channel). Height
+matrices with a header are core.io.matrix's.
 Parsing is numpy's C reader (``np.loadtxt``); only when it fails do we walk the lines in Python to
 name the exact line and column at fault.
 """
@@ -130,13 +136,14 @@ def _check_readable(path: Path, what: str = "file") -> None:
         raise InputError(f"{path}: is a folder, not a {what}")
 
 
-def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: bool = True
-              ) -> tuple[np.ndarray | None, dict, dict]:
+def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: bool = True,
+              profile_angle_deg: float | None = None) -> tuple[np.ndarray | None, dict, dict]:
     """Read a text export. Returns (xyz (N,3) float64 mm, channels, meta); with ``need_xyz=False``
     a header without x, y, z is allowed and every column comes back as a channel (xyz None).
     ``invalid``: "drop" removes rows holding a NaN/inf (``index`` keeps the input row), "error"
     names the first. ``quote=False``: messages name the line and column but quote nothing of the
-    file (a parameter file, which is not the user's measurement)."""
+    file (a parameter file, which is not the user's measurement). ``profile_angle_deg``: the azimuth
+    of a stylus profile (see the module doc)."""
     raw = path.read_bytes()
     text, encoding = _decode(raw)
     # Only the head is split into lines to find the layout; the body goes to the C reader whole.
@@ -160,12 +167,22 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
     meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in ("x", "y", "z")}
     keep = _rows_to_keep(path, lines, lay.first_data, data, names, invalid, quote)
     meta["invalid_dropped"] = 0 if keep is None else int((~keep).sum())
+    rows = np.arange(len(data))
     if keep is not None:
         xyz = xyz[keep]
+        rows = rows[keep]
         cols = {n: a[keep] for n, a in cols.items()}
         if "index" not in cols:
             cols["index"] = np.flatnonzero(keep).astype(np.int64)
     _check_index(path, cols)
+    if "y" not in names:
+        xyz, cols, meta["profile"] = _profile_placed(path, lines, lay.first_data, xyz, cols, rows,
+                                                     profile_angle_deg)
+    elif profile_angle_deg is not None:  # an x, y, z line whose scan direction the user names
+        if "angle" in cols:
+            raise InputError(f"{path}: has its own angle column; leave out the reader option "
+                             "profile_angle_deg")
+        cols["angle"] = np.full(len(xyz), float(profile_angle_deg))
     return xyz, cols, meta
 
 
@@ -325,8 +342,8 @@ def _header_columns(path, lay: _Layout, need_xyz: bool, quote: bool = True):
         raise InputError(f"{path}, line {line + 1}: duplicate column name(s) {sorted(dup)}")
     if not need_xyz:
         return names, lengths, units
-    if lay.ncols == 2 and "y" not in names:
-        _profile(path, line + 1, ", ".join(written))
+    if "y" not in names and "x" in names and "z" in names:
+        return names, lengths, units  # a stylus profile: x along the scan, z
     missing = [a for a in "xyz" if a not in names]
     if missing:
         raise InputError(f"{path}, line {line + 1}: no {'/'.join(missing)} column in the header "
@@ -336,8 +353,8 @@ def _header_columns(path, lay: _Layout, need_xyz: bool, quote: bool = True):
 
 def _plain_columns(path, lay: _Layout):
     """Names without a header: x, y, z, col4, col5…; no units."""
-    if lay.ncols == 2:
-        _profile(path, lay.first_data + 1, "x, z")
+    if lay.ncols == 2:  # a stylus profile: x, z
+        return ["x", "z"], [None, None], [None, None]
     if lay.ncols < 3:
         raise InputError(f"{path}, line {lay.first_data + 1}: {lay.ncols} column(s); need at least "
                          "x, y, z")
@@ -352,8 +369,11 @@ def _xyz_in_mm(path, lay: _Layout, data, names, lengths, units):
     no length are refused; counts, labels and flags (index, row, col …) are never converted; other
     units (``t [s]``) are kept as read and stated in ``meta["channel_units"]``."""
     cols = {n: data[:, j] for j, n in enumerate(names)}
-    xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")])
+    xyz = np.column_stack([cols.pop("x"), cols.pop("y") if "y" in cols else np.zeros(len(data)),
+                           cols.pop("z")])
     for a in "xyz":
+        if a not in names:
+            continue
         j = names.index(a)
         if units[j] is not None:
             if not lengths[j]:
@@ -421,10 +441,48 @@ def _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, trailin
     return data
 
 
-def _profile(path, line: int, columns: str):
-    raise InputError(f"{path}, line {line}: 2 columns ({columns}) — a line profile x, z; profiles are "
-                     "not yet supported as input (PointsPro reads areal data: x y z columns, height "
-                     "matrices, instrument maps)")
+def _profile_placed(path, lines, first_data, xyz, cols, rows, angle_opt):
+    """A stylus profile's points on their vertical plane: x = s·cos θ, y = s·sin θ (s the file's x),
+    θ from the reader option or the file's ``angle`` column (default 0°), the ``angle`` channel set.
+    Each profile (the ``profile`` column, else each angle) must scan x strictly one way."""
+    n = len(xyz)
+    if n < 2:
+        raise InputError(f"{path}: a profile of {n} point{'s' if n != 1 else ''} — a stylus profile "
+                         "needs a scan of several points")
+    if angle_opt is not None and "angle" in cols:
+        raise InputError(f"{path}: has its own angle column; leave out the reader option "
+                         "profile_angle_deg")
+    angle = cols["angle"] if "angle" in cols else np.full(n, 0.0 if angle_opt is None else float(angle_opt))
+    key = cols["profile"] if "profile" in cols else angle
+    s = xyz[:, 0]
+    for v in dict.fromkeys(key.tolist()):
+        g = np.flatnonzero(key == v)
+        d = np.diff(s[g])
+        if not d.size:
+            continue
+        rep = np.flatnonzero(d == 0)
+        turn = np.flatnonzero(np.sign(d[1:]) != np.sign(d[0])) + 1 if d[0] != 0 else np.array([], int)
+        if rep.size and (not turn.size or rep[0] <= turn[0]):
+            i = int(rep[0])
+            ln = _data_line_number(lines.all(), first_data, int(rows[g[i + 1]]))
+            prev = _data_line_number(lines.all(), first_data, int(rows[g[i]]))
+            raise InputError(f"{path}, line {ln}: x = {s[g[i]]:.9g} mm repeats line {prev}'s — a profile "
+                             "holds one height per position; remove one of them")
+        if turn.size:
+            i = int(turn[0])
+            ln = _data_line_number(lines.all(), first_data, int(rows[g[i + 1]]))
+            raise InputError(f"{path}, line {ln}: the scan is not monotonic in x ({s[g[i - 1]]:.9g} → "
+                             f"{s[g[i]]:.9g} → {s[g[i + 1]]:.9g} mm) — a profile is one scan in one "
+                             "direction: sort it, or tell profiles apart with a `profile` column")
+    t = np.radians(angle)
+    out = np.column_stack([s * np.cos(t), s * np.sin(t), xyz[:, 2]])
+    exact = np.isin(angle, (0.0,))  # cos 0 = 1, sin 0 = 0: x as read, bit for bit
+    out[exact, 0], out[exact, 1] = s[exact], 0.0
+    cols = {**cols, "angle": np.asarray(angle, dtype=np.float64)}
+    angles = sorted(set(np.asarray(angle, dtype=np.float64).tolist()))
+    info = {"angle_deg": angles[0] if len(angles) == 1 else angles,
+            "profiles": len(set(key.tolist())), "from": "x, z columns"}
+    return out, cols, info
 
 
 def _check_finite(path, lines, first_data, data, names, quote: bool = True) -> None:

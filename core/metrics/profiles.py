@@ -1,4 +1,5 @@
-"""Profiles and power spectral densities of a gridded form-error map (core.maps.MapGrid).
+"""Profiles and power spectral densities of a gridded form-error map (core.maps.MapGrid), and of a
+stylus profile's residual along its line (profile_slope, profile_psd, profile_power, profile_astigmatism).
 
 Profile at angle θ through a point: the map sampled by bilinear interpolation along the line, NaN
 where the map has no value. Radial profile: the mean (and spread) of the map in rings of one grid
@@ -103,3 +104,102 @@ def psd_2d(grid):
     fx = np.fft.fftshift(np.fft.fftfreq(nx, d))
     fy = np.fft.fftshift(np.fft.fftfreq(ny, d))
     return fx, fy, psd
+
+
+# --- stylus profiles (core.profiles): a residual r(u) along one line ------------------------------
+
+def profile_slope(u, r, window_mm: float | None = None) -> tuple[np.ndarray, float]:
+    """(slope of r along u at each point (rad), window used (mm)): the least-squares line through the
+    points within ±window/2 of each point (cumulative sums: O(N)), so noise is not differentiated
+    point to point. Default window: 1 % of the profile's length, at least 5 points' spacing."""
+    u = np.asarray(u, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    order = np.argsort(u, kind="stable")
+    us, rs = u[order], r[order]
+    n = len(us)
+    if n < 3:
+        return np.zeros(n), 0.0
+    step = float(np.median(np.diff(us)))
+    if window_mm is None:
+        window_mm = max(0.01 * float(us[-1] - us[0]), 5.0 * step)
+    lo = np.searchsorted(us, us - 0.5 * window_mm, side="left")
+    hi = np.searchsorted(us, us + 0.5 * window_mm, side="right")
+    uc = us - us.mean()
+    rc = rs - rs.mean()
+    cs = [np.concatenate([[0.0], np.cumsum(a)]) for a in (np.ones(n), uc, uc * uc, rc, uc * rc)]
+    m, su, suu, sr, sur = (c[hi] - c[lo] for c in cs)
+    den = m * suu - su * su
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope_sorted = np.where(den > 0, (m * sur - su * sr) / den, 0.0)
+    out = np.empty(n)
+    out[order] = slope_sorted
+    return out, float(window_mm)
+
+
+def profile_psd(u, r) -> tuple[np.ndarray, np.ndarray]:
+    """(f (1/mm), one-sided PSD (mm³)) of r along u: resampled linearly on the median spacing, mean
+    removed, Hann window (periodogram_hann: ∫PSD df = variance)."""
+    u = np.asarray(u, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    order = np.argsort(u, kind="stable")
+    us, rs = u[order], r[order]
+    step = float(np.median(np.diff(us)))
+    grid = np.arange(us[0], us[-1] + 0.5 * step, step)
+    z = np.interp(grid, us, rs)
+    return periodogram_hann(z - z.mean(), fs=1.0 / step)
+
+
+def profile_power(u, r, half: float) -> float:
+    """The quadratic coefficient a₂ (1/mm) of the least-squares a₀ + a₁u + a₂u² of r over |u| ≤ half:
+    the profile's power; a₂·half² is its sag at the edge of ±half (mm)."""
+    u = np.asarray(u, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    keep = np.abs(u) <= half
+    t = u[keep] / half
+    A = np.column_stack([np.ones_like(t), t, t * t])
+    coef, *_ = np.linalg.lstsq(A, r[keep], rcond=None)
+    return float(coef[2] / (half * half))
+
+
+def profile_astigmatism(items) -> dict | None:
+    """A coarse astigmatism from profiles at two or more azimuths, stated as such. ``items``: (angle
+    in degrees, u, r) with r the profile's form error including its power (mm).
+
+    Each profile's power a₂ over the common half-length h (the shortest profile's reach on both sides
+    of the axis); astigmatism W = A·ρ²·cos 2(θ − θ₀) makes a₂(θ) = P + A cos 2(θ − θ₀)/h². Two
+    azimuths give the difference of their powers, (a₂(θ₁) − a₂(θ₂))·h² = 2A cos 2(θ₁ − θ₀) for crossed
+    profiles: the astigmatism's PV over ±h when the profiles lie along its axes, less otherwise. Three
+    azimuths or more (mod 180°) determine A and θ₀ by least squares."""
+    angles = np.array([float(a) % 180.0 for a, _, _ in items])
+    if len(np.unique(np.round(angles, 9))) < 2:
+        return None
+    h = min(min(-np.min(u), np.max(u)) for _, u, _ in items)
+    if not h > 0:
+        return None
+    a2 = np.array([profile_power(u, r, h) for _, u, r in items])
+    power_um = a2 * h * h * 1e3
+    out = {"method": "", "common_half_length_mm": float(h)}
+    for a, p in zip(angles, power_um):
+        out[f"power_um_at_{a:g}deg"] = float(p)
+    ua = np.unique(np.round(angles, 9))
+    if len(ua) == 2:
+        i = int(np.argmax(angles == angles[0]))
+        j = int(np.argmax(angles != angles[0]))
+        diff = float(power_um[i] - power_um[j])
+        out["astigmatism_pv_estimate_um"] = abs(diff)
+        out["method"] = (f"difference of the powers of the profiles at {angles[i]:g}° and {angles[j]:g}° "
+                         f"over ±{h:.4g} mm: a coarse estimate from two profiles — the astigmatism's PV "
+                         "when they lie along its axes, a lower bound otherwise; its axis is not "
+                         "determined")
+        out["crossing_angle_deg"] = float(abs(angles[i] - angles[j]))
+        return out
+    t = np.radians(2.0 * angles)
+    A = np.column_stack([np.ones_like(t), np.cos(t), np.sin(t)])
+    (p, a, b), *_ = np.linalg.lstsq(A, power_um, rcond=None)
+    amp = float(np.hypot(a, b))
+    out["astigmatism_pv_estimate_um"] = 2.0 * amp
+    out["astigmatism_axis_deg"] = float(np.degrees(0.5 * np.arctan2(b, a)) % 180.0)
+    out["method"] = (f"powers of {len(items)} profiles at {len(ua)} azimuths over ±{h:.4g} mm fitted as "
+                     "P + A·cos 2(θ − θ₀): the astigmatism's PV (2A) and the azimuth θ₀ of its highest "
+                     "power, a coarse estimate from profiles")
+    return out

@@ -10,7 +10,8 @@ the vertical residual in the part frame,
 with an analytic Jacobian (core/geometry/posed_fit.py) and Levenberg–Marquardt on the normal
 equations, so that it converges from zero for misalignments of degrees and tens of millimetres and
 runs in well under a second on 10⁶ points. Optional DOF: the vertex radius (`radius`) and the conic
-(`conic`) for users who want them. The output is the cloud in the part frame with
+(`conic`) for users who want them. Stylus profiles (core.profiles: an x, z file, an `angle` or
+`profile` channel) are fitted in their own planes (profile.py). The output is the cloud in the part frame with
 ``residual = z − sag(x, y)`` (mm).
 
 Uncertainties are Type A: s²(JᵀJ)⁻¹ with s² the residual variance — they treat the form error as
@@ -21,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import field_validator
 
+from pointspro.core.errors import StepError
 from pointspro.core.geometry.posed_fit import PosedSurfaceFit
 from pointspro.core.params.pose import (
     FIVE_DOF,
@@ -55,9 +57,22 @@ class MisalignmentStep(Step):
     def run(self, cloud, params: MisalignmentParams, ctx: Context) -> StepResult:
         ctx.progress.check()
         surface = ctx.require_surface(self.id)
+        from pointspro.core.profiles import profiles_of
+
+        profiles = profiles_of(cloud)
+        if profiles is not None:  # stylus profiles: each fitted in its own plane (profile.py)
+            from .profile import run_profiles
+
+            out, report, arts = run_profiles(cloud, profiles, params, ctx, surface)
+            return StepResult(out, report, arts)
         dof, note = dof_for_surface(surface, params.dof, "dof" in params.model_fields_set)
-        fit = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "vertical",
-                              max_iter=params.max_iterations, check=ctx.progress.check).fit()
+        try:
+            fit = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "vertical",
+                                  max_iter=params.max_iterations, check=ctx.progress.check).fit()
+        except StepError as e:
+            from pointspro.core.profiles import with_profile_hint
+
+            raise with_profile_hint(e) from None
         ctx.progress.update(0.9, "residual")
         part, residual = fit.part, fit.residuals  # p = Rᵀ(q − t) and z − sag(x, y) at the solution
         report = fit.report()

@@ -14,7 +14,8 @@ an analytic Jacobian (core/geometry/posed_fit.py). By default the design is fixe
 the paper's option of fitting c, k and chosen A_n too is `dof: [alpha, beta, dx, dy, dz, radius,
 conic, A4, A6]`. Each centre then moves by −s·ρ·n̂ with n̂ the design normal at its foot point, refined
 from the data's own slopes where the part has form error (normals.py). The output stays in the
-measuring frame, as the input.
+measuring frame, as the input. Stylus profiles (core.profiles) get the same exact fit in each
+profile's plane: the 2-D offset curve of the meridian (profile.py).
 """
 from __future__ import annotations
 
@@ -89,11 +90,24 @@ class ProbeRadiusStep(Step):
         ctx.progress.check()
         surface = ctx.require_surface(self.id)
         s, rho_b = params.side, params.radius
+        from pointspro.core.profiles import profiles_of
+
+        profiles = profiles_of(cloud)
+        if profiles is not None:  # stylus profiles: the 2-D offset curve in each plane (profile.py)
+            from .profile import run_profiles
+
+            out, report = run_profiles(cloud, profiles, params, ctx, surface, check_no_fold)
+            return StepResult(out, report)
         dof, note = dof_for_surface(surface, params.dof, "dof" in params.model_fields_set)
         fitter = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "normal",
                                  offset=s * rho_b, max_iter=params.max_iterations,
                                  check=ctx.progress.check)
-        fit = fitter.fit()
+        try:
+            fit = fitter.fit()
+        except StepError as e:
+            from pointspro.core.profiles import with_profile_hint
+
+            raise with_profile_hint(e) from None
         ctx.progress.update(0.8, "compensating")
         foot, n, dist = fit.surface.foot_point(fit.part)
         check_no_fold(fit.surface, foot, s, rho_b)
