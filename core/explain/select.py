@@ -1,19 +1,30 @@
 """Which library effects the gap supports: greedy group-forward selection with evidence.
 
-Signatures: each effect's columns S_e = ∂Δz/∂p_e (core.simulate.effects), scaled to unit RMS.
-Stage k: for every effect not yet chosen, least squares of the gap g on [chosen, S_e]; with SSR the
-residual sum of squares, N points and P parameters in all,
+Signatures: each effect's columns S_e = ∂Δz/∂p_e (core.simulate.effects), scaled to unit RMS. A
+spindle error motion (spindle_axial, spindle_tilt) is not one group but one candidate per harmonic k
+(cos kc, sin kc), for k up to what the scan's angular sampling resolves (resolved_harmonics): the
+selection keeps only the harmonics the gap supports, and the report gathers them under the effect.
+Stage k: for every candidate not yet chosen, least squares of the gap g on [chosen, S_e]; with SSR
+the residual sum of squares, N points and P parameters in all,
     F = ((SSR_k − SSR_e)/p_e) / (SSR_e/(N − P)),   p = P(F_{p_e, N−P} > F),
     ΔBIC = N ln(SSR_e/SSR_k) + p_e ln N.
-The effect with the lowest ΔBIC enters if p < α/m (Bonferroni over the m candidates; for the vibration
-the search over N/2 frequencies counts too) and ΔBIC < −10 (strong evidence, Kass & Raftery).
-Ambiguity: another candidate whose fit is statistically as good (SSR_o − SSR_e < σ² χ²_{0.999}(p))
-cannot be told apart on this scan path → `ambiguous_with`, with the angle between the two fitted
-signatures and the measurement that would separate them. At the end: VIF of every chosen column,
-a χ² test of the residual against the noise σ (estimated from second differences along the scan,
-σ = 1.4826·MAD(Δ²g)/√6, which a smooth gap does not inflate), the lag-1 autocorrelation of the
-residual along the scan (whiteness), regions where the residual's local mean is significant, and a
-block bootstrap of the selection (stability of each choice).
+A candidate enters if p < α/m (Bonferroni over the m candidates of the stage, every harmonic one of
+them; for the vibration the search over N/2 frequencies counts too) and ΔBIC < −10 (strong evidence,
+Kass & Raftery); of those, the one of lowest ΔBIC is the best fit.
+Ambiguity: another entering candidate whose fit is statistically as good (SSR_o − SSR_e <
+σ² χ²_{0.999}(max(p_e, p_o))) cannot be told apart on this scan path. Of such a tie the named effect
+is the physical one before a catch-all (volumetric), then the one with fewer parameters (a
+vibration's frequency counts as one), then the lower ΔBIC — a quadratic field that fits as well as a
+one-parameter tip radius is not preferred to it; the others are reported as `ambiguous_with`, with
+the measurement that would separate them. A vibration that is an integer multiple of the spindle
+frequency on a scan whose spindle turns at constant speed is synchronous — a spindle error motion of
+that order as much as a vibration — and is reported ambiguous with one.
+Noise: σ from second differences along the scan, σ = 1.4826·MAD(Δ²g)/√6, which a smooth gap does not
+inflate but a strong vibration does; it is therefore estimated again on the residual once the found
+effects are removed, and the selection repeated with it (its ties depend on σ) until it settles.
+At the end: VIF of every chosen column, a χ² test of the residual against σ, the lag-1
+autocorrelation of the residual along the scan (whiteness), regions where the residual's local mean
+is significant, and a block bootstrap of the selection (stability of each choice).
 
 Sums over points are done once: the Gram matrix AᵀA and Aᵀg of all columns, then every candidate
 fit is a small solve — the whole library on 290,011 points costs a few passes over the data.
@@ -25,12 +36,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from ..simulate.effects import LIBRARY, ScanContext, Vibration
+from ..simulate.effects import LIBRARY, ScanContext, Vibration, _Harmonics, resolved_harmonics
 
 ALPHA = 0.01
 BIC_STRONG = -10.0
 #: an effect whose SSR gain comes for more than this share from the 10 % best cells is local
 LOCAL_LIMIT = 0.6
+#: the σ re-estimated on the residual replaces the gap's when it differs by more than this share
+SIGMA_SETTLED = 0.05
 
 
 def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells: int = 24) -> float:
@@ -49,6 +62,7 @@ def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells
     top = max(int(np.ceil(0.1 * gain.size)), 1)
     return float(gain[:top].sum() / total)
 
+
 #: what separates two effects that a scan cannot tell apart
 SEPARATE_BY = {
     frozenset({"thermal_drift", "squareness"}): "on a spiral the radius is linear in time: run the "
@@ -59,6 +73,9 @@ SEPARATE_BY = {
     "step artefact (z_scale) or a flat (straightness)",
     frozenset({"z_scale", "probe_radius"}): "measure with a second tip radius or a sphere of known radius",
     frozenset({"probe_radius", "straightness"}): "measure with a second tip radius",
+    frozenset({"probe_radius", "volumetric"}): "measure with a second tip radius (a tip radius follows "
+    "the slope, a machine field does not), or a sphere of known radius",
+    frozenset({"z_scale", "volumetric"}): "measure a step artefact: a z-scale error follows the height",
     frozenset({"dynamic_lag", "spindle_axial"}): "change the spindle speed: a lag scales with speed, "
     "an axial motion does not",
     frozenset({"dynamic_lag", "pose"}): "change the scan speed or direction: a lag follows the velocity",
@@ -83,10 +100,23 @@ def noise_sigma(g_in_scan_order: np.ndarray) -> float:
 
 @dataclass
 class Group:
+    """One candidate of the selection: a whole effect, one harmonic of a spindle error motion, or the
+    vibration at one frequency. ``params`` names its columns in the effect's parameters; ``scale`` is
+    the factor each raw column was divided by; ``n_params`` counts what the fit chooses (a
+    vibration's frequency too)."""
     name: str
     cols: np.ndarray          # (N, p) scaled
-    scale: np.ndarray         # (p,) the factor each raw column was divided by
+    scale: np.ndarray         # (p,)
+    effect: str = ""
+    params: tuple = ()
     frequency: float | None = None
+    harmonic: int | None = None
+    n_params: int = 0
+    catch_all: bool = False
+
+    def __post_init__(self):
+        self.effect = self.effect or self.name
+        self.n_params = self.n_params or self.cols.shape[1]
 
 
 @dataclass
@@ -98,42 +128,68 @@ class Stage:
     p: float
     delta_bic: float
     ambiguous_with: list = field(default_factory=list)
+    candidate: str = ""
+    harmonic: int | None = None
+
+
+def _independent(S: np.ndarray) -> np.ndarray:
+    """Indices of the columns of S (unit RMS) that do not repeat others (rank-revealing QR)."""
+    from scipy.linalg import qr
+
+    _, rr, piv = qr(S, mode="economic", pivoting=True)
+    rank = int(np.sum(np.abs(np.diag(rr)) > 1e-9 * abs(rr[0, 0])))
+    return np.sort(piv[:rank])
+
+
+def _group(name, effect, params, S, **kw) -> Group | None:
+    """Columns S scaled to unit RMS, those that vanish or repeat others within the group dropped (e.g.
+    a cos lobe that is constant on this scan); None when none is left."""
+    s = np.sqrt(np.mean(S * S, axis=0))
+    keep = np.flatnonzero(s > 1e-18)
+    if keep.size == 0:
+        return None
+    S = S[:, keep] / s[keep]
+    sel = _independent(S)
+    idx = keep[sel]
+    return Group(name, S[:, sel], s[idx], effect=effect, params=tuple(params[i] for i in idx), **kw)
 
 
 def linear_groups(ctx: ScanContext) -> tuple[list[Group], list[str]]:
+    """The linear candidates: one per effect, one per resolved harmonic of a spindle error motion;
+    and the effects with no observable column on this scan."""
     groups, unobservable = [], []
+    kmax = resolved_harmonics(ctx)
     for name, eff in LIBRARY.items():
         if not eff.linear:
             continue
-        S = eff.columns(ctx)
-        s = np.sqrt(np.mean(S * S, axis=0))
-        keep = s > 1e-18
-        if not keep.any():
+        if isinstance(eff, _Harmonics):
+            got = [_group(f"{name}[{k}]", name, eff.harmonic_params(k), eff.harmonic_columns(ctx, k),
+                          harmonic=k) for k in eff.harmonics if k <= kmax]
+        else:
+            got = [_group(name, name, eff.params, eff.columns(ctx), catch_all=eff.catch_all)]
+        got = [g for g in got if g is not None]
+        if not got:
             unobservable.append(name)
-            continue
-        S = S[:, keep] / s[keep]
-        # drop columns that repeat others within the group (e.g. a cos lobe that is constant here)
-        from scipy.linalg import qr
-
-        q, rr, piv = qr(S, mode="economic", pivoting=True)
-        rank = int(np.sum(np.abs(np.diag(rr)) > 1e-9 * abs(rr[0, 0])))
-        sel = np.sort(piv[:rank])
-        idx = np.flatnonzero(keep)[sel]
-        full_scale = np.full(len(eff.params), np.nan)
-        full_scale[idx] = s[idx]
-        groups.append(Group(name, S[:, sel], full_scale))
+        groups.extend(got)
     return groups, unobservable
+
+
+def uniform_rate(t_sorted: np.ndarray) -> float | None:
+    """The sampling rate (Hz) of uniform time stamps, else None."""
+    if t_sorted.size < 64 or np.ptp(t_sorted) == 0:
+        return None
+    dt = np.diff(t_sorted)
+    if np.std(dt) > 1e-3 * np.mean(dt):
+        return None
+    return float(1.0 / np.mean(dt))
 
 
 def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarray) -> Group | None:
     """cos/sin at the strongest spectral line of the residual (uniform time stamps only)."""
     t = ctx.t[order]
-    if t.size < 64:
+    fs = uniform_rate(t)
+    if fs is None:
         return None
-    dt = np.diff(t)
-    if np.ptp(t) == 0 or np.std(dt) > 1e-3 * np.mean(dt):
-        return None
-    fs = 1.0 / np.mean(dt)
     n = t.size
     r = resid_t_order - resid_t_order.mean()
     F = np.abs(np.fft.rfft(r * np.hanning(n)))
@@ -148,49 +204,121 @@ def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarr
     fk = (k + shift) * fs / n
     V = Vibration().columns_at(ctx, fk)
     s = np.sqrt(np.mean(V * V, axis=0))
-    return Group("vibration", V / s, s, frequency=fk)
+    return Group("vibration", V / s, s, params=("cos", "sin"), frequency=fk, n_params=3)
+
+
+def spindle_frequency(ctx: ScanContext, order: np.ndarray) -> float | None:
+    """The spindle's turns per second when its angle c is linear in time along the scan (a spiral at
+    constant speed: then time and angle are tied and a synchronous vibration is a spindle harmonic),
+    else None."""
+    t = ctx.t[order]
+    if t.size < 8 or np.ptp(t) == 0:
+        return None
+    c = np.unwrap(np.deg2rad(ctx.c[order]))
+    A = np.column_stack([np.ones_like(t), t - t.mean()])
+    coef, *_ = np.linalg.lstsq(A, c, rcond=None)
+    if abs(coef[1]) < 1e-12 or np.max(np.abs(c - A @ coef)) > 1e-3:
+        return None
+    return float(abs(coef[1]) / (2 * np.pi))
 
 
 class _Design:
-    """All candidate columns with their Gram matrix and Aᵀg, computed once (vibration columns are
-    appended when found)."""
+    """All candidate columns A (scaled), Aᵀg, and the Gram matrix AᵀA filled as the search needs it:
+    each candidate's own block at once, a column's cross products with every other column once it is
+    chosen (a fit of [chosen, candidate] needs no more) — N·P·(chosen + 2) operations instead of N·P²
+    for the ~150 columns of the library with its spindle harmonics. Columns found later (the vibration
+    at each stage's line) are kept beside A and bordered onto the Gram matrix whole."""
 
     def __init__(self, groups, g):
         self.g = g
         self.gg = float(g @ g)
-        self.cols = [gr.cols for gr in groups]
         self.index = {}
         k = 0
         for gr in groups:
             self.index[gr.name] = list(range(k, k + gr.cols.shape[1]))
             k += gr.cols.shape[1]
-        self.A = np.hstack(self.cols) if self.cols else np.zeros((g.size, 0))
-        self.G = self.A.T @ self.A
+        self.A = np.hstack([gr.cols for gr in groups]) if groups else np.zeros((g.size, 0))
+        for gr in groups:  # the groups' columns become views of A (one copy in memory)
+            gr.cols = self.A[:, self.index[gr.name]]
+        self.base = self.A.shape[1]
+        self.extra = []  # (first index, columns)
+        self.G = np.full((self.base, self.base), np.nan)
+        for gr in groups:
+            ix = self.index[gr.name]
+            self.G[np.ix_(ix, ix)] = gr.cols.T @ gr.cols
+        self.full = np.zeros(self.base, bool)
         self.b = self.A.T @ g
 
+    def ensure(self, idx) -> None:
+        """Fill the Gram matrix's rows and columns idx (cross products with every column)."""
+        todo = [i for i in idx if not self.full[i]]
+        if not todo:
+            return
+        X = self.X(todo)
+        col = np.r_[self.A.T @ X, *[V.T @ X for _, V in self.extra]] if self.extra else self.A.T @ X
+        self.G[:, todo] = col
+        self.G[todo, :] = col.T
+        self.full[todo] = True
+
     def add(self, name, cols):
-        AtV = self.A.T @ cols
-        k0 = self.A.shape[1]
-        self.A = np.hstack([self.A, cols])
+        k0 = self.G.shape[0]
+        border = np.r_[self.A.T @ cols, *[V.T @ cols for _, V in self.extra]] if k0 else np.zeros((0, cols.shape[1]))
         G = np.zeros((k0 + cols.shape[1],) * 2)
         G[:k0, :k0] = self.G
-        G[:k0, k0:] = AtV
-        G[k0:, :k0] = AtV.T
+        G[:k0, k0:] = border
+        G[k0:, :k0] = border.T
         G[k0:, k0:] = cols.T @ cols
         self.G = G
+        self.full = np.r_[self.full, np.ones(cols.shape[1], bool)]
         self.b = np.r_[self.b, cols.T @ self.g]
+        self.extra.append((k0, cols))
         self.index[name] = list(range(k0, k0 + cols.shape[1]))
+
+    def X(self, idx) -> np.ndarray:
+        """The columns idx (base and added) as one matrix."""
+        idx = list(idx)
+        X = np.empty((self.g.size, len(idx)))
+        at = {i: j for j, i in enumerate(idx)}
+        base = [i for i in idx if i < self.base]
+        if base:
+            X[:, [at[i] for i in base]] = self.A[:, base]
+        for k0, V in self.extra:
+            for j in range(V.shape[1]):
+                if k0 + j in at:
+                    X[:, at[k0 + j]] = V[:, j]
+        return X
+
+    def fresh(self) -> "_Design":
+        """The same design without the columns added since it was built (a new search on it)."""
+        D = object.__new__(_Design)
+        D.g, D.gg, D.A, D.base = self.g, self.gg, self.A, self.base
+        D.index = {k: v for k, v in self.index.items() if v and v[0] < self.base}
+        D.extra = []
+        D.G, D.b = self.G[:self.base, :self.base].copy(), self.b[:self.base]
+        D.full = self.full[:self.base].copy()
+        return D
+
+    def gram(self, idx) -> np.ndarray:
+        Gs = self.G[np.ix_(idx, idx)]
+        if np.isnan(Gs).any():
+            self.ensure(idx)
+            Gs = self.G[np.ix_(idx, idx)]
+        return Gs
 
     def ssr(self, idx):
         if not idx:
             return self.gg, np.zeros(0)
-        beta = np.linalg.lstsq(self.G[np.ix_(idx, idx)], self.b[idx], rcond=1e-12)[0]
+        beta = np.linalg.lstsq(self.gram(idx), self.b[idx], rcond=1e-12)[0]
         return float(self.gg - self.b[idx] @ beta), beta
+
+    def resid(self, idx) -> np.ndarray:
+        _, beta = self.ssr(idx)
+        return self.g - self.X(idx) @ beta if idx else self.g.copy()
 
 
 @dataclass
 class Candidate:
-    """The evidence for adding one effect to those already chosen (module doc):
+    """The evidence for adding one candidate to those already chosen (module doc):
         F = ((SSR_k − SSR_e)/p_e) / (SSR_e/(N − P)),   p = P(F_{p_e, N−P} > F),
         ΔBIC = N ln(SSR_e/SSR_k) + p_e ln N,
     and m, the size of the Bonferroni family its p is judged in."""
@@ -200,6 +328,8 @@ class Candidate:
     p: float
     delta_bic: float
     m: float
+    n_params: int = 1
+    catch_all: bool = False
 
 
 def significant(p: float, m: float) -> bool:
@@ -224,19 +354,19 @@ def gap_noise(g: np.ndarray, order: np.ndarray) -> float:
     return max(noise_sigma(g[order]), 1e-9 * (float(np.sqrt(np.mean(g * g))) + 1e-12))
 
 
-def candidate(D: _Design, chosen_cols: list[int], name: str, ssr_cur: float, n_candidates: int) -> Candidate:
-    """F-test and ΔBIC of adding effect `name` to the columns already chosen (Candidate's equations)."""
+def candidate(D: _Design, chosen_cols: list[int], gr: Group, ssr_cur: float, n_candidates: int) -> Candidate:
+    """F-test and ΔBIC of adding candidate ``gr`` to the columns already chosen (Candidate's equations)."""
     N = D.g.size
-    cand = chosen_cols + D.index[name]
+    cand = chosen_cols + D.index[gr.name]
     ssr, _ = D.ssr(cand)
-    pe = len(D.index[name])
+    pe = len(D.index[gr.name])
     dof = N - len(cand)
     ssr = max(ssr, 1e-300)
     F = ((ssr_cur - ssr) / pe) / (ssr / dof) if dof > 0 else 0.0
     pval = float(stats.f.sf(F, pe, dof)) if dof > 0 and F > 0 else 1.0
     dbic = N * np.log(ssr / max(ssr_cur, 1e-300)) + pe * np.log(N)
-    m = n_candidates * (N / 2 if name == "vibration" else 1)
-    return Candidate(name, ssr, F, pval, dbic, m)
+    m = n_candidates * (N / 2 if gr.effect == "vibration" else 1)
+    return Candidate(gr.name, ssr, F, pval, dbic, m, gr.n_params, gr.catch_all)
 
 
 @dataclass
@@ -252,73 +382,131 @@ class _Search:
     cols: list
     ssr: float
     resid: np.ndarray
+    spindle_hz: float | None = None
     stages: list = field(default_factory=list)
 
     @property
     def chosen(self) -> list[str]:
-        return [st.effect for st in self.stages]
+        """The candidates chosen (one per harmonic)."""
+        return [st.candidate for st in self.stages]
+
+    @property
+    def effects(self) -> list[str]:
+        """The effects chosen, each once, in the order they first entered."""
+        return list(dict.fromkeys(st.effect for st in self.stages))
 
 
-def _start(ctx: ScanContext, g: np.ndarray, order: np.ndarray, groups: list) -> _Search:
+def design(g: np.ndarray, groups: list) -> _Design:
+    """The piston and every linear candidate."""
+    return _Design([Group("_piston", np.ones((g.size, 1)), np.ones(1))] + groups, g)
+
+
+def _start(ctx: ScanContext, g: np.ndarray, order: np.ndarray, groups: list, D: _Design | None = None) -> _Search:
     """Stage 0: the piston alone (the absolute height offset is a nuisance of every measurement,
     never an effect)."""
-    piston = Group("_piston", np.ones((g.size, 1)), np.ones(1))
-    D = _Design([piston] + groups, g)
+    D = design(g, groups) if D is None else D.fresh()
     cols = list(D.index["_piston"])
+    D.ensure(cols)
     ssr, beta0 = D.ssr(cols)
-    return _Search(ctx, g, order, groups, D, {gr.name: gr for gr in groups}, cols, ssr, g - beta0[0])
+    return _Search(ctx, g, order, groups, D, {gr.name: gr for gr in groups}, cols, ssr, g - beta0[0],
+                   spindle_frequency(ctx, order))
 
 
-def _candidates(s: _Search) -> list[str]:
-    """The effects not chosen yet; the vibration at the strongest spectral line of what is left, found
-    anew at every stage until it is chosen."""
-    names = [gr.name for gr in s.groups if gr.name not in s.chosen]
-    if "vibration" not in s.chosen:
+def _candidates(s: _Search, max_effects: int) -> list[str]:
+    """The candidates not chosen yet (no new effect once max_effects are chosen); the vibration at the
+    strongest spectral line of what is left, found anew at every stage until it is chosen."""
+    full = len(s.effects) >= max_effects
+    names = [gr.name for gr in s.groups if gr.name not in s.chosen and not (full and gr.effect not in s.effects)]
+    if "vibration" not in s.effects and not full:
         vib = vibration_group(s.ctx, s.resid[s.order], s.order)
         if vib is not None:
-            s.D.add("vibration", vib.cols)
-            s.by_name["vibration"] = vib
-            names.append("vibration")
+            name = f"vibration@{len(s.stages)}"
+            s.D.add(name, vib.cols)
+            vib.name = name
+            s.by_name[name] = vib
+            names.append(name)
     return names
 
 
 def _is_local(s: _Search, name: str) -> bool:
     """Every library effect acts over the whole part: one whose SSR gain comes from a small area is
     fitting a local defect, which no effect explains (→ unexplained, located)."""
-    cols = s.cols + s.D.index[name]
-    _, beta = s.D.ssr(cols)
-    return local_fraction(s.ctx, s.resid, s.g - s.D.A[:, cols] @ beta) > LOCAL_LIMIT
+    return local_fraction(s.ctx, s.resid, s.D.resid(s.cols + s.D.index[name])) > LOCAL_LIMIT
 
 
-def _ambiguous_with(s: _Search, best: Candidate, others: list[Candidate], sigma: float) -> list[dict]:
-    """The other candidates that would enter too and whose fit is statistically as good:
-    SSR_o − SSR_e < σ² χ²_{0.999}(p_e) — this scan path cannot tell them from the best."""
-    thr = sigma * sigma * stats.chi2.ppf(0.999, len(s.D.index[best.effect]))
-    return [{"effect": o.effect, "ssr_excess": float(o.ssr - best.ssr)}
-            for o in others if o.ssr - best.ssr < thr and enters(o)]
+def _tie_threshold(sigma: float, a: Candidate, b: Candidate) -> float:
+    return sigma * sigma * stats.chi2.ppf(0.999, max(a.n_params, b.n_params))
+
+
+def _choose(s: _Search, entering: list[Candidate], sigma: float) -> tuple[Candidate, list[Candidate]]:
+    """Of the entering candidates (sorted by ΔBIC), the best fit and those that fit statistically as
+    well; the one named is the physical one before a catch-all, then the one with fewer parameters,
+    then the lower ΔBIC. Returns it and the others of the tie."""
+    best = entering[0]
+    tie = [best] + [o for o in entering[1:] if o.ssr - best.ssr < _tie_threshold(sigma, best, o)]
+    named = min(tie, key=lambda c: (c.catch_all, c.n_params, c.delta_bic))
+    return named, [o for o in tie if o is not named]
+
+
+def _ambiguous_with(s: _Search, named: Candidate, tie: list[Candidate], sigma: float) -> list[dict]:
+    """The others of the tie (another harmonic of the same effect is no ambiguity), and for a vibration
+    at an integer multiple k of the spindle frequency, the spindle's axial harmonic k when it fits as
+    well: this scan path cannot tell them from the named one."""
+    me = s.by_name[named.effect]
+    out = []
+    for o in tie:
+        gr = s.by_name[o.effect]
+        if gr.effect == me.effect:
+            continue
+        out.append({"effect": gr.effect, "harmonic": gr.harmonic, "ssr_excess": float(o.ssr - named.ssr)})
+    if me.effect == "vibration" and s.spindle_hz:
+        k = int(round(me.frequency / s.spindle_hz))
+        T = float(np.ptp(s.ctx.t))
+        if k >= 1 and abs(me.frequency - k * s.spindle_hz) * T < 0.25 and \
+                not any(a["effect"] == "spindle_axial" for a in out):
+            eff = LIBRARY["spindle_axial"]
+            gr = _group(f"spindle_axial[{k}]~sync", "spindle_axial", eff.harmonic_params(k),
+                        eff.harmonic_columns(s.ctx, k), harmonic=k)
+            if gr is not None:
+                if gr.name not in s.D.index:
+                    s.D.add(gr.name, gr.cols)
+                ssr, _ = s.D.ssr(s.cols + s.D.index[gr.name])
+                o = Candidate(gr.name, ssr, 0.0, 1.0, 0.0, 1.0, 2)
+                if ssr - named.ssr < _tie_threshold(sigma, named, o):
+                    out.append({"effect": "spindle_axial", "harmonic": k, "ssr_excess": float(ssr - named.ssr),
+                                "note": f"the vibration is at {k} × the spindle frequency: synchronous"})
+    return out
 
 
 def _add(s: _Search, best: Candidate, ambiguous: list[dict]) -> None:
     """Record the stage and refit the gap on the chosen columns."""
-    s.stages.append(Stage(best.effect, s.ssr, best.ssr, float(best.F), best.p, float(best.delta_bic), ambiguous))
+    gr = s.by_name[best.effect]
+    s.stages.append(Stage(gr.effect, s.ssr, best.ssr, float(best.F), best.p, float(best.delta_bic), ambiguous,
+                          candidate=gr.name, harmonic=gr.harmonic))
     s.cols = s.cols + s.D.index[best.effect]
-    s.ssr, beta = s.D.ssr(s.cols)
-    s.resid = s.g - s.D.A[:, s.cols] @ beta
+    s.D.ensure(s.cols)
+    s.ssr, _ = s.D.ssr(s.cols)
+    s.resid = s.D.resid(s.cols)
 
 
 def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
-    """Greedy group-forward selection: at each stage the candidate of lowest ΔBIC enters when it is
-    significant, strong and not local; stops at the first stage where it is not, or at max_effects."""
-    for _ in range(max_effects):
-        names = _candidates(s)
+    """Greedy group-forward selection: at each stage, of the candidates that are significant and
+    strong, the named one of the best-fitting tie (_choose) enters unless its gain is local; stops
+    when none enters, or when max_effects effects (harmonics of one effect count once) are chosen
+    and none of their harmonics is left to enter."""
+    for _ in range(max_effects + 2 * len(s.groups)):
+        names = _candidates(s, max_effects)
         if not names:
             break
-        results = sorted((candidate(s.D, s.cols, name, s.ssr, len(names)) for name in names),
+        results = sorted((candidate(s.D, s.cols, s.by_name[name], s.ssr, len(names)) for name in names),
                          key=lambda c: c.delta_bic)
-        best = results[0]
-        if not enters(best) or _is_local(s, best.effect):
+        entering = [c for c in results if enters(c)]
+        if not entering:
             break
-        _add(s, best, _ambiguous_with(s, best, results[1:], sigma))
+        named, tie = _choose(s, entering, sigma)
+        if _is_local(s, named.effect):
+            break
+        _add(s, named, _ambiguous_with(s, named, tie, sigma))
     return s
 
 
@@ -329,31 +517,47 @@ def uncentred_vif(G: np.ndarray) -> np.ndarray:
     return np.diag(np.linalg.pinv(G / np.outer(dn, dn)))
 
 
+def _raw_params(gr: Group, beta: np.ndarray, sd: np.ndarray) -> tuple[dict, dict]:
+    """A candidate's fitted coefficients in the library's parameters and units, with their standard
+    deviations."""
+    raw, raw_sd = beta / gr.scale, sd / gr.scale
+    if gr.effect == "vibration":
+        return Vibration.from_columns(gr.frequency, raw), {"amplitude": float(np.hypot(*raw_sd))}
+    return ({n: float(v) for n, v in zip(gr.params, raw)}, {n: float(v) for n, v in zip(gr.params, raw_sd)})
+
+
 def _fitted_effects(s: _Search) -> tuple[list[dict], np.ndarray]:
-    """The final least-squares fit on all chosen columns: each chosen effect's coefficients, their
-    standard deviations (σ̂² (AᵀA)⁻¹, σ̂² = SSR/(N − P)), its largest VIF, its fitted part and the gap
-    left after the effects up to it; and the final residual."""
+    """The final least-squares fit on all chosen columns, gathered by effect in the order each first
+    entered: its parameters in the library's units and their standard deviations (σ̂² (AᵀA)⁻¹, σ̂² =
+    SSR/(N − P)), the harmonics kept (spindle error motions), its largest VIF, its fitted part, the gap
+    left after the effects up to it, and its stages (the evidence of each candidate that entered);
+    and the final residual."""
     D, g, idx = s.D, s.g, s.cols
     N, P = g.size, len(idx)
-    X = D.A[:, idx]
-    Gs = D.G[np.ix_(idx, idx)]
+    X = D.X(idx)
+    Gs = D.gram(idx)
     beta = np.linalg.lstsq(Gs, D.b[idx], rcond=1e-12)[0]
     resid = g - X @ beta
     s2 = float(resid @ resid) / max(N - P, 1)
     cov = np.linalg.pinv(Gs) * s2
     vif = uncentred_vif(Gs)
-    found = []
-    col = 1  # after the piston
-    for st in s.stages:
-        p = len(D.index[st.effect])
-        bb = beta[col:col + p]
-        sd = np.sqrt(np.clip(np.diag(cov)[col:col + p], 0, None))
-        upto = idx[: col + p]
-        _, bk = D.ssr(upto)
-        found.append({"group": s.by_name[st.effect], "stage": st, "beta": bb, "sd": sd,
-                      "vif_max": float(np.max(vif[col:col + p])), "fitted": X[:, col:col + p] @ bb,
-                      "resid_upto": g - D.A[:, upto] @ bk})
-        col += p
+    pos = {i: j for j, i in enumerate(idx)}
+    found, upto = [], list(D.index["_piston"])
+    for eff in s.effects:
+        stages = [st for st in s.stages if st.effect == eff]
+        params, unc, js, vifs = {}, {}, [], []
+        for st in stages:
+            j = [pos[i] for i in D.index[st.candidate]]
+            p, u = _raw_params(s.by_name[st.candidate], beta[j], np.sqrt(np.clip(np.diag(cov)[j], 0, None)))
+            params.update(p)
+            unc.update(u)
+            js += j
+            vifs.append(float(np.max(vif[j])))
+            upto += D.index[st.candidate]
+        harmonics = sorted(st.harmonic for st in stages) if stages[0].harmonic is not None else None
+        found.append({"effect": eff, "params": params, "uncertainty": unc, "harmonics": harmonics,
+                      "stage": stages[0], "stages": stages, "vif_max": max(vifs),
+                      "fitted": X[:, js] @ beta[js], "resid_upto": D.resid(list(upto))})
     return found, resid
 
 
@@ -370,18 +574,29 @@ def residual_checks(resid: np.ndarray, sigma: float, order: np.ndarray, P: int) 
 
 def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int = 10,
            seed: int = 0) -> dict:
-    """The forward selection (module doc). Returns a dict of plain results (see workflow)."""
+    """The forward selection (module doc). Returns a dict of plain results (see workflow): σ of the
+    gap as found (sigma_gap) and re-estimated on the residual once the found effects are removed
+    (sigma, the one every check uses)."""
     order = scan_order(ctx, g.size)
-    sigma = gap_noise(g, order)
+    sigma_gap = sigma = gap_noise(g, order)
     groups, unobservable = linear_groups(ctx)
-    s = forward_search(_start(ctx, g, order, groups), sigma, max_effects)
+    D = design(g, groups)
+    s = forward_search(_start(ctx, g, order, groups, D), sigma, max_effects)
+    for _ in range(3):  # σ again without the effects found; the ties depend on it
+        if not s.stages:
+            break
+        s_new = gap_noise(s.resid, order)
+        if abs(s_new - sigma) <= SIGMA_SETTLED * sigma:
+            break
+        sigma = s_new
+        s = forward_search(_start(ctx, g, order, groups, D), sigma, max_effects)
     found, resid = _fitted_effects(s) if s.stages else ([], s.resid)
     checks = residual_checks(resid, sigma, order, len(s.cols))
     stability = {}
     if s.stages and bootstrap > 0:
-        stability = _bootstrap(ctx, g - resid, resid, s.chosen, bootstrap, seed, max_effects)
-    return {"sigma": sigma, "found": found, "residual": resid, **checks, "unobservable": unobservable,
-            "stability": stability, "order": order}
+        stability = _bootstrap(ctx, g - resid, resid, s.effects, bootstrap, seed, max_effects)
+    return {"sigma": sigma, "sigma_gap": sigma_gap, "found": found, "residual": resid, **checks,
+            "unobservable": unobservable, "stability": stability, "order": order}
 
 
 def _bootstrap(ctx, fitted, resid, names, B, seed, max_effects) -> dict:
@@ -403,7 +618,7 @@ def _bootstrap(ctx, fitted, resid, names, B, seed, max_effects) -> dict:
         rb = np.concatenate([r_sorted[s:s + L] for s in starts])[:n]
         g_star = fitted[keep] + rb[pos_in_sub]
         res = select(sub, g_star, max_effects, bootstrap=0)
-        got = {f["group"].name for f in res["found"]}
+        got = {f["effect"] for f in res["found"]}
         for nm in names:
             count[nm] += nm in got
     return {nm: c / B for nm, c in count.items()}

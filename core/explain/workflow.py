@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, RecipeError
-from ..simulate.effects import LIBRARY, ScanContext, Vibration
+from ..simulate.effects import ScanContext
 from .select import select, separate_by
 
 REGION_MIN_SIGMA = 5.0
@@ -46,22 +46,6 @@ def regions(x, y, r, sigma, cells=24) -> list[dict]:
         out.append({"x": cx, "y": cy, "radius": float(np.sqrt(cellsi.size * h * h / np.pi)),
                     "mean_um": float(np.mean(r[pts]) * 1e3)})
     return sorted(out, key=lambda d: -abs(d["mean_um"]))
-
-
-def _params_of(found) -> tuple[dict, dict]:
-    gr, beta, sd = found["group"], found["beta"], found["sd"]
-    if gr.name == "vibration":
-        raw = beta / gr.scale
-        p = Vibration.from_columns(gr.frequency, raw)
-        u = {"amplitude": float(np.hypot(*(sd / gr.scale)))}
-        return p, u
-    names = LIBRARY[gr.name].params
-    kept = [i for i, s in enumerate(gr.scale) if np.isfinite(s)]
-    params, unc = {}, {}
-    for j, i in enumerate(kept):
-        params[names[i]] = float(beta[j] / gr.scale[i])
-        unc[names[i]] = float(sd[j] / gr.scale[i])
-    return params, unc
 
 
 def _merge(effects: list[dict], name: str, params: dict) -> list[dict]:
@@ -112,7 +96,7 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     structure = bool(regs) or res["rms"] > 1.25 * sigma
     report = {
         "verdict": verdict(structure, ambiguous, found), "gap_before": _stats(gap), "gap_after": _stats(after),
-        "noise_um": sigma * 1e3, "found": found, "ambiguous_with": ambiguous,
+        "noise_um": sigma * 1e3, "noise_um_of_gap": res["sigma_gap"] * 1e3, "found": found, "ambiguous_with": ambiguous,
         "unexplained": {"rms_um": _stats(after)["rms_um"] if structure else 0.0, "regions": regs if structure else []},
         "checks": {"chi2_p": res["chi2_p"], "residual_lag1_autocorrelation": res["rho1"],
                    "residual_rms_over_noise": res["rms"] / max(sigma, 1e-300)},
@@ -150,9 +134,11 @@ def against_model(meas, model, base: Path):
 
 def against_simulation(meas, simulated: Path):
     """A simulated cloud (with t and c) matched to the measurement by row when the positions agree,
-    else by nearest position; its slopes from a B-spline through it: (ScanContext, simulated z, how
-    the points were matched)."""
+    else by nearest position; its slopes from a global polynomial through it (core.explain.slopes:
+    accurate enough for the probe_radius signature): (ScanContext, simulated z, how the points were
+    matched and the slopes found)."""
     from ..io import read_cloud
+    from .slopes import cloud_slopes
 
     simc = read_cloud(simulated)
     for ch in ("t", "c"):
@@ -167,11 +153,11 @@ def against_simulation(meas, simulated: Path):
         d, j = cKDTree(simc.xyz[:, :2]).query(meas.xyz[:, :2])
         match = f"by position (nearest simulated point, up to {float(d.max()):.3g} mm away)"
     z_sim = simc.z[j]
-    from ..maps.bspline import fit_bspline
-
-    sp = fit_bspline(simc.x, simc.y, simc.z)
-    ctx = ScanContext(meas.x, meas.y, z_sim, sp(meas.x, meas.y, dx=1), sp(meas.x, meas.y, dy=1),
-                      simc["t"][j], simc["c"][j])
+    fx, fy, how = cloud_slopes(simc.x, simc.y, simc.z, np.argsort(simc["t"], kind="stable"))
+    match += (f"; slopes from a degree-{how['degree']} polynomial through the simulation ({how['rest_rms_um'] * 1e3:.3g} "
+              f"nm RMS left, its noise {how['noise_um'] * 1e3:.3g} nm"
+              + ("; the rest by a smoothing spline)" if how["spline"] else ")"))
+    ctx = ScanContext(meas.x, meas.y, z_sim, fx[j], fy[j], simc["t"][j], simc["c"][j])
     return ctx, z_sim, match
 
 
@@ -180,14 +166,18 @@ def found_effects(res: dict, effects: list[dict]) -> tuple[list[dict], list[dict
     uncertainties, the gap after it and its evidence; and the model's effects with them added."""
     found = []
     for f in res["found"]:
-        params, unc = _params_of(f)
-        st = f["stage"]
-        effects = _merge(effects, f["group"].name, params)
-        found.append({"effect": f["group"].name, "params": params, "uncertainty": unc,
-                      "gap_after": _stats(f["resid_upto"]),
-                      "evidence": {"F": st.F, "p": st.p, "delta_bic": st.delta_bic, "vif_max": f["vif_max"],
-                                   "stability": res["stability"].get(f["group"].name),
-                                   "ssr_before_um2": st.ssr_before * 1e6, "ssr_after_um2": st.ssr_after * 1e6}})
+        params, unc, st = f["params"], f["uncertainty"], f["stage"]
+        effects = _merge(effects, f["effect"], params)
+        entry = {"effect": f["effect"], "params": params, "uncertainty": unc,
+                 "gap_after": _stats(f["resid_upto"]),
+                 "evidence": {"F": st.F, "p": st.p, "delta_bic": st.delta_bic, "vif_max": f["vif_max"],
+                              "stability": res["stability"].get(f["effect"]),
+                              "ssr_before_um2": st.ssr_before * 1e6, "ssr_after_um2": st.ssr_after * 1e6}}
+        if f["harmonics"] is not None:
+            entry["harmonics"] = f["harmonics"]
+            entry["evidence"]["harmonics"] = [{"harmonic": h.harmonic, "F": h.F, "p": h.p, "delta_bic": h.delta_bic}
+                                              for h in f["stages"]]
+        found.append(entry)
     return found, effects
 
 
@@ -195,12 +185,17 @@ def ambiguities(res: dict, sigma: float) -> list[dict]:
     """The pairs this scan cannot tell apart, why (their SSR difference in σ²) and what would."""
     out = []
     for f in res["found"]:
-        for a in f["stage"].ambiguous_with:
-            out.append({"effects": [f["group"].name, a["effect"]],
-                        "why": "on this scan path the two signatures fit the gap equally well "
-                               f"(their fits differ by {a['ssr_excess'] / max(sigma, 1e-300) ** 2:.3g} σ² "
-                               "in the sum of squares, below the χ² threshold)",
-                        "separate_by": separate_by(f["group"].name, a["effect"])})
+        for st in f["stages"]:
+            for a in st.ambiguous_with:
+                if any(set(o["effects"]) == {f["effect"], a["effect"]} for o in out):
+                    continue
+                what = f" at {a['harmonic']} undulations per revolution" if a.get("harmonic") else ""
+                note = f"; {a['note']}" if a.get("note") else ""
+                out.append({"effects": [f["effect"], a["effect"]],
+                            "why": f"on this scan path the two signatures{what} fit the gap equally well "
+                                   f"(their fits differ by {abs(a['ssr_excess']) / max(sigma, 1e-300) ** 2:.3g} σ² "
+                                   f"in the sum of squares, below the χ² threshold){note}",
+                            "separate_by": separate_by(f["effect"], a["effect"])})
     return out
 
 

@@ -13,14 +13,20 @@ spindle angle c (deg), time t (s), ż = df/dt along the scan (mm/s).
   z_scale        s: Δz = s·f                               (amplification error of the z axis)
   probe_radius   ρ (mm) left uncompensated: Δz = ρ(√(1 + f_x² + f_y²) − 1)   (constant part = piston)
   squareness     EB0C (arcsec), X–C squareness: Δz = −r·EB0C        (a cone; 003 selective model)
-  spindle_tilt   EBC lobes k = 2…4 (arcsec): Δz = −r Σ (a_k cos kc + b_k sin kc)   (k = 1 is a part tilt)
-  spindle_axial  EZC lobes k = 1…4 (mm): Δz = Σ (a_k cos kc + b_k sin kc)
+  spindle_tilt   EBC harmonics k = 2…32 (arcsec): Δz = −r Σ (a_k cos kc + b_k sin kc)   (k = 1 is a part
+                 tilt, the pose's)
+  spindle_axial  EZC harmonics k = 1…32 (mm): Δz = Σ (a_k cos kc + b_k sin kc)
+                 Synchronous error motions (ISO 230-7) have every integer harmonic: a_k, b_k for any k
+                 up to SPINDLE_HARMONICS; `explain` fits those the scan's angular sampling resolves
+                 (resolved_harmonics) one harmonic at a time and keeps the ones the gap supports.
   straightness   slide straightness over radius (mm at the rim): Δz = Σ_{k=2..4} s_k (r/R)^k
   thermal_drift  d1, d2 (mm over the scan): Δz = d1 τ + d2 τ²,  τ = (t − t₀)/T
   dynamic_lag    τ (s), a first-order measuring loop Gm = 1/(1 + τs): Δz = (1 − Gm)z ≈ τ ż
   vibration      f (Hz, as sampled — the aliased frequency), amplitude (mm), phase (deg):
                  Δz = A cos(2πft + φ)
   volumetric     a smooth machine field (fiducial/GP issue): Δz = cxx x² + cxy xy + cyy y² + cxz xz + cyz yz
+                 — a catch-all: a quadratic field fits much of what the physical effects do, so
+                 `explain` never names it before a physical effect that fits as well (catch_all)
 """
 from __future__ import annotations
 
@@ -66,6 +72,11 @@ class Effect:
     params: tuple[str, ...] = ()
     units: tuple[str, ...] = ()
     linear = True
+    #: a field that fits much of what the physical effects do (explain names it last on a tie)
+    catch_all = False
+
+    def params_text(self) -> str:
+        return ", ".join(self.params)
 
     def columns(self, ctx: ScanContext) -> np.ndarray:
         raise NotImplementedError
@@ -74,7 +85,7 @@ class Effect:
         unknown = set(values) - set(self.params)
         if unknown:
             raise KeyError(f"effect '{self.name}' has no parameter(s) {sorted(unknown)}; "
-                           f"it has {', '.join(self.params)}")
+                           f"it has {self.params_text()}")
         p = np.array([float(values.get(k, 0.0)) for k in self.params])
         return self.columns(ctx) @ p
 
@@ -108,29 +119,93 @@ class Squareness(Effect):
         return (-c.r * ARCSEC)[:, None]
 
 
+#: the highest spindle harmonic (undulations per revolution) in the library. Error motions of precision
+#: spindles lie in the low orders (bearing lobing); on a spiral at constant speed a line above this
+#: order is named a vibration (and reported ambiguous with a synchronous error when it is one).
+SPINDLE_HARMONICS = 32
+
+
 def _lobes(c_deg, ks):
     a = np.deg2rad(c_deg)
     return np.column_stack([f(k * a) for k in ks for f in (np.cos, np.sin)])
 
 
-class SpindleTilt(Effect):
+def resolved_harmonics(ctx: ScanContext, kmax: int = SPINDLE_HARMONICS) -> int:
+    """The highest harmonic of the spindle angle c that the scan's angular sampling resolves: below the
+    Nyquist order 180°/Δc of Δc, the widest angular gap on the rings of the scan's outer half (median
+    over 8 rings; where a tilt's signal is largest), capped at ``kmax``. 0 when no ring is sampled."""
+    r = ctx.r
+    if r.size < 8 or not np.ptp(r) > 0:
+        return 0
+    edges = np.linspace(np.median(r), r.max(), 9)
+    ring = np.clip(np.searchsorted(edges, r, side="right") - 1, 0, 7)
+    gaps = []
+    for i in range(8):
+        ci = np.sort(np.asarray(ctx.c, float)[(ring == i) & (r >= edges[0])] % 360.0)
+        if ci.size < 4:
+            continue
+        gaps.append(float(np.max(np.diff(np.r_[ci, ci[0] + 360.0]))))
+    if not gaps:
+        return 0
+    gap = max(float(np.median(gaps)), 1e-9)
+    return int(min(max(np.ceil(180.0 / gap) - 1, 0), kmax))
+
+
+class _Harmonics(Effect):
+    """A synchronous spindle error motion: harmonics k = first…SPINDLE_HARMONICS of the spindle angle,
+    parameters a_k (cos), b_k (sin) with ``suffix`` (the unit in the name)."""
+    first = 1
+    suffix = ""
+    unit = "mm"
+
+    def __init__(self):
+        self.harmonics = tuple(range(self.first, SPINDLE_HARMONICS + 1))
+        self.params = tuple(f"{ab}{k}{self.suffix}" for k in self.harmonics for ab in ("a", "b"))
+        self.units = (self.unit,) * len(self.params)
+
+    def weight(self, c) -> np.ndarray:
+        return np.ones_like(c.x)
+
+    def harmonic_columns(self, c, k: int) -> np.ndarray:
+        """The two columns (cos, sin) of harmonic k."""
+        return self.weight(c)[:, None] * _lobes(c.c, (k,))
+
+    def harmonic_params(self, k: int) -> tuple[str, str]:
+        return f"a{k}{self.suffix}", f"b{k}{self.suffix}"
+
+    def columns(self, c):
+        return self.weight(c)[:, None] * _lobes(c.c, self.harmonics)
+
+    def apply(self, c, values):
+        unknown = set(values) - set(self.params)
+        if unknown:
+            raise KeyError(f"effect '{self.name}' has no parameter(s) {sorted(unknown)}; "
+                           f"it has {self.params_text()}")
+        dz = np.zeros_like(c.x)
+        for k in self.harmonics:
+            a, b = (float(values.get(n, 0.0)) for n in self.harmonic_params(k))
+            if a or b:
+                dz = dz + self.harmonic_columns(c, k) @ np.array([a, b])
+        return dz
+
+    def params_text(self) -> str:
+        a, b = self.harmonic_params(self.first)
+        za, zb = self.harmonic_params(SPINDLE_HARMONICS)
+        return f"{a}, {b}, … {za}, {zb} (harmonics {self.first}…{SPINDLE_HARMONICS})"
+
+
+class SpindleTilt(_Harmonics):
     name = "spindle_tilt"
-    lobes = (2, 3, 4)
-    params = tuple(f"{ab}{k}_arcsec" for k in lobes for ab in ("a", "b"))
-    units = ("arcsec",) * 6
+    first = 2
+    suffix = "_arcsec"
+    unit = "arcsec"
 
-    def columns(self, c):
-        return -c.r[:, None] * ARCSEC * _lobes(c.c, self.lobes)
+    def weight(self, c):
+        return -c.r * ARCSEC
 
 
-class SpindleAxial(Effect):
+class SpindleAxial(_Harmonics):
     name = "spindle_axial"
-    lobes = (1, 2, 3, 4)
-    params = tuple(f"{ab}{k}" for k in lobes for ab in ("a", "b"))
-    units = ("mm",) * 8
-
-    def columns(self, c):
-        return _lobes(c.c, self.lobes)
 
 
 class Straightness(Effect):
@@ -183,6 +258,7 @@ class Vibration(Effect):
 
 class Volumetric(Effect):
     name, params, units = "volumetric", ("cxx", "cxy", "cyy", "cxz", "cyz"), ("1/mm",) * 5
+    catch_all = True
 
     def columns(self, c):
         return np.column_stack([c.x * c.x, c.x * c.y, c.y * c.y, c.x * c.f, c.y * c.f])

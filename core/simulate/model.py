@@ -53,7 +53,7 @@ class ModelSpec(BaseModel):
             bad = set(params or {}) - set(LIBRARY[name].params)
             if bad:
                 raise ValueError(f"effect {i + 1} '{name}': unknown parameter(s) {sorted(bad)}; it has "
-                                 f"{', '.join(LIBRARY[name].params)}")
+                                 f"{LIBRARY[name].params_text()}")
         return v
 
     def build_surface(self, base_dir=None):
