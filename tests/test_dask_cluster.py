@@ -30,9 +30,8 @@ surface: {type: even_asphere, c: 1.0e-3, k: 0, aperture: 200}
 inputs: {fiducials: ../calib/fid.csv}
 steps:
   - misalignment: {dof: [dx, dy, dz]}
-  - knn_denoise: {window: 30.0}
-  - aperture: {diameter: 180}
-  - zernike: {terms: 15}
+  - knn_denoise: {window: 60.0}
+  - aperture: {diameter: 150}
 """
 #: the recipe names ../calib/fid.csv: a folder the user allows (relative too: it travels resolved)
 ALLOW = ("--allow-path", "calib")
@@ -92,11 +91,12 @@ def real_cluster(tmp_path_factory):
         log.close()
 
 
-def _data(root: Path, n: int = 4, points: int = 300) -> Path:
-    """A working folder as a user has it: in/*.csv, recipes/r.yaml naming ../calib/fid.csv."""
+def _data(root: Path, n: int = 4, side: int = 7) -> Path:
+    """A working folder as a user has it: in/*.csv, recipes/r.yaml naming ../calib/fid.csv. Rasters
+    of side + k points a side (small: a few tenths of a second each)."""
     for k in range(n):
         rng = np.random.default_rng(100 + k)
-        g = np.linspace(-100, 100, int(np.sqrt(points)) + k)  # a raster: inputs of different sizes
+        g = np.linspace(-100, 100, side + k)  # a raster: inputs of different sizes
         x, y = (a.ravel() for a in np.meshgrid(g, g))
         r2 = x * x + y * y
         z = 1e-3 * r2 / (1 + np.sqrt(1 - 1e-6 * r2)) + 1e-5 * x + rng.normal(0, 2e-4, x.size)
@@ -143,7 +143,7 @@ def test_relative_paths_from_another_folder_match_a_local_run(real_cluster, run_
     work = _data(tmp_path / "data")
     monkeypatch.chdir(work)  # the workers run in another folder: relative paths must travel
     files = _inputs(work)
-    opts = ["--figures", "none", "--set", "knn_denoise.window=25"]
+    opts = ["--figures", "none", "--set", "knn_denoise.window=50"]
     code, _, err = run_cli("--batch", "recipes/r.yaml", *files, *ALLOW, "--out", "local", "--workers", "1",
                            "--quiet", *opts)
     assert code == 0, err
@@ -153,7 +153,7 @@ def test_relative_paths_from_another_folder_match_a_local_run(real_cluster, run_
     assert "in/p0.csv: ok → cl/p0" in out  # named as typed, as a local run names them
     _same_as_local(work, "local", "cl")
     rep = json.loads((work / "cl" / "p0" / "report.json").read_text(encoding="utf-8"))
-    assert rep["input"] == "in/p0.csv" and rep["overrides"] == ["knn_denoise.window=25"]
+    assert rep["input"] == "in/p0.csv" and rep["overrides"] == ["knn_denoise.window=50"]
     assert rep["recipe"]["inputs"] == {"fiducials": "recipes/../calib/fid.csv"}
     s = json.loads((work / "cl" / "summary.json").read_text(encoding="utf-8"))
     assert s["counts"] == {"ok": len(files)} and s["scheduler"] == real_cluster.address
@@ -281,7 +281,7 @@ def test_a_worker_killed_mid_run_the_batch_still_completes(real_cluster, tmp_pat
     is written: Dask runs its inputs again on the others; every output is complete."""
     from distributed import Client
 
-    work = _data(tmp_path / "data", n=10, points=1500)
+    work = _data(tmp_path / "data", n=10, side=16)
     extra = real_cluster.add_worker()
     with Client(real_cluster.address, timeout="30s") as c:
         c.wait_for_workers(3, timeout=90)
@@ -304,7 +304,7 @@ def test_a_worker_killed_mid_run_the_batch_still_completes(real_cluster, tmp_pat
 
 
 def test_ctrl_c_on_the_cluster_then_resume(real_cluster, tmp_path):
-    work = _data(tmp_path / "data", n=8, points=1500)
+    work = _data(tmp_path / "data", n=8, side=16)
     cmd = _batch_cmd(work, real_cluster.address, "o")
     proc = subprocess.Popen(cmd, cwd=work, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
