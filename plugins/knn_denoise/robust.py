@@ -201,6 +201,7 @@ def _trim_rounds(win, d, w, max_rounds, progress, offset):
     """Iteratively trimmed local fits: returns the final weights, z, σ(P), σ_g, the cells' fits."""
     n = len(d)
     prev = None
+    sig = None
     rounds = 0
     while rounds < max_rounds:
         rounds += 1
@@ -211,10 +212,13 @@ def _trim_rounds(win, d, w, max_rounds, progress, offset):
         # local σ: RMS of z over the window's points inside the trim (w), truncation corrected
         fin = np.isfinite(z)
         zf = np.where(fin, z, 0.0)
+        # (without the point itself: an outlier does not inflate its own σ)
         inside = w * fin
         cq = win.window(win.cell_sums(inside, np.column_stack([np.ones(n), zf * zf])))[win.cell]
+        cq[:, 0] -= inside
+        cq[:, 1] -= inside * zf * zf
         with np.errstate(invalid="ignore", divide="ignore"):
-            sl = np.sqrt(cq[:, 1] / cq[:, 0] / TRUNCATED_VAR)
+            sl = np.sqrt(np.clip(cq[:, 1], 0, None) / cq[:, 0] / TRUNCATED_VAR)
         sig = np.fmax(sg, np.where(cq[:, 0] >= 8, sl, 0.0))
         trimmed = fin & ~(np.abs(zf) < TRIM * sig)  # an unjudged point keeps its weight
         if prev is not None and np.count_nonzero(trimmed != prev) <= max(0, n // 100_000):
@@ -231,32 +235,36 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
     n = len(d)
     # a coarse pass first (window COARSE · a): a dig or scratch that fills a good part of the 2a window
     # is a small part of the larger one, so its points are trimmed before the fine planes see them
-    w = np.ones(n)
-    if COARSE > 1:
-        coarse = _Windows(x, y, COARSE * window)
-        w, _, _, _, _, _, _ = _trim_rounds(coarse, d, w, COARSE_ROUNDS, progress, 0)
+    coarse = _Windows(x, y, COARSE * window)
+    w, zc, sigc, _, betac, livec, _ = _trim_rounds(coarse, d, np.ones(n), COARSE_ROUNDS, progress, 0)
     win = _Windows(x, y, window)
     w, z, sig, sg, beta, live, rounds = _trim_rounds(win, d, w, MAX_ROUNDS, progress, COARSE_ROUNDS)
+    # where the 2a window is too sparse to judge (the end of a star's line), the coarse window judges
+    sparse = ~np.isfinite(z)
+    z, sig = np.where(sparse, zc, z), np.where(sparse, sigc, sig)
     thr = np.maximum(threshold_sigma * sig, floor)
     fin = np.isfinite(z)
     flagged = fin & (np.abs(np.where(fin, z, 0.0)) > thr)
-    cand = np.flatnonzero(flagged)
-    spread = _disagreement(win, beta, live, cand)
-    flagged[cand[np.abs(z[cand]) <= AGREE * spread]] = False
+    zz = np.where(fin, z, 0.0)
+    # candidates for growing a dig: beyond TRIM σ (and the floor)
+    growable = fin & ~flagged & (np.abs(zz) > np.maximum(TRIM * sig, floor))
+    for wn, b, lv, sel in ((win, beta, live, ~sparse), (coarse, betac, livec, sparse)):
+        for mask in (flagged, growable):
+            cand = np.flatnonzero(mask & sel)
+            spread = _disagreement(wn, b, lv, cand)
+            mask[cand[np.abs(z[cand]) <= AGREE * spread]] = False
     grown = 0
     if flagged.any():
-        grown = _grow(x, y, z, sig, flagged, floor)
+        grown = _grow(x, y, z, growable, flagged)
     return RobustResult(flagged, z, sig, sg, thr, rounds, grown, int((~fin).sum()))
 
 
-def _grow(x, y, z, sig, flagged, floor) -> int:
-    """Add to `flagged` (in place) the neighbours of flagged points whose z has the same sign and
-    exceeds TRIM σ (and the floor), until none joins; returns how many joined."""
+def _grow(x, y, z, cand, flagged) -> int:
+    """Add to `flagged` (in place) the `cand` points next to a flagged point whose z has the same sign,
+    until none joins; returns how many joined."""
     from scipy.spatial import cKDTree
 
-    fin = np.isfinite(z)
-    zz = np.where(fin, z, 0.0)
-    cand = fin & ~flagged & (np.abs(zz) > np.maximum(TRIM * sig, floor))
+    zz = np.where(np.isfinite(z), z, 0.0)
     if not cand.any():
         return 0
     ci = np.flatnonzero(cand)
