@@ -225,8 +225,9 @@ def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0
 def process_job(recipe_path: str, path: str, out_dir: str, stem: str,
                 allowed_dirs: list[str] | None = None, figures: str = "all",
                 options: dict | None = None) -> InputOutcome:
-    """One input in a worker (process pool or Dask): the recipe is read there from its file, so
-    only plain strings cross process and machine boundaries — once per worker and recipe version
+    """One input in a worker of the process pool (Dask's run ``cluster.cluster_job``, with the recipe
+    sent as data): the recipe is read there from its file, so only plain strings cross process
+    boundaries — once per worker and recipe version
     (``worker_recipe``), not once per input. ``options`` (plain values): ``cloud_format``,
     ``overrides`` (the ``--set`` texts) and ``log_level`` — the records at that level or above of
     the ``pointspro`` loggers come back in the outcome's ``log`` instead of this process's stderr."""

@@ -266,6 +266,8 @@ def cmd_batch(args) -> int:
         results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "csv")
         # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
         runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed, session)
+        if session is not None:  # the cluster's workers, as the pre-flight found them
+            workers = session.workers or workers
         progress = None
         if not args.quiet and runner.__name__ != "run_sequential":  # workers: one overall bar
             from .terminal import BatchProgress
@@ -320,6 +322,7 @@ def _cluster_session(args, recipe_path: Path, recipe, inputs: list[Path], out: P
     session = DaskSession(args.scheduler, workers)
     try:
         session.bundle = bundle
+        session.workers = len(session.client.scheduler_info().get("workers", {}))
         problems = cluster.check_workers(session.client,
                                          cluster.expectations(recipe, bundle, inputs, out, args.ship))
         if problems:

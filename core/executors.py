@@ -114,6 +114,7 @@ class DaskSession:
         from .errors import PointsProError
 
         self.address, self.cluster, self.client = address, None, None
+        self.bundle, self.workers = None, 0  # set by the CLI: the recipe bundle, the workers found
         self._dlog = logging.getLogger("distributed")
         self._saved_level = self._dlog.level
         if logging.getLogger("pointspro").getEffectiveLevel() > logging.DEBUG:
