@@ -4,7 +4,9 @@ Plain JSON, validated field by field on loading (pydantic) and sealed with a SHA
 so a file from another version or edited by hand is refused with a clear message — nothing in it is
 ever executed (no pickle). Contents: the 12-parameter transform and its covariance, the workspace
 bounds (mm), and per error component (ex, ey, ez) the GP: kernel kind and hyperparameters, training
-positions and values; prediction rebuilds the regressor with those hyperparameters fixed.
+positions and values; prediction rebuilds the regressor with those hyperparameters fixed. Beside
+them, how the kernel was chosen (``gp_selection``: the cross-validated RMS of every candidate) and
+the in-sample closed-form LOO (``loo_rms_um``, biased low: for comparison only).
 """
 from __future__ import annotations
 
@@ -35,7 +37,8 @@ class VolumetricModelSpec(BaseModel):
     transform: dict
     workspace: list[list[float]]          # [[xmin, xmax], [ymin, ymax], [zmin, zmax]]
     gp: dict[str, GPSpec]                 # "ex", "ey", "ez"
-    loo_rms_um: dict
+    loo_rms_um: dict                      # closed-form LOO at the all-points hyperparameters (biased low)
+    gp_selection: dict = {}               # how the kernel was chosen: criterion, chosen, cross-validated RMS
     sha256: str
 
 
@@ -48,8 +51,8 @@ def encode_gp(gp, kind: str, X, y) -> dict:
     k = gp.kernel_
     main, white = k.k1, k.k2
     if kind == "spectral_mixture":
-        params = {"weights": main.weights.tolist(), "means": main.means.tolist(),
-                  "variances": main.variances.tolist()}
+        params = {name: np.asarray(getattr(main, name), dtype=np.float64).ravel().tolist()
+                  for name in ("weights", "means", "variances")}
     else:
         params = {"constant": float(main.k1.constant_value),
                   "length_scale": np.atleast_1d(main.k2.length_scale).tolist()}
@@ -107,29 +110,42 @@ def loads(text: str, source: str) -> VolumetricModelSpec:
 ERROR_COMPONENTS = ("ex", "ey", "ez")
 
 
-def fit_error_gps(X, errors, Q: int = 10, check=None) -> tuple[dict, dict, dict]:
+def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None) -> tuple[dict, dict, dict, dict]:
     """A GP of each volumetric-error component (ex, ey, ez) at the positions X (machine frame, mm),
-    the kernel chosen by leave-one-out (core.calibration.gp.fit_gp). Returns (regressors, their
-    specs for the model file, {component: LOO RMS µm per kernel and the chosen one}). ``check`` (e.g.
-    a Progress's) is called before each component, so a cancel stops between fits."""
-    from .gp import fit_gp
+    their kernel chosen by K-fold cross-validation with the hyperparameters re-fitted in each fold
+    (core.calibration.gp.select_gps). ``noise_var``: the known variance (mm²) of each component's
+    error at a fiducial (measured and calibrated centres' σ²), a floor for the GP's noise. Returns
+    (regressors, their specs for the model file, {component: closed-form LOO RMS µm per kernel and
+    the chosen one — in-sample, for comparison}, the selection: {"criterion", "chosen",
+    "cv_rms_um": {kernel: {component: RMS}}, "gp_cv_rms_um": the chosen kernel's {component: RMS,
+    "norm": RMS of |e|}, "no_gp_rms_um": the same without a GP}). ``check`` (e.g. a Progress's) is
+    called between candidate kernels, so a cancel stops between fits."""
+    from .gp import select_gps
 
     errors = np.asarray(errors, dtype=np.float64)
+    gp_list, info = select_gps(X, errors, Q=Q, noise_var=noise_var, check=check)
+    chosen, kind = info["chosen"], info["kind"]
     gps, specs, loo = {}, {}, {}
     for k, name in enumerate(ERROR_COMPONENTS):
-        if check is not None:
-            check()
-        gp, info = fit_gp(X, errors[:, k], Q=Q)
-        gps[name] = gp
-        specs[name] = encode_gp(gp, info["chosen"], X, errors[:, k])
-        loo[name] = {kk: v * 1e3 for kk, v in info["loo_rms"].items()} | {"chosen": info["chosen"]}
-    return gps, specs, loo
+        gps[name] = gp_list[k]
+        specs[name] = encode_gp(gp_list[k], kind, X, errors[:, k])
+        loo[name] = {kk: v[k] * 1e3 for kk, v in info["loo_rms"].items()} | {"chosen": chosen}
+
+    def per_component(v):
+        d = {n: float(v[k]) * 1e3 for k, n in enumerate(ERROR_COMPONENTS)}
+        return d | {"norm": float(np.sqrt(np.sum(np.square(v)))) * 1e3}
+
+    selection = {"criterion": info["criterion"], "chosen": chosen, "kind": kind,
+                 "gp_cv_rms_um": per_component(info["cv_rms"][chosen]),
+                 "no_gp_rms_um": per_component(info["zero_rms"]),
+                 "cv_rms_um": {kk: per_component(v) for kk, v in info["cv_rms"].items()}}
+    return gps, specs, loo, selection
 
 
-def model_text(fit, X, gp_specs: dict, loo_rms_um: dict) -> str:
+def model_text(fit, X, gp_specs: dict, loo_rms_um: dict, gp_selection: dict | None = None) -> str:
     """volumetric_model.json's text: the transform (an AffineFit), the workspace (bounding box of
-    the machine-frame positions X) and the GP specs."""
+    the machine-frame positions X), the GP specs and how their kernel was chosen."""
     X = np.asarray(X, dtype=np.float64)
     workspace = np.column_stack([X.min(axis=0), X.max(axis=0)]).tolist()
     return dumps({"transform": fit.to_dict(), "workspace": workspace, "gp": gp_specs,
-                  "loo_rms_um": loo_rms_um})
+                  "loo_rms_um": loo_rms_um, "gp_selection": gp_selection or {}})

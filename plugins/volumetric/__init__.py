@@ -83,9 +83,10 @@ def _example_params():
     ref = example_layout()
     meas = example_measured_centres(ref)
     fit = fit_affine(ref, meas, 1e-7, 0.2e-3)  # exact centres; σ_reference as the fiducials step's default
-    _, gp_specs, loo = vm.fit_error_gps(meas, fit.volumetric_errors, Q=2)
+    _, gp_specs, loo, selection = vm.fit_error_gps(meas, fit.volumetric_errors, Q=2)
     d = Path(tempfile.mkdtemp(prefix="pointspro-vol-"))
-    (d / "volumetric_model.json").write_text(vm.model_text(fit, meas, gp_specs, loo), encoding="utf-8")
+    (d / "volumetric_model.json").write_text(vm.model_text(fit, meas, gp_specs, loo, selection),
+                                             encoding="utf-8")
     return {"model": str(d / "volumetric_model.json")}
 
 
