@@ -46,21 +46,26 @@ LOCAL_LIMIT = 0.6
 SIGMA_SETTLED = 0.05
 
 
-def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells: int = 24) -> float:
-    """Share of the SSR gain r_old² − r_new² that the best 10 % of occupied cells hold."""
+def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells: int = 24) -> tuple[float, float]:
+    """Share of the SSR gain r_old² − r_new² that the best 10 % of occupied cells hold (of the gain of
+    the cells that gain: where other unmodelled signal crosses the fit, cells gain and lose), and the share of
+    the points in those cells (a spiral samples its centre more densely: a global effect gains most
+    where the points are, a local one where the defect is)."""
     x, y = ctx.x, ctx.y
     span = max(np.ptp(x), np.ptp(y)) or 1.0
     ix = np.clip(((x - x.min()) / span * cells).astype(int), 0, cells - 1)
     iy = np.clip(((y - y.min()) / span * cells).astype(int), 0, cells - 1)
     k = iy * cells + ix
     gain = np.bincount(k, weights=r_old * r_old - r_new * r_new, minlength=cells * cells)
-    occ = np.bincount(k, minlength=cells * cells) > 0
-    gain = np.sort(gain[occ])[::-1]
-    total = gain.sum()
+    count = np.bincount(k, minlength=cells * cells)
+    occ = count > 0
+    rank = np.argsort(gain[occ])[::-1]
+    gain, count = gain[occ][rank], count[occ][rank]
+    total = gain[gain > 0].sum()  # where the fit gains (unmodelled signal makes others lose)
     if total <= 0:
-        return 1.0
+        return 1.0, 0.0
     top = max(int(np.ceil(0.1 * gain.size)), 1)
-    return float(gain[:top].sum() / total)
+    return float(gain[:top].sum() / total), float(count[:top].sum() / count.sum())
 
 
 #: what separates two effects that a scan cannot tell apart
@@ -79,6 +84,13 @@ SEPARATE_BY = {
     frozenset({"dynamic_lag", "spindle_axial"}): "change the spindle speed: a lag scales with speed, "
     "an axial motion does not",
     frozenset({"dynamic_lag", "pose"}): "change the scan speed or direction: a lag follows the velocity",
+    frozenset({"dynamic_lag", "squareness"}): "scan at another feed or run the spiral outward: a lag "
+    "follows the velocity (on a turned part only the radial feed moves the probe up the slope), a cone "
+    "does not",
+    frozenset({"dynamic_lag", "thermal_drift"}): "scan at another feed or in the other direction: a lag "
+    "follows the velocity, a drift the clock",
+    frozenset({"dynamic_lag", "straightness"}): "scan at another feed or run the spiral outward: a lag "
+    "follows the velocity, the slide's straightness the radius",
     frozenset({"vibration", "spindle_axial"}): "measure at another spindle speed: a synchronous spindle "
     "error follows the spindle, a vibration keeps its frequency",
     frozenset({"vibration", "spindle_tilt"}): "measure at another spindle speed: a synchronous spindle "
@@ -130,6 +142,7 @@ class Stage:
     ambiguous_with: list = field(default_factory=list)
     candidate: str = ""
     harmonic: int | None = None
+    n_candidates: int = 1
 
 
 def _independent(S: np.ndarray) -> np.ndarray:
@@ -174,26 +187,37 @@ def linear_groups(ctx: ScanContext) -> tuple[list[Group], list[str]]:
     return groups, unobservable
 
 
-def uniform_rate(t_sorted: np.ndarray) -> float | None:
-    """The sampling rate (Hz) of uniform time stamps, else None."""
-    if t_sorted.size < 64 or np.ptp(t_sorted) == 0:
+def _time_grid(t: np.ndarray) -> tuple[float, np.ndarray] | None:
+    """The scan's clock: its typical step dt (the median) and each sample's index on the grid t₀ + k·dt
+    — exact for uniform stamps, the nearest slot where a path pauses or jumps (a raster's row
+    changes). None when the stamps do not support a spectrum (too few, or mostly gaps)."""
+    if t.size < 64 or np.ptp(t) == 0:
         return None
-    dt = np.diff(t_sorted)
-    if np.std(dt) > 1e-3 * np.mean(dt):
+    dt = float(np.median(np.diff(t)))
+    if not dt > 0 or np.ptp(t) / dt > 8 * t.size:
         return None
-    return float(1.0 / np.mean(dt))
+    return dt, np.rint((t - t[0]) / dt).astype(np.int64)
 
 
 def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarray) -> Group | None:
-    """cos/sin at the strongest spectral line of the residual (uniform time stamps only)."""
+    """cos/sin at the strongest spectral line of the residual: the windowed FFT of the residual on the
+    scan's clock (empty slots zero), the peak interpolated, then refined on the exact time stamps to
+    the frequency of greatest periodogram power within half a bin. ``n_search`` is the number of
+    frequencies searched (the Bonferroni family of the vibration)."""
+    from scipy.optimize import minimize_scalar
+
     t = ctx.t[order]
-    fs = uniform_rate(t)
-    if fs is None:
+    grid = _time_grid(t)
+    if grid is None:
         return None
-    n = t.size
+    dt, k_of = grid
+    n = int(k_of[-1]) + 1
     r = resid_t_order - resid_t_order.mean()
-    F = np.abs(np.fft.rfft(r * np.hanning(n)))
-    f = np.fft.rfftfreq(n, 1.0 / fs)
+    w = np.hanning(n)
+    x = np.zeros(n)
+    np.add.at(x, k_of, r * w[k_of])
+    F = np.abs(np.fft.rfft(x))
+    f = np.fft.rfftfreq(n, dt)
     low = f < 5.0 / np.ptp(t)
     F[low] = 0.0
     k = int(np.argmax(F))
@@ -201,10 +225,17 @@ def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarr
         return None
     a, b, c = np.log(F[k - 1] + 1e-300), np.log(F[k] + 1e-300), np.log(F[k + 1] + 1e-300)
     shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 else 0.0
-    fk = (k + shift) * fs / n
+    df = 1.0 / (n * dt)
+    fk = (k + shift) * df
+    tt = t - t[0]
+    power = lambda fr: -abs(np.sum(r * np.exp(-2j * np.pi * fr * tt)))  # noqa: E731
+    fk = float(minimize_scalar(power, bounds=(fk - 0.5 * df, fk + 0.5 * df), method="bounded",
+                               options={"xatol": 1e-4 * df}).x)
     V = Vibration().columns_at(ctx, fk)
     s = np.sqrt(np.mean(V * V, axis=0))
-    return Group("vibration", V / s, s, params=("cos", "sin"), frequency=fk, n_params=3)
+    g = Group("vibration", V / s, s, params=("cos", "sin"), frequency=fk, n_params=3)
+    g.n_search = int(np.count_nonzero(~low))
+    return g
 
 
 def spindle_frequency(ctx: ScanContext, order: np.ndarray) -> float | None:
@@ -365,7 +396,7 @@ def candidate(D: _Design, chosen_cols: list[int], gr: Group, ssr_cur: float, n_c
     F = ((ssr_cur - ssr) / pe) / (ssr / dof) if dof > 0 else 0.0
     pval = float(stats.f.sf(F, pe, dof)) if dof > 0 and F > 0 else 1.0
     dbic = N * np.log(ssr / max(ssr_cur, 1e-300)) + pe * np.log(N)
-    m = n_candidates * (N / 2 if gr.effect == "vibration" else 1)
+    m = n_candidates * (getattr(gr, "n_search", N / 2) if gr.effect == "vibration" else 1)
     return Candidate(gr.name, ssr, F, pval, dbic, m, gr.n_params, gr.catch_all)
 
 
@@ -429,9 +460,11 @@ def _candidates(s: _Search, max_effects: int) -> list[str]:
 
 
 def _is_local(s: _Search, name: str) -> bool:
-    """Every library effect acts over the whole part: one whose SSR gain comes from a small area is
-    fitting a local defect, which no effect explains (→ unexplained, located)."""
-    return local_fraction(s.ctx, s.resid, s.D.resid(s.cols + s.D.index[name])) > LOCAL_LIMIT
+    """Every library effect acts over the whole part: one whose SSR gain comes from a small area (more
+    than LOCAL_LIMIT of it from the best 10 % of the cells, and more than twice their share of the
+    points) is fitting a local defect, which no effect explains (→ unexplained, located)."""
+    gain, points = local_fraction(s.ctx, s.resid, s.D.resid(s.cols + s.D.index[name]))
+    return gain > LOCAL_LIMIT and gain > 2.0 * points
 
 
 def _tie_threshold(sigma: float, a: Candidate, b: Candidate) -> float:
@@ -458,7 +491,8 @@ def _ambiguous_with(s: _Search, named: Candidate, tie: list[Candidate], sigma: f
         gr = s.by_name[o.effect]
         if gr.effect == me.effect:
             continue
-        out.append({"effect": gr.effect, "harmonic": gr.harmonic, "ssr_excess": float(o.ssr - named.ssr)})
+        out.append({"effect": gr.effect, "harmonic": gr.harmonic, "ssr_excess": float(o.ssr - named.ssr),
+                    "candidate": gr.name})
     if me.effect == "vibration" and s.spindle_hz:
         k = int(round(me.frequency / s.spindle_hz))
         T = float(np.ptp(s.ctx.t))
@@ -475,18 +509,58 @@ def _ambiguous_with(s: _Search, named: Candidate, tie: list[Candidate], sigma: f
                 if ssr - named.ssr < _tie_threshold(sigma, named, o):
                     out.append({"effect": "spindle_axial", "harmonic": k, "ssr_excess": float(ssr - named.ssr),
                                 "note": f"the vibration is at {k} × the spindle frequency: synchronous"})
+                    # beyond the spindle band: reported, never swapped in (_refine)
     return out
 
 
-def _add(s: _Search, best: Candidate, ambiguous: list[dict]) -> None:
+def _add(s: _Search, best: Candidate, ambiguous: list[dict], n_candidates: int) -> None:
     """Record the stage and refit the gap on the chosen columns."""
     gr = s.by_name[best.effect]
     s.stages.append(Stage(gr.effect, s.ssr, best.ssr, float(best.F), best.p, float(best.delta_bic), ambiguous,
-                          candidate=gr.name, harmonic=gr.harmonic))
+                          candidate=gr.name, harmonic=gr.harmonic, n_candidates=n_candidates))
     s.cols = s.cols + s.D.index[best.effect]
     s.D.ensure(s.cols)
     s.ssr, _ = s.D.ssr(s.cols)
     s.resid = s.D.resid(s.cols)
+
+
+def _refine(s: _Search, sigma: float) -> None:
+    """Each choice made among a tie is judged again with every other chosen effect in the fit (at its
+    stage, effects found later were still in the gap and could favour a look-alike): of the tie, those
+    that still fit as well as the best form the tie now, named by the same rule (_choose); those that
+    fit worse by more than the χ² threshold are no longer ambiguous — the scan tells them apart once the
+    other effects are modelled. The stages' evidence is then computed again in their order."""
+    piston = list(s.D.index["_piston"])
+    for i, st in enumerate(s.stages):
+        alts = [a["candidate"] for a in st.ambiguous_with if "candidate" in a]
+        taken = {o.candidate for j, o in enumerate(s.stages) if j != i}
+        alts = [a for a in alts if a not in taken]
+        if not alts:
+            continue
+        others = piston + [c for j, o in enumerate(s.stages) if j != i for c in s.D.index[o.candidate]]
+        fits = []
+        for nm in [st.candidate] + alts:
+            gr = s.by_name[nm]
+            fits.append(Candidate(nm, s.D.ssr(others + s.D.index[nm])[0], 0.0, 0.0, 0.0, 1.0, gr.n_params,
+                                  gr.catch_all))
+        best = min(fits, key=lambda c: c.ssr)
+        tie = [c for c in fits if c.ssr - best.ssr < _tie_threshold(sigma, best, c)]
+        named = min(tie, key=lambda c: (c.catch_all, c.n_params, c.ssr))
+        gr = s.by_name[named.effect]
+        kept = [a for a in st.ambiguous_with if "candidate" not in a]
+        st.ambiguous_with = [{"effect": s.by_name[c.effect].effect, "harmonic": s.by_name[c.effect].harmonic,
+                              "ssr_excess": float(c.ssr - named.ssr), "candidate": c.effect}
+                             for c in tie if s.by_name[c.effect].effect != gr.effect] + kept
+        st.candidate, st.effect, st.harmonic = gr.name, gr.effect, gr.harmonic
+    cols = piston
+    ssr = s.D.ssr(cols)[0]
+    for st in s.stages:
+        c = candidate(s.D, cols, s.by_name[st.candidate], ssr, st.n_candidates)
+        st.ssr_before, st.ssr_after, st.F, st.p, st.delta_bic = ssr, c.ssr, float(c.F), c.p, float(c.delta_bic)
+        cols = cols + s.D.index[st.candidate]
+        s.D.ensure(cols)
+        ssr = s.D.ssr(cols)[0]
+    s.cols, s.ssr, s.resid = cols, ssr, s.D.resid(cols)
 
 
 def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
@@ -506,7 +580,8 @@ def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
         named, tie = _choose(s, entering, sigma)
         if _is_local(s, named.effect):
             break
-        _add(s, named, _ambiguous_with(s, named, tie, sigma))
+        _add(s, named, _ambiguous_with(s, named, tie, sigma), len(names))
+    _refine(s, sigma)
     return s
 
 
