@@ -122,3 +122,96 @@ def test_identical_points_and_param_rules():
         KnnDenoiseStep.Params(method="statistical", remove=5)
     with pytest.raises(ValidationError, match="spacing must not exceed window"):
         KnnDenoiseStep.Params(window=1.0, spacing=2.0)
+
+
+# --- issue 16 part 3: small spikes, digs/scratches, rim outliers, steep regions -------------------------
+from pointspro.plugins.knn_denoise.peers import hampel  # noqa: E402
+from pointspro.plugins.knn_denoise.robust import claimed_rate, robust_outliers  # noqa: E402
+
+from .denoise_cases import ISSUE_MIX, mixture  # noqa: E402
+
+
+def _f1(found: set, truth: set) -> float:
+    tp = len(found & truth)
+    return 0.0 if tp == 0 else 2 * tp / (len(found) + len(truth))
+
+
+@pytest.mark.parametrize("seed,n,scattered,classes", [
+    (11, 60_000, True, ISSUE_MIX),
+    (12, 60_000, True, ISSUE_MIX + ("steep",)),
+    pytest.param(12, 30_000, True, ISSUE_MIX + ("steep",), marks=pytest.mark.xfail(
+        strict=True, reason="known gap (issue 16): at 1 point/mm² a 30-point dig fills most of a 3 mm "
+                            "window; digs recall 0.68, F1 0.88")),
+    (13, 40_000, False, ISSUE_MIX + ("steep",)),
+])
+def test_robust_finds_small_spikes_and_digs_and_beats_hampel(seed, n, scattered, classes):
+    """The issue's mixture: the paper's ω found 1/40 small spikes (F1 0.867), Hampel F1 0.596."""
+    cloud, truth, _ = mixture(n=n, seed=seed, classes=classes, scattered=scattered)
+    rep = run(cloud, window=3.0).report
+    assert rep["method"] == "robust"
+    found = set(rep["removed_index"])
+    every = set().union(*truth.values())
+    assert _f1(found, every) >= 0.95, {c: len(found & v) / len(v) for c, v in truth.items()}
+    ham = set(np.flatnonzero(hampel(cloud.x, cloud.y, cloud["residual"])).tolist())
+    for c, v in truth.items():  # recall per class at least Hampel's
+        assert len(found & v) >= len(ham & v), c
+    assert len(found & truth["small"]) >= 0.8 * len(truth["small"])
+    assert len(found & truth["digs"]) >= 0.9 * len(truth["digs"])
+    assert truth["rim"] <= found and truth["big"] <= found
+
+
+def test_paper_method_misses_what_robust_finds():
+    """The case of the issue: the paper's ω (method: paper) sees few small spikes."""
+    cloud, truth, _ = mixture(n=30_000, seed=21)
+    paper = set(run(cloud, window=3.0, method="paper").report["removed_index"])
+    robust = set(run(cloud, window=3.0).report["removed_index"])
+    assert len(robust & truth["small"]) >= len(paper & truth["small"]) + 5
+
+
+_GAP = pytest.mark.xfail(strict=True, reason="known gap (issue 16): model error of the local quadratic at a "
+                        "crest / the cone tip, 0.04–0.4 µm noise-free, is not yet told from an outlier")
+
+
+@pytest.mark.parametrize("case", ["scattered", "dense", pytest.param("steep", marks=_GAP),
+                                  pytest.param("raster", marks=_GAP), "q1", pytest.param("q2", marks=_GAP)])
+def test_noise_free_form_error_removes_nothing(case):
+    """Smooth form error only (σ → 0): the floor and the fits' agreement keep every point — also the
+    cone tip of the polishing residual's centre and the steep ridge / turned-down edge."""
+    if case == "q1":
+        cloud, _ = q1(spikes=(), noise_um=0.0)
+        window = 15.0
+    elif case == "q2":
+        cloud, _ = q2(n_low=0, spikes=(), noise_um=0.0)
+        window = 15.0
+    else:
+        n = {"scattered": 20_000, "dense": 60_000, "steep": 30_000, "raster": 30_000}[case]
+        cloud, _, _ = mixture(n=n, seed=31, classes=(), noise_um=0.0, ripple_um=0.0,
+                              residual_um=1.0, steep_surface=case == "steep", scattered=case != "raster")
+        window = 3.0
+    rep = run(cloud, window=window).report
+    assert rep["removed"] == 0, rep["removed_index"][:10]
+
+
+@pytest.mark.parametrize("sigma", [5.0, 3.5])
+def test_false_positive_rate_on_clean_noisy_data_within_the_claim(sigma):
+    """Gaussian noise on a smooth residual with a ripple, no outlier, 10 seeds: what is removed stays
+    at or below the rate the threshold claims (erfc(t/√2) of the points) plus 3 Poisson σ."""
+    removed = total = 0
+    for seed in range(10):
+        cloud, _, _ = mixture(n=20_000, seed=100 + seed, classes=())
+        r = robust_outliers(cloud.x, cloud.y, cloud["residual"], 3.0, 1.0, sigma, 1e-6)
+        removed += int(r.flagged.sum())
+        total += cloud.n
+    expected = claimed_rate(sigma) * total
+    assert removed <= expected + 3 * np.sqrt(expected) + 1, (removed, expected)
+    rep = run(mixture(n=20_000, seed=100, classes=())[0], window=3.0, threshold_sigma=sigma).report
+    assert rep["false_positive_rate"] == pytest.approx(claimed_rate(sigma))
+
+
+def test_robust_count_and_floor_and_hampel_method():
+    cloud, spikes = q1()
+    assert set(run(cloud, window=15.0, remove=3).report["removed_index"]) == spikes
+    # a floor above the spikes: nothing goes
+    assert run(cloud, window=15.0, floor=0.02).report["removed"] == 0
+    rep = run(cloud, window=15.0, method="hampel").report
+    assert spikes <= set(rep["removed_index"])

@@ -59,7 +59,7 @@ class KnnDenoiseParams(Params):
     threshold_sigma: float | None = param(
         None, gt=1, le=100, help="auto: threshold in robust σ; empty: 5 for robust (false-positive rate "
                                  "5.7e-7 on Gaussian noise), 8 for paper and hampel")
-    floor: float = param(1e-6, unit="mm", ge=0, help="robust: a point nearer than this to its local fit "
+    floor: float = param(1e-5, unit="mm", ge=0, help="robust: a point nearer than this to its local fit "
                          "is never removed (noise-free data loses nothing); about the instrument's resolution")
     interpolation: Literal["auto", "cubic", "binned"] = param(
         "auto", help="grid interpolation: cubic (Clough–Tocher, the paper's) up to 150,000 points, "
