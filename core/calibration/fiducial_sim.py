@@ -6,8 +6,9 @@ points of the balls and calibration noise on the reference centres, and workpiec
 not fiducials. Two families of random smooth fields, so that no one kernel is favoured by the
 construction:
 
-* ``fourier``: a sum of random plane waves per component, periods from 0.8 to a few times each
-  axis' travel (a field that varies along every axis at once);
+* ``fourier``: a sum of six random plane waves per component, their frequencies along each axis
+  normal with σ = 0.3 cycles per travel (a Gaussian spectrum: a field that varies along every axis
+  at once, correlation length about ½ travel);
 * ``kinematic``: the ISO 230-1 picture of a three-axis machine: positioning and straightness errors,
   each a smooth function of one axis (cubic plus a sine of period 1–3 travels), and angular errors
   of each axis times their Abbe offsets (products of a function of one axis and another coordinate).
@@ -24,7 +25,7 @@ from .fiducials import ball_points
 
 EXTENT = np.array([200.0, 40.0, 50.0])          # mm
 LOW = np.array([-100.0, -20.0, 0.0])
-UMAX = 0.6
+SPECTRUM = 0.3    # σ of the plane waves' frequencies, cycles per travel
 
 
 def machine_frame(ref):
@@ -37,7 +38,7 @@ def _fourier(rng, extent, low):
     waves = []
     for _k in range(3):
         n = 6
-        u = rng.uniform(-UMAX, UMAX, (n, 3))                 # cycles per travel
+        u = rng.normal(0, SPECTRUM, (n, 3))                  # cycles per travel
         f = u / extent                                       # cycles per mm
         a = rng.normal(0, 1, n) / np.sqrt(n)
         ph = rng.uniform(0, 2 * np.pi, n)
@@ -101,7 +102,8 @@ class FiducialCase:
     def reference_csv(self) -> str:
         n = len(self.ref_given)
         rows = np.column_stack([np.arange(1, n + 1), self.ref_given])
-        return "fiducial,x,y,z\n" + "".join(f"{int(r[0])},{r[1]!r},{r[2]!r},{r[3]!r}\n" for r in rows)
+        return "fiducial,x,y,z\n" + "".join(f"{int(r[0])}," + ",".join(repr(float(v)) for v in r[1:]) + "\n"
+                                             for r in rows)
 
 
 def case_000(seed: int, kind: str = "fourier", n: int = 24, rms_um: float = 1.3, probe_um: float = 0.2,

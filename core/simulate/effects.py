@@ -132,16 +132,24 @@ def _lobes(c_deg, ks):
 
 def resolved_harmonics(ctx: ScanContext, kmax: int = SPINDLE_HARMONICS) -> int:
     """The highest harmonic of the spindle angle c that the scan's angular sampling resolves: below the
-    Nyquist order 180°/Δc of Δc, the widest angular gap on the rings of the scan's outer half (median
-    over 8 rings; where a tilt's signal is largest), capped at ``kmax``. 0 when no ring is sampled."""
+    Nyquist order 180°/Δc of Δc, the widest angular gap within a ring of the scan's outer half (where
+    a tilt's signal is largest), the median over the rings; capped at ``kmax``, 0 when no ring is
+    sampled. A ring is at least 1.5 times the scan's line spacing wide (the area over the path's
+    length: a spiral's pitch, a raster's row spacing), so that it holds whole turns or crossings."""
     r = ctx.r
     if r.size < 8 or not np.ptp(r) > 0:
         return 0
-    edges = np.linspace(np.median(r), r.max(), 9)
-    ring = np.clip(np.searchsorted(edges, r, side="right") - 1, 0, 7)
+    order = np.argsort(ctx.t, kind="stable") if np.ptp(ctx.t) > 0 else np.arange(r.size)
+    length = float(np.sum(np.hypot(np.diff(ctx.x[order]), np.diff(ctx.y[order]))))
+    spacing = np.pi * float(r.max()) ** 2 / max(length, 1e-300)
+    r0, r1 = float(np.median(r)), float(r.max())
+    n = int(max(min(8, (r1 - r0) / max(1.5 * spacing, 1e-12)), 1))
+    edges = np.linspace(r0, r1, n + 1)
+    ring = np.clip(np.searchsorted(edges, r, side="right") - 1, 0, n - 1)
+    cc = np.asarray(ctx.c, float) % 360.0
     gaps = []
-    for i in range(8):
-        ci = np.sort(np.asarray(ctx.c, float)[(ring == i) & (r >= edges[0])] % 360.0)
+    for i in range(n):
+        ci = np.sort(cc[(ring == i) & (r >= r0)])
         if ci.size < 4:
             continue
         gaps.append(float(np.max(np.diff(np.r_[ci, ci[0] + 360.0]))))
