@@ -26,9 +26,13 @@ from pointspro.core.simulate.scan import scan_points
 SEEDS = range(200)
 NOISE = 2e-6  # mm
 SURFACE = {"type": "even_asphere", "R": 200.0, "k": -0.5, "A": {4: 2e-8}, "aperture": 50.0}
-# small clouds: a spiral of 400 points (uniform time stamps: the vibration search runs) and a raster
+# small clouds: a spiral of 400 points (uniform time stamps: the vibration search runs; 20 samples a turn
+# resolve the spindle's harmonics up to 9), a spiral of 800 points sampled finely in angle (80 a turn:
+# all 32 harmonics of the spindle_axial and spindle_tilt, ~70 candidates a stage) and a raster (its
+# clock has jumps at the row changes; the vibration is searched on it too)
 SCANS = {
     "spiral": {"type": "spiral", "radius": 10.0, "rpm": 60.0, "pitch": 0.5, "fs": 20.0},
+    "spiral_harmonics": {"type": "spiral", "radius": 10.0, "rpm": 60.0, "pitch": 1.0, "fs": 80.0},
     "raster": {"type": "raster", "radius": 10.0, "spacing": 0.5, "lines": 15, "speed": 5.0},
 }
 
@@ -69,10 +73,21 @@ def test_significance_gate_alone_holds_alpha(ctx, monkeypatch):
         f"{fp}/{len(SEEDS)} pure-noise gaps pass p < α/m: the Bonferroni correction does not hold α")
 
 
-def test_without_bonferroni_the_gate_does_not_hold_alpha(monkeypatch):
+def test_without_bonferroni_the_gate_does_not_hold_alpha(ctx, monkeypatch):
     """The same seeds with p < α: the test above sees a correction that is missing."""
     monkeypatch.setattr(S, "BIC_STRONG", np.inf)
     monkeypatch.setattr(S, "LOCAL_LIMIT", np.inf)
     monkeypatch.setattr(S, "significant", lambda p, m: p < S.ALPHA)
-    fp = false_positives(scan_context(SCANS["spiral"]))
+    fp = false_positives(ctx)
     assert fp > most_allowed(S.ALPHA), f"{fp}/{len(SEEDS)}"
+
+
+def test_the_spindle_harmonics_are_in_the_family():
+    """Each resolved harmonic is a candidate of its own: the fine spiral's stage judges ~70."""
+    from pointspro.core.simulate.effects import resolved_harmonics
+
+    ctx = scan_context(SCANS["spiral_harmonics"])
+    assert resolved_harmonics(ctx) == 32
+    groups, _ = S.linear_groups(ctx)
+    assert sum(g.effect == "spindle_axial" for g in groups) == 32
+    assert sum(g.effect == "spindle_tilt" for g in groups) == 31

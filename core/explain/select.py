@@ -366,7 +366,7 @@ class Candidate:
 def significant(p: float, m: float) -> bool:
     """p < α/m: Bonferroni over the m candidates of a stage, so that on a gap with no effect in it the
     chance that any candidate passes stays ≤ α (the vibration's m counts its N/2 searched frequencies)."""
-    return p < ALPHA  # TEMP: Bonferroni removed
+    return p < ALPHA / m
 
 
 def enters(c: Candidate) -> bool:
