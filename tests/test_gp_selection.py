@@ -1,0 +1,85 @@
+"""Issue 16 part 1: the volumetric GP's kernel chosen by an honest out-of-sample criterion.
+
+Cases in the set-up of 000 §2.4 (core.calibration.fiducial_sim): 24 balls at random in 200 × 40 × 50 mm,
+a random smooth field of 1.3 µm RMS |e| (two families, several seeds), 0.2 µm probing noise on each
+probe point and 0.2 µm calibration noise on the reference centres, 3,000 workpiece points inside the
+calibrated workspace that are not fiducials; `fiducials` then `volumetric {frame: reference}`; the
+error is the RMS of |corrected − true| over the workpiece points (3-D, µm).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pointspro.core import PointCloud
+from pointspro.core.calibration.fiducial_sim import case_000
+from pointspro.core.step import Context
+from pointspro.plugins.fiducials import FiducialsStep
+from pointspro.plugins.volumetric import VolumetricStep
+
+
+def run_case(tmp_path, seed, kind):
+    c = case_000(seed, kind)
+    (tmp_path / "reference.csv").write_text(c.reference_csv(), encoding="utf-8")
+    cloud = PointCloud.from_xyz(*c.points.T, fiducial=c.ids)
+    res = FiducialsStep().run(cloud, FiducialsStep.Params(reference="reference.csv", monte_carlo_runs=0),
+                              Context(base_dir=tmp_path))
+    (tmp_path / "m.json").write_text(res.artifacts["volumetric_model.json"], encoding="utf-8")
+    out = VolumetricStep().run(PointCloud(c.work_meas), VolumetricStep.Params(model="m.json", frame="reference"),
+                               Context(base_dir=tmp_path))
+    from pointspro.core.calibration import volumetric_model as vm
+    from pointspro.core.calibration.fiducials import PARAMS, AffineFit
+
+    t = vm.loads(res.artifacts["volumetric_model.json"], "m.json").transform
+    fit = AffineFit(np.array([t["params"][n] for n in PARAMS]), np.zeros((12, 12)), 0, 0, 0, None)
+
+    def rms(p):
+        return float(np.sqrt(np.mean(np.sum((p - c.work_ref) ** 2, axis=1))) * 1e3)
+
+    return rms(out.cloud.xyz), rms(fit.inverse(c.work_meas)), res.report
+
+
+@pytest.mark.parametrize("seed, kind", [(0, "fourier"), (1, "fourier"), (2, "fourier"), (2, "kinematic")])
+def test_workpiece_error_after_the_gp_over_seeds(tmp_path, seed, kind):
+    """Measured (µm, GP / affine only): fourier 0 0.80/0.86, 1 0.41/0.64, 2 0.34/0.80, kinematic 2
+    0.52/0.83 (goal of issue 16: ≤ 0.40 — met on one seed of four). The former in-sample choice took a
+    spectral mixture that interpolated the fiducials and removed ~11 % of the error (issue 16)."""
+    gp, affine, rep = run_case(tmp_path, seed, kind)
+    print(f"{kind} seed {seed}: GP {gp:.3f} µm, affine only {affine:.3f} µm, {rep['gp_selection']['chosen']}")
+    sel = rep["gp_selection"]
+    assert sel["criterion"].startswith("6-fold cross-validation")
+    assert rep["gp_cv_rms_um"] == sel["cv_rms_um"][sel["chosen"]]
+    # the chosen kernel has the lowest cross-validated error, and it is below "no GP at all"
+    pooled = {k: v["norm"] for k, v in sel["cv_rms_um"].items()}
+    assert sel["chosen"] == min(pooled, key=pooled.get)
+    assert rep["gp_cv_rms_um"]["norm"] < sel["no_gp_rms_um"]["norm"]
+    # the honest figure cannot be below the noise of a held-out fiducial (0.2 µm calibration noise per
+    # axis: ≥ 0.35 µm in |e|), which the in-sample LOO of a spectral mixture is
+    assert rep["gp_cv_rms_um"]["norm"] > 0.3
+    assert gp < 0.95 * affine, (gp, affine)
+
+
+def test_in_sample_loo_is_biased_and_cross_validation_is_not():
+    """A 10-component spectral mixture fitted to all 24 fiducials: its closed-form LOO is far below the
+    noise it was given, its cross-validated RMS (hyperparameters re-fitted without the held-out balls)
+    is not — and the honest choice does not take it."""
+    from pointspro.core.calibration.gp import select_gps
+
+    rng = np.random.default_rng(4)
+    X = np.column_stack([rng.uniform(-100, 100, 24), rng.uniform(-20, 20, 24), rng.uniform(0, 50, 24)])
+    y = 5e-4 * np.sin(X[:, 0] / 60) + 3e-4 * np.cos(X[:, 2] / 30) + rng.normal(0, 2e-4, 24)
+    gps, info = select_gps(X, y, Q=10)
+    assert info["chosen"] in info["cv_rms"] and not info["chosen"].startswith("spectral_mixture_Q10")
+    for name, cv in info["cv_rms"].items():
+        assert cv[0] > 1.2e-4, (name, cv)          # noise 2e-4: nothing predicts held-out balls better
+    sm = [n for n in info["loo_rms"] if n.startswith("spectral_mixture")]
+    assert any(info["loo_rms"][n][0] < 0.5 * info["cv_rms"][n][0] for n in sm), info
+
+
+def test_model_file_records_the_selection(tmp_path):
+    from pointspro.core.calibration import volumetric_model as vm
+
+    _, _, rep = run_case(tmp_path, 0, "kinematic")
+    spec = vm.loads((tmp_path / "m.json").read_text(encoding="utf-8"), "m.json")
+    assert spec.gp_selection["chosen"] == rep["gp_selection"]["chosen"]
+    assert spec.gp["ex"].kind == rep["gp_selection"]["kind"]
