@@ -1,6 +1,7 @@
 """Outlier finding on residual maps: knn_denoise against open3d and scikit-learn, F1 and seconds.
 
     .venv/bin/python benchmarks/bench_denoise.py [--sizes 50000 1000000]
+    .venv/bin/python benchmarks/bench_denoise.py --classes [--seeds 4 --points 60000 --raster]
 
 Data (tests/denoise_cases.py `injected`): a 1000 mm aperture, a smooth 0.3 µm RMS polishing residual,
 20 nm noise and 0.2 % of the points pushed up or down by 0.5–20 µm; gridded (raster) and scattered
@@ -20,7 +21,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pointspro.core.step import Context  # noqa: E402
 from pointspro.plugins.knn_denoise import KnnDenoiseStep  # noqa: E402
-from tests.denoise_cases import injected  # noqa: E402
+from pointspro.plugins.knn_denoise.peers import hampel  # noqa: E402
+from tests.denoise_cases import ISSUE_MIX, injected, mixture  # noqa: E402
 
 
 def f1(found: set, truth: set) -> float:
@@ -37,10 +39,48 @@ def timed(fn):
     return time.perf_counter() - t0, out
 
 
+def prf(found: set, truth: set):
+    tp = len(found & truth)
+    p = tp / len(found) if found else 1.0
+    r = tp / len(truth) if truth else 1.0
+    return p, r, (0.0 if tp == 0 else 2 * p * r / (p + r))
+
+
+def classes(seeds, n, scattered):
+    """Issue 16 part 3: per class (a case holding only that class) and the mixtures, robust against
+    the paper's ω and a Hampel filter (25 nearest neighbours, median ± 8 robust σ): P / R / F1."""
+    print("| case | points | method | precision | recall | F1 | seconds |\n|---|---:|---|---:|---:|---:|---:|")
+    cases = [(c, (c,)) for c in ("small", "digs", "rim", "big", "steep")] + [
+        ("issue mixture", ISSUE_MIX), ("mixture + steep", ISSUE_MIX + ("steep",))]
+    for label, cl in cases:
+        acc = {}
+        for seed in seeds:
+            cloud, truth, _ = mixture(n=n, seed=seed, classes=cl, scattered=scattered)
+            every = set().union(*truth.values())
+            x, y, d = cloud.x, cloud.y, cloud["residual"]
+            for method in ("robust", "paper"):
+                p = KnnDenoiseStep.Params(window=3.0, method=method)
+                t, res = timed(lambda: KnnDenoiseStep().run(cloud, p, Context()))
+                acc.setdefault(method, []).append((*prf(set(res.report["removed_index"]), every), t))
+            t, bad = timed(lambda: hampel(x, y, d))
+            acc.setdefault("hampel", []).append((*prf(set(np.flatnonzero(bad).tolist()), every), t))
+        for method, rows in acc.items():
+            a = np.mean(rows, axis=0)
+            print(f"| {label} | {cloud.n:,} | {method} | {a[0]:.3f} | {a[1]:.3f} | {a[2]:.3f} | {a[3]:.2f} |",
+                  flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", type=int, nargs="+", default=[50_000, 1_000_000])
+    ap.add_argument("--classes", action="store_true", help="issue 16's classes instead (60,000 points)")
+    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--points", type=int, default=60_000)
+    ap.add_argument("--raster", action="store_true")
     args = ap.parse_args()
+    if args.classes:
+        classes(range(args.seeds), args.points, not args.raster)
+        return
     import open3d as o3d
     from sklearn.neighbors import LocalOutlierFactor
 
@@ -51,8 +91,9 @@ def main():
             kind = "scattered" if scattered else "gridded"
             x, y, d = cloud.x, cloud.y, cloud["residual"]
             rows = []
-            for label, params in (("knn_denoise paper (count)", {"remove": len(truth)}),
-                                  ("knn_denoise auto", {})):
+            for label, params in (("knn_denoise paper (count)", {"remove": len(truth), "method": "paper"}),
+                                  ("knn_denoise paper auto", {"method": "paper"}),
+                                  ("knn_denoise robust auto", {})):
                 p = KnnDenoiseStep.Params(window=10.0, **params)
                 t, res = timed(lambda: KnnDenoiseStep().run(cloud, p, Context()))
                 rows.append((label, f1(set(res.report["removed_index"]), truth), t))
