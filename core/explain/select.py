@@ -34,7 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 from ..simulate.effects import LIBRARY, ScanContext, Vibration, _Harmonics, resolved_harmonics
 
@@ -162,7 +162,9 @@ def _group(name, effect, params, S, **kw) -> Group | None:
     if keep.size == 0:
         return None
     S = S[:, keep] / s[keep]
-    sel = _independent(S)
+    g = S.T @ S / S.shape[0]
+    w = np.linalg.eigvalsh(g)
+    sel = np.arange(S.shape[1]) if w[0] > 1e-9 * w[-1] else _independent(S)
     idx = keep[sel]
     return Group(name, S[:, sel], s[idx], effect=effect, params=tuple(params[i] for i in idx), **kw)
 
@@ -176,8 +178,10 @@ def linear_groups(ctx: ScanContext) -> tuple[list[Group], list[str]]:
         if not eff.linear:
             continue
         if isinstance(eff, _Harmonics):
-            got = [_group(f"{name}[{k}]", name, eff.harmonic_params(k), eff.harmonic_columns(ctx, k),
-                          harmonic=k) for k in eff.harmonics if k <= kmax]
+            ks = [k for k in eff.harmonics if k <= kmax]
+            block = eff.harmonic_block(ctx, ks) if ks else None
+            got = [_group(f"{name}[{k}]", name, eff.harmonic_params(k), block[:, 2 * j:2 * j + 2], harmonic=k)
+                   for j, k in enumerate(ks)]
         else:
             got = [_group(name, name, eff.params, eff.columns(ctx), catch_all=eff.catch_all)]
         got = [g for g in got if g is not None]
@@ -230,7 +234,7 @@ def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarr
     tt = t - t[0]
     power = lambda fr: -abs(np.sum(r * np.exp(-2j * np.pi * fr * tt)))  # noqa: E731
     fk = float(minimize_scalar(power, bounds=(fk - 0.5 * df, fk + 0.5 * df), method="bounded",
-                               options={"xatol": 1e-4 * df}).x)
+                               options={"xatol": 1e-3 * df}).x)
     V = Vibration().columns_at(ctx, fk)
     s = np.sqrt(np.mean(V * V, axis=0))
     g = Group("vibration", V / s, s, params=("cos", "sin"), frequency=fk, n_params=3)
@@ -292,15 +296,19 @@ class _Design:
         self.full[todo] = True
 
     def add(self, name, cols):
+        """Columns found later: their own block and their products with the chosen (full) columns now,
+        the rest when they are chosen (ensure)."""
         k0 = self.G.shape[0]
-        border = np.r_[self.A.T @ cols, *[V.T @ cols for _, V in self.extra]] if k0 else np.zeros((0, cols.shape[1]))
-        G = np.zeros((k0 + cols.shape[1],) * 2)
+        G = np.full((k0 + cols.shape[1],) * 2, np.nan)
         G[:k0, :k0] = self.G
-        G[:k0, k0:] = border
-        G[k0:, :k0] = border.T
+        done = list(np.flatnonzero(self.full))
+        if done:
+            border = self.X(done).T @ cols
+            G[done, k0:] = border
+            G[k0:, done] = border.T
         G[k0:, k0:] = cols.T @ cols
         self.G = G
-        self.full = np.r_[self.full, np.ones(cols.shape[1], bool)]
+        self.full = np.r_[self.full, np.zeros(cols.shape[1], bool)]
         self.b = np.r_[self.b, cols.T @ self.g]
         self.extra.append((k0, cols))
         self.index[name] = list(range(k0, k0 + cols.shape[1]))
@@ -394,7 +402,7 @@ def candidate(D: _Design, chosen_cols: list[int], gr: Group, ssr_cur: float, n_c
     dof = N - len(cand)
     ssr = max(ssr, 1e-300)
     F = ((ssr_cur - ssr) / pe) / (ssr / dof) if dof > 0 else 0.0
-    pval = float(stats.f.sf(F, pe, dof)) if dof > 0 and F > 0 else 1.0
+    pval = float(special.fdtrc(pe, dof, F)) if dof > 0 and F > 0 else 1.0  # P(F_{pe,dof} > F)
     dbic = N * np.log(ssr / max(ssr_cur, 1e-300)) + pe * np.log(N)
     m = n_candidates * (getattr(gr, "n_search", N / 2) if gr.effect == "vibration" else 1)
     return Candidate(gr.name, ssr, F, pval, dbic, m, gr.n_params, gr.catch_all)

@@ -181,8 +181,22 @@ class _Harmonics(Effect):
     def harmonic_params(self, k: int) -> tuple[str, str]:
         return f"a{k}{self.suffix}", f"b{k}{self.suffix}"
 
+    def harmonic_block(self, c, ks) -> np.ndarray:
+        """The columns (cos kc, sin kc) of every k in ks (ascending), 2 per harmonic, by the recurrence
+        e^{ikc} = e^{i(k−1)c}·e^{ic} (one complex exponential for them all; error ~k·1e-16)."""
+        e1 = np.exp(1j * np.deg2rad(np.asarray(c.c, float)))
+        w = self.weight(c)
+        out = np.empty((e1.size, 2 * len(ks)))
+        ek, k0 = np.ones_like(e1), 0
+        for j, k in enumerate(ks):
+            ek = ek * e1 ** (k - k0) if k - k0 != 1 else ek * e1
+            k0 = k
+            out[:, 2 * j] = w * ek.real
+            out[:, 2 * j + 1] = w * ek.imag
+        return out
+
     def columns(self, c):
-        return self.weight(c)[:, None] * _lobes(c.c, self.harmonics)
+        return self.harmonic_block(c, self.harmonics)
 
     def apply(self, c, values):
         unknown = set(values) - set(self.params)
