@@ -93,7 +93,7 @@ def main():
             rows = []
             for label, params in (("knn_denoise paper (count)", {"remove": len(truth), "method": "paper"}),
                                   ("knn_denoise paper auto", {"method": "paper"}),
-                                  ("knn_denoise robust auto", {})):
+                                  ("knn_denoise robust auto", {"method": "robust"})):
                 p = KnnDenoiseStep.Params(window=10.0, **params)
                 t, res = timed(lambda: KnnDenoiseStep().run(cloud, p, Context()))
                 rows.append((label, f1(set(res.report["removed_index"]), truth), t))

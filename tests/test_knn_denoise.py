@@ -147,7 +147,7 @@ def _f1(found: set, truth: set) -> float:
 def test_robust_finds_small_spikes_and_digs_and_beats_hampel(seed, n, scattered, classes):
     """The issue's mixture: the paper's ω found 1/40 small spikes (F1 0.867), Hampel F1 0.596."""
     cloud, truth, _ = mixture(n=n, seed=seed, classes=classes, scattered=scattered)
-    rep = run(cloud, window=3.0).report
+    rep = run(cloud, window=3.0, method="robust").report
     assert rep["method"] == "robust"
     found = set(rep["removed_index"])
     every = set().union(*truth.values())
@@ -164,7 +164,7 @@ def test_paper_method_misses_what_robust_finds():
     """The case of the issue: the paper's ω (method: paper) sees few small spikes."""
     cloud, truth, _ = mixture(n=30_000, seed=21)
     paper = set(run(cloud, window=3.0, method="paper").report["removed_index"])
-    robust = set(run(cloud, window=3.0).report["removed_index"])
+    robust = set(run(cloud, window=3.0, method="robust").report["removed_index"])
     assert len(robust & truth["small"]) >= len(paper & truth["small"]) + 5
 
 
@@ -188,7 +188,7 @@ def test_noise_free_form_error_removes_nothing(case):
         cloud, _, _ = mixture(n=n, seed=31, classes=(), noise_um=0.0, ripple_um=0.0,
                               residual_um=1.0, steep_surface=case == "steep", scattered=case != "raster")
         window = 3.0
-    rep = run(cloud, window=window).report
+    rep = run(cloud, window=window, method="robust").report
     assert rep["removed"] == 0, rep["removed_index"][:10]
 
 
@@ -204,14 +204,16 @@ def test_false_positive_rate_on_clean_noisy_data_within_the_claim(sigma):
         total += cloud.n
     expected = claimed_rate(sigma) * total
     assert removed <= expected + 3 * np.sqrt(expected) + 1, (removed, expected)
-    rep = run(mixture(n=20_000, seed=100, classes=())[0], window=3.0, threshold_sigma=sigma).report
+    rep = run(mixture(n=20_000, seed=100, classes=())[0], window=3.0, threshold_sigma=sigma,
+              method="robust").report
     assert rep["false_positive_rate"] == pytest.approx(claimed_rate(sigma))
 
 
 def test_robust_count_and_floor_and_hampel_method():
     cloud, spikes = q1()
-    assert set(run(cloud, window=15.0, remove=3).report["removed_index"]) == spikes
+    assert set(run(cloud, window=15.0, remove=3, method="robust").report["removed_index"]) == spikes
+    assert set(run(cloud, window=15.0, method="robust").report["removed_index"]) == spikes
     # a floor above the spikes: nothing goes
-    assert run(cloud, window=15.0, floor=0.02).report["removed"] == 0
+    assert run(cloud, window=15.0, floor=0.02, method="robust").report["removed"] == 0
     rep = run(cloud, window=15.0, method="hampel").report
     assert spikes <= set(rep["removed_index"])
