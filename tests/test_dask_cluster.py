@@ -315,7 +315,7 @@ def test_ctrl_c_on_the_cluster_then_resume(real_cluster, tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 130, err
-    assert "run the same command with --resume" in err and "Traceback" not in err
+    assert "run the same command with --resume" in err and "Traceback" not in err, err
     out = work / "o"
     assert not list(out.glob(".*")), list(out.glob(".*"))
     done = [p for p in out.iterdir() if p.is_dir()]
