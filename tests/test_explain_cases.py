@@ -207,3 +207,25 @@ def test_noise_is_estimated_again_without_a_strong_vibration(tmp_path):
     assert rep["verdict"] == "unexplained"
     reg = rep["unexplained"]["regions"][0]
     assert np.hypot(reg["x"] - 4.0, reg["y"] + 6.0) < 1.5
+
+
+def test_a_catch_all_is_never_named_before_a_physical_effect_that_fits_as_well():
+    """The tie rule itself: volumetric (5 parameters, a catch-all) with the lowest ΔBIC and a
+    1-parameter probe_radius whose fit is worse by less than the χ² threshold: probe_radius is named,
+    volumetric reported with it; a physical effect that fits clearly better still wins."""
+    from pointspro.core.explain import select as S
+
+    sigma = 2e-6
+    vol = S.Candidate("volumetric", 1.000e-6, 50.0, 1e-30, -300.0, 10, 5, True)
+    probe = S.Candidate("probe_radius", 1.000e-6 + 10 * sigma**2, 240.0, 1e-30, -290.0, 10, 1, False)
+    far = S.Candidate("z_scale", 1.000e-6 + 100 * sigma**2, 200.0, 1e-30, -200.0, 10, 1, False)
+    named, tie = S._choose(None, [vol, probe, far], sigma)
+    assert named is probe and tie == [vol]
+    better = S.Candidate("probe_radius", 1.000e-6 - 5 * sigma**2, 260.0, 1e-30, -310.0, 10, 1, False)
+    named, tie = S._choose(None, [better, vol], sigma)
+    assert named is better and tie == [vol]
+    # fewer parameters first among physical effects too: a spindle harmonic (2) before a vibration (3)
+    harm = S.Candidate("spindle_axial[3]", 1e-6, 9.0, 1e-30, -99.0, 10, 2, False)
+    vib = S.Candidate("vibration@0", 1e-6 - sigma**2, 9.0, 1e-30, -100.0, 10, 3, False)
+    named, _ = S._choose(None, [vib, harm], sigma)
+    assert named is harm
