@@ -327,3 +327,17 @@ def test_ctrl_c_on_the_cluster_then_resume(real_cluster, tmp_path):
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["counts"].get("ok", 0) + s["counts"].get("skipped", 0) == 8
     assert s["counts"].get("skipped", 0) >= len(done)
+
+
+def test_check_only_without_a_cluster_checks_this_machine(run_cli, tmp_path, monkeypatch):
+    work = _data(tmp_path / "data", n=2)
+    monkeypatch.chdir(work)
+    code, out, err = run_cli("--batch", "recipes/r.yaml", *_inputs(work), *ALLOW, "--out", "o", "--check-only")
+    assert code == 0 and "ready on this machine" in out, err
+    assert not list((work / "o").iterdir())  # nothing ran
+    code, out, err = run_cli("--batch", "recipes/r.yaml", "in/p0.csv", "in/gone.csv", *ALLOW, "--out", "o",
+                             "--check-only")
+    assert code == 2 and err.strip().splitlines() == [
+        f"pointspro: this machine: cannot read the input {work / 'in' / 'gone.csv'}"], err
+    code, out, err = run_cli("--batch", "recipes/r.yaml", "in/p0.csv", "--out", "o", "--ship")
+    assert code == 2 and "--ship goes with --scheduler" in err
