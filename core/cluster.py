@@ -165,11 +165,20 @@ def bundled_recipe(bundle: dict):
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
+    if not _BUNDLES:
+        import atexit
+
+        atexit.register(_remove_bundles)  # the worker's temporary folders go with it
     while len(_BUNDLES) >= _KEEP:  # the oldest recipe version goes, with its folder
         old = _BUNDLES.pop(next(iter(_BUNDLES)))
         shutil.rmtree(old[2], ignore_errors=True)
     _BUNDLES[bundle["hash"]] = (recipe, surface, folder, pmap)
     return recipe, surface, pmap
+
+
+def _remove_bundles() -> None:
+    while _BUNDLES:
+        shutil.rmtree(_BUNDLES.popitem()[1][2], ignore_errors=True)
 
 
 def bundle_folder(bundle: dict) -> str | None:
