@@ -75,6 +75,7 @@ class MapView(QtWidgets.QWidget):
         self.ext = None
         self._k = None
         self.profile = None        # (distance along the cut mm, value in display units)
+        self.stylus = None         # a stylus profile cloud: its profiles (core.profiles), drawn as curves
         self.profile_line = None   # ((x0, y0), (x1, y1)) mm
         self._line_artist = None
         self._profile_artists = []
@@ -115,7 +116,11 @@ class MapView(QtWidgets.QWidget):
         if same:
             self.im.set_data(img)
             self.sel_im.set_data(np.zeros(img.shape + (4,)))
-            if self.profile_line is not None:
+            if self.stylus is not None:
+                self.stylus = _stylus_profiles(cloud)  # the rows of the edited cloud
+            if self.stylus is not None:
+                self._draw_stylus(fast=True)
+            elif self.profile_line is not None:
                 self.cut(*self.profile_line, draw=False, fast=True)
             self._blit()
             return
@@ -139,11 +144,52 @@ class MapView(QtWidgets.QWidget):
         self.ax.set_ylim(ext[2], ext[3])
         self.ax.set_title(title, fontsize=9)
         self._fill_threshold_channels()
-        if self.profile_line is None:  # the opening cut: along x through the middle of the part
-            cy = 0.5 * (ext[2] + ext[3])
-            self.profile_line = ((ext[0], cy), (ext[1], cy))
-        self.cut(*self.profile_line, draw=False)
+        self.stylus = _stylus_profiles(cloud)
+        if self.stylus is not None:  # a stylus profile: the curves themselves, not a cut of a map
+            self._draw_stylus()
+        else:
+            if self.profile_line is None:  # the opening cut: along x through the middle of the part
+                cy = 0.5 * (ext[2] + ext[3])
+                self.profile_line = ((ext[0], cy), (ext[1], cy))
+            self.cut(*self.profile_line, draw=False)
         self.canvas.draw_idle()
+
+    def _draw_stylus(self, fast: bool = False):
+        """Each stylus profile as a curve of the shown channel against the position along it (mm),
+        in scan order; the map above shows where it lies. ``fast``: new data, same axes."""
+        label = self.cbar.ax.get_ylabel() if self.cbar else ""
+        unit = label[label.rfind("(") + 1:-1] if label.endswith(")") else ""
+        curves = []
+        for p in self.stylus:
+            order = np.argsort(p.s, kind="stable")
+            curves.append((p, p.s[order], self.values[p.rows][order]))
+        self.profile = (np.concatenate([c[1] for c in curves]), np.concatenate([c[2] for c in curves]))
+        pv = ", ".join(f"{p.angle_deg:g}°: PV {np.ptp(v):.4g} {unit}".rstrip() for p, _, v in curves)
+        self.profile_info.setText(f"{len(curves)} stylus profile(s) — {pv}")
+        if fast and len(self._profile_artists) == len(curves):
+            for art, (_, s_, v) in zip(self._profile_artists, curves):
+                art.set_data(s_, v)
+            return
+        if self._line_artist is not None:
+            self._line_artist.remove()
+            self._line_artist = None
+        pax = self.pax
+        pax.clear()
+        pax.set_xlabel("along the profile (mm)")
+        pax.set_ylabel(label)
+        self._profile_artists = [pax.plot(s_, v, lw=1.0, label=f"{p.angle_deg:g}°", animated=True)[0]
+                                 for p, s_, v in curves]
+        lo = min(float(s_.min()) for _, s_, _ in curves)
+        hi = max(float(s_.max()) for _, s_, _ in curves)
+        vmin = min(float(v.min()) for _, _, v in curves)
+        vmax = max(float(v.max()) for _, _, v in curves)
+        pad = 0.05 * ((vmax - vmin) or 1.0)
+        pax.set_xlim(lo, hi if hi > lo else lo + 1.0)
+        pax.set_ylim(vmin - pad, vmax + pad)
+        if len(curves) > 1:
+            pax.legend(handles=self._profile_artists, fontsize=7, loc="upper right")
+        if fast:  # a deletion took a whole profile: the axes changed, a blit would not show it
+            self.canvas.draw_idle()
 
     # -- fast redraws: the map's images over a cached background ------------------------------------
     def _on_draw(self, _ev):
@@ -265,7 +311,7 @@ class MapView(QtWidgets.QWidget):
             self._press = (ev.xdata, ev.ydata)
 
     def _on_release(self, ev):
-        if self._press is not None and ev.inaxes is self.ax:
+        if self._press is not None and ev.inaxes is self.ax and self.stylus is None:
             self.cut(self._press, (ev.xdata, ev.ydata))
         self._press = None
 
@@ -303,3 +349,15 @@ class MapView(QtWidgets.QWidget):
         mask, text = self.threshold_mask(name, pos)
         self.th_info.setText(f"{int(mask.sum()):,} points: {text}")
         self.selected.emit(mask)
+
+
+def _stylus_profiles(cloud):
+    """The cloud's stylus profiles (core.profiles), or None for areal data or when its lines are
+    not straight (then the map and its cuts are shown as for any cloud)."""
+    from pointspro.core.errors import PointsProError
+    from pointspro.core.profiles import profiles_of
+
+    try:
+        return profiles_of(cloud)
+    except PointsProError:
+        return None

@@ -82,10 +82,27 @@ def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None) -> dict
         s["figures_of"] = "heights, piston and tilt removed (no residual)"
     else:
         return s
+    if _is_stylus_profile(cloud_out):
+        # a profile has no area: PVr's Zernike fit and the map's slope RMS mean nothing there; its
+        # PV/RMS stand, and each profile's slope error is in the step's report (core.profiles)
+        d = v - v.mean()
+        s.update({"rms_um": float(np.sqrt(np.mean(d * d))) * 1e3, "pv_um": float(np.ptp(v)) * 1e3,
+                  "figures_of": f"{s['figures_of']} of stylus profiles (no PVr or map slope on lines)"})
+        return s
     pupil = pupil_of(x, y, surface)
     s.update(form_metrics(x, y, v, pupil.radius, center=pupil.center))
     s["pupil"] = pupil.report()
     return s
+
+
+def _is_stylus_profile(cloud) -> bool:
+    from .errors import PointsProError
+    from .profiles import profiles_of
+
+    try:
+        return profiles_of(cloud) is not None
+    except PointsProError:
+        return False
 
 
 def remove_piston_tilt(x, y, z):

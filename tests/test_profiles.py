@@ -359,3 +359,20 @@ def test_batch_reads_and_reports_a_profile_file(tmp_path):
     result.write(tmp_path / "out")
     html = (tmp_path / "out" / "profile" / "report.html").read_text(encoding="utf-8")
     assert "profile.png" in html and "profile_psd.png" in html and "not_determined" in html
+
+
+def test_summary_of_profiles_has_no_areal_figures():
+    """A profile has no area: the summary gives its PV and RMS, no PVr (a 36-term Zernike fit over a
+    line) and no map slope RMS, and says so."""
+    import pointspro.core as pp
+
+    s = np.linspace(-20, 20, 801)
+    z = s ** 2 / (50 * (1 + np.sqrt(1 - s ** 2 / 50 ** 2))) + 60e-6 * np.cos(2 * np.pi * s / 16)
+    cloud = pp.PointCloud.from_xyz(s, np.zeros_like(s), z, angle=np.zeros_like(s))
+    res = pp.run({"surface": {"type": "even_asphere", "c": 0.02, "k": 0, "aperture": 40},
+                  "steps": [{"misalignment": {}}]}, cloud)
+    summ = res.summary
+    assert summ["pvr_um"] is None and summ["slope_rms_urad"] is None
+    assert "stylus profiles" in summ["figures_of"]
+    r = res.cloud["residual"]
+    assert summ["rms_um"] == pytest.approx(np.std(r) * 1e3) and summ["pv_um"] == pytest.approx(np.ptp(r) * 1e3)
