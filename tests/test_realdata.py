@@ -198,8 +198,16 @@ def test_ragged_and_damaged_matrices(tmp_path):
     assert np.isclose(c.z.max(), 9e-3) and np.isclose(np.ptp(c.x), 2e-3)
 
 
-def test_two_column_profile_is_named(tmp_path):
+def test_two_column_profile_reads_as_a_profile(tmp_path):
+    """A profilometer's two columns (x, z) are a stylus profile at azimuth 0° (issue 19; it was
+    refused before); a scan that turns back is refused naming its line."""
     p = tmp_path / "profile.txt"
     p.write_text("0.0 0.1\n0.5 0.2\n1.0 0.15\n", encoding="utf-8")
-    with pytest.raises(InputError, match=r"profile.txt, line 1: 2 columns \(x, z\) — a line profile"):
-        read_cloud(p)
+    c = read_cloud(p)
+    assert c.n == 3 and np.all(c.y == 0) and np.all(c["angle"] == 0)
+    np.testing.assert_array_equal(c.x, [0.0, 0.5, 1.0])
+    np.testing.assert_array_equal(c.z, [0.1, 0.2, 0.15])
+    back = tmp_path / "back.txt"
+    back.write_text("0.0 0.1\n0.5 0.2\n0.2 0.15\n", encoding="utf-8")
+    with pytest.raises(InputError, match="back.txt"):
+        read_cloud(back)
