@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, ClassVar, Iterable, Mapping
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from .cloud import PointCloud
 from .progress import Progress
@@ -31,6 +31,19 @@ class Params(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
     schema_version: ClassVar[int] = 1
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _booleans_are_true_or_false(cls, v, info):
+        """A yes/no field takes true or false only: after YAML 1.2 (core/yamlio.py) `repair: yes` is
+        the word "yes", which pydantic's lax mode would still take as True."""
+        f = cls.model_fields.get(info.field_name)
+        if f is not None and f.annotation in (bool, bool | None) and isinstance(v, str):
+            from pydantic_core import PydanticCustomError
+
+            raise PydanticCustomError("bool_word", "Input should be true or false (yes, no, on and off "
+                                      "are words in YAML 1.2)")
+        return v
 
     @classmethod
     def migrate(cls, data: dict, from_version: int) -> dict:

@@ -210,3 +210,17 @@ def test_recipe_project_and_recipe_file_round_trip(tmp_path):
     assert parse_recipe(load_project(tmp_path / "p.pointspro.yaml")["recipe"], "p").to_dict() == r.to_dict()
     write_recipe(tmp_path / "r.yaml", r)
     assert load_recipe(tmp_path / "r.yaml").to_dict() == r.to_dict()
+
+
+def test_boolean_step_parameters_take_true_or_false_only():
+    """`repair: yes` reads as the word "yes" (YAML 1.2); a yes/no parameter refuses it by name instead
+    of pydantic's lax mode taking it as true."""
+    from pointspro.core.errors import RecipeError
+    from pointspro.core.recipe import load_yaml, parse_recipe
+
+    text = "pointspro: 1\nsteps:\n  - bspline_map: {extrapolate: on}\n"
+    with pytest.raises(RecipeError, match=r"line 3: step 1 'bspline_map': key 'extrapolate': Input should be "
+                       r"true or false \(yes, no, on and off are words in YAML 1.2\) \(got 'on'\)"):
+        parse_recipe(load_yaml(text, "r.yaml"), "r.yaml")
+    ok = parse_recipe(load_yaml(text.replace("on}", "true}"), "r.yaml"), "r.yaml")
+    assert ok.steps[0].params.extrapolate is True
