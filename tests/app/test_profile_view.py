@@ -51,3 +51,4 @@ def test_stylus_profiles_are_drawn_as_curves(qtbot):
     X, Y = np.meshgrid(g, g)
     m.set_cloud(PointCloud.from_xyz(X.ravel(), Y.ravel(), 0 * X.ravel()), "z", new_input=True)
     assert m.stylus is None and m.pax.get_xlabel() == "along the cut (mm)"
+    qtbot.wait(20)  # let the canvas's pending draw run before the widget is deleted
