@@ -136,7 +136,9 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
                                   bounds=(cx - radius, cx + radius, cy - radius, cy + radius))
     except ValueError as e:
         raise CorrectionInputError(str(e)) from None
-    h = spacing if spacing is not None else _nice(spline.h / 2)
+    from ..maps.grid import nice_spacing
+
+    h = spacing if spacing is not None else nice_spacing(spline.h / 2)
     outer = outer(h) if callable(outer) else outer
     xs = working_axes(cx - outer, cx + outer, 0.0, h)
     ys = working_axes(cy - outer, cy + outer, 0.0, h)
@@ -153,14 +155,6 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
     E = np.where(disk, E, np.nan)
     return ErrorMap(xs, ys, E, covered & disk, float(h),
                     f"smoothing B-spline of the points (knots every {spline.h:.4g} mm)")
-
-
-def _nice(v: float) -> float:
-    e = np.floor(np.log10(v))
-    for m in (5.0, 2.0, 1.0):
-        if m * 10**e <= v:
-            return float(m * 10**e)
-    return float(10**e)
 
 
 def plane_fit(X, Y, Z):

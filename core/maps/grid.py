@@ -114,6 +114,16 @@ def coverage_mask(px, py, xs, ys, cell: float) -> np.ndarray:
     return occ[np.ix_(jy, jx)]
 
 
+def nice_spacing(v: float) -> float:
+    """The largest of 1, 2, 5 × 10^k not above v (mm): grid spacings people can read (the automatic
+    spacing of `bspline_map`'s and `correction`'s grids, half the knot spacing)."""
+    e = np.floor(np.log10(v))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**e <= v:
+            return float(m * 10**e)
+    return float(10**e)
+
+
 def node_axis(lo: float, hi: float, spacing: float) -> np.ndarray:
     i0 = int(np.ceil(lo / spacing - 1e-9))
     i1 = int(np.floor(hi / spacing + 1e-9))

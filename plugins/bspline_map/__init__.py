@@ -66,6 +66,7 @@ class BSplineMapStep(Step):
     def run(self, cloud, params: BSplineMapParams, ctx: Context) -> StepResult:
         from pointspro.core.figures import grid_map_figure, png_artifact, profiles_figure, psd_figure
         from pointspro.core.maps import fit_bspline, grid_map
+        from pointspro.core.maps.grid import nice_spacing
 
         channel = params.channel
         if channel == "auto":
@@ -101,7 +102,7 @@ class BSplineMapStep(Step):
             raise StepError(str(e)) from None
         ctx.progress.check()
         cells = _empty_fraction(x, y, spline)
-        spacing = params.spacing if params.spacing is not None else _nice(spline.h / 2)
+        spacing = params.spacing if params.spacing is not None else nice_spacing(spline.h / 2)
         try:
             grid = grid_map(spline, spacing, x, y, diameter=diameter, center=center,
                             extrapolate=params.extrapolate)
@@ -207,15 +208,6 @@ def _write_psd(path, grid) -> None:
         f.write(PSD_HEADER)
         for a, b, c in zip(fx[:n].tolist(), px[:n].tolist(), py[:n].tolist()):
             f.write(f"{a!r},{b!r},{c!r}\n")
-
-
-def _nice(v: float) -> float:
-    """The largest of 1, 2, 5 × 10^k not above v (grid spacings people can read)."""
-    e = np.floor(np.log10(v))
-    for m in (5.0, 2.0, 1.0):
-        if m * 10**e <= v:
-            return float(m * 10**e)
-    return float(10**e)
 
 
 def _empty_fraction(x, y, spline) -> float:
