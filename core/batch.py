@@ -439,10 +439,16 @@ def replay_log(records: list[dict]) -> None:
 def cleanup_partials(out_dir: Path) -> list[str]:
     """Remove what an interrupted run leaves: temporary output folders and files (``.*.partial``) and
     folders set aside while being replaced (``.*.old``). Returns what was removed."""
+    return remove_leftovers(sorted(Path(out_dir).glob(".*")))
+
+
+def remove_leftovers(paths) -> list[str]:
+    """Remove those of ``paths`` that are atomic writes' leftovers (``*.partial``, ``*.old``: files or
+    folders); the names removed."""
     import shutil
 
     gone = []
-    for p in sorted(Path(out_dir).glob(".*")):
+    for p in paths:
         if p.name.endswith((".partial", ".old")):
             if p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)

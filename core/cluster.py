@@ -277,15 +277,11 @@ def write_shipped(out_dir: Path, stem: str, files: dict) -> None:
 def cleanup_stems(out_dir: Path, stems) -> list[str]:
     """Remove the temporary folders (``.<stem>.*.partial``, ``.old``) a lost worker left for these
     stems; a worker that died mid-input cannot remove its own."""
+    from .batch import remove_leftovers
+
     gone = []
     for stem in stems:
-        for p in Path(out_dir).glob(f".{stem}.*"):
-            if p.name.endswith((".partial", ".old")) and p.name.count(".") >= 3:
-                if p.is_dir():
-                    shutil.rmtree(p, ignore_errors=True)
-                else:
-                    p.unlink(missing_ok=True)
-                gone.append(p.name)
+        gone += remove_leftovers(p for p in Path(out_dir).glob(f".{stem}.*") if p.name.count(".") >= 3)
     return gone
 
 
