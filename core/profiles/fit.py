@@ -254,3 +254,14 @@ def initial_for(p_angle_deg: float, initial: dict) -> dict:
     if "dz" in initial:
         out["dz"] = initial["dz"]
     return out
+
+
+def pose_record(p, rep: dict) -> dict:
+    """One profile's line of a step report: its label, azimuth, points and each fitted pose/shape
+    parameter with its standard uncertainty (``u_<name>``), from ``ProfileFit.report()``."""
+    rec = {"profile": p.label, "angle_deg": p.angle_deg, "points": len(p.rows)}
+    for key in ("tilt_deg", "decentre_mm", "dz", "R", "k"):
+        if key in rep:
+            rec[key] = rep[key]
+            rec["u_" + key] = rep["uncertainty"][key]
+    return rec

@@ -15,7 +15,7 @@ import numpy as np
 
 from pointspro.core.params.pose import dof_for_surface
 from pointspro.core.profiles import NOT_DETERMINED, check_scan, place
-from pointspro.core.profiles.fit import ProfileFit, initial_for, profile_dof
+from pointspro.core.profiles.fit import ProfileFit, initial_for, pose_record, profile_dof
 
 
 def run_profiles(cloud, profiles, params, ctx, surface):
@@ -38,11 +38,7 @@ def run_profiles(cloud, profiles, params, ctx, surface):
         residual[p.rows] = r
         slope, window = profile_slope(fit.u, r)
         rep = fit.report()
-        rec = {"profile": p.label, "angle_deg": p.angle_deg, "points": len(p.rows)}
-        for key in ("tilt_deg", "decentre_mm", "dz", "R", "k"):
-            if key in rep:
-                rec[key] = rep[key]
-                rec["u_" + key] = rep["uncertainty"][key]
+        rec = pose_record(p, rep)
         rec.update(rms_um=float(np.sqrt(np.mean((r - r.mean()) ** 2)) * 1e3),
                    pv_um=float(np.ptp(r) * 1e3),
                    slope_rms_urad=float(np.sqrt(np.mean((slope - slope.mean()) ** 2)) * 1e6),

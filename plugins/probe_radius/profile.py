@@ -14,7 +14,7 @@ import numpy as np
 
 from pointspro.core.params.pose import dof_for_surface
 from pointspro.core.profiles import NOT_DETERMINED, check_scan, place
-from pointspro.core.profiles.fit import ProfileFit, initial_for, profile_dof
+from pointspro.core.profiles.fit import ProfileFit, initial_for, pose_record, profile_dof
 
 from .normals import refined_normals, residual_slopes
 
@@ -50,11 +50,7 @@ def run_profiles(cloud, profiles, params, ctx, surface, check_no_fold):
         contact[p.rows] = np.column_stack([x, y, z - s * rho * nz])
         e_all[p.rows] = e
         rep = fit.report()
-        rec = {"profile": p.label, "angle_deg": p.angle_deg, "points": len(p.rows)}
-        for key in ("tilt_deg", "decentre_mm", "dz", "R", "k"):
-            if key in rep:
-                rec[key] = rep[key]
-                rec["u_" + key] = rep["uncertainty"][key]
+        rec = pose_record(p, rep)
         rec["distance_residual_rms_um"] = float(np.sqrt(np.mean(e ** 2)) * 1e3)
         records.append(rec)
         warnings += fit.warnings
