@@ -46,6 +46,10 @@ class PipelineResult:
     steps: list[StepRecord] = field(default_factory=list)
     #: the recipe's nominal (None: a map with no nominal) — decides the pupil of PVr
     surface: object | None = None
+    #: core.uncertainty's result (Monte Carlo through the steps) when the recipe has ``uncertainty:``
+    uncertainty: object | None = None
+    #: core.tolerance's verdict block when the recipe has ``tolerance:`` (core/assessment.py)
+    tolerance: dict | None = None
 
     @property
     def artifacts(self) -> dict:
@@ -58,7 +62,12 @@ class PipelineResult:
         """summarize() of input and output, computed once (PVr and slope RMS fit a map)."""
         if self._summary is None:
             self._summary = summarize(self.input_cloud, self.cloud, self.surface)
-        return dict(self._summary)
+        s = dict(self._summary)
+        if self.uncertainty is not None:
+            s["uncertainty"] = self.uncertainty.block()
+        if self.tolerance is not None:
+            s["tolerance"] = self.tolerance
+        return s
 
 
 def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None) -> dict:
@@ -152,18 +161,24 @@ def internal_message(where: str, e: BaseException) -> str:
 
 def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None = None,
                  log: logging.Logger | None = None, surface=None, upto: int | None = None,
-                 allowed_dirs=None) -> PipelineResult:
+                 allowed_dirs=None, assess: bool = True) -> PipelineResult:
     """Run the recipe's enabled steps (those before position ``upto`` when given).
 
     Step errors that are the input's fault come back as StepError naming the step, bugs as
     InternalError naming it; `Cancelled` propagates. ``allowed_dirs``: folders a parameter file may
     lie in besides the recipe's (the batch: the inputs' folders and --allow-path); None: any. The input cloud is never modified (its arrays are read-only).
+    After the whole recipe (``upto`` None) and with ``assess``, the recipe's ``uncertainty:`` and
+    ``tolerance:`` blocks are evaluated (core/assessment.py) into ``result.uncertainty`` and
+    ``result.tolerance``.
     """
     progress = progress or Progress()
     log = log or logging.getLogger("pointspro")
     if surface is None and recipe.surface_spec is not None:
         surface = recipe.build_surface()
     steps = [s for s in recipe.steps[:upto] if s.enabled]
+    assessing = assess and upto is None and (recipe.uncertainty is not None
+                                             or recipe.tolerance is not None)
+    whole, progress = progress, (progress.sub(0.0, 0.3) if assessing else progress)
     result = PipelineResult(cloud, cloud, surface=surface)
     n = max(len(steps), 1)
     current = cloud
@@ -199,4 +214,13 @@ def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None
         if ids.count(rec.id) > 1:
             rec.file_prefix = f"{k}_"
     result.cloud = current
+    if assessing:
+        from .assessment import assess as assess_result
+
+        try:
+            assess_result(recipe, result, progress=whole.sub(0.3, 1.0))
+        except (PointsProError, Cancelled):
+            raise
+        except Exception as e:  # a bug in the Monte Carlo or the tolerance: this input fails alone
+            raise InternalError(internal_message("uncertainty/tolerance", e)) from e
     return result

@@ -30,7 +30,7 @@ from .surfaces import parse_surface_spec
 from .yamlio import LineDict, dump_yaml, load_yaml
 
 RECIPE_VERSION = 1
-TOP_KEYS = ("pointspro", "surface", "input", "inputs", "steps")
+TOP_KEYS = ("pointspro", "surface", "input", "inputs", "steps", "uncertainty", "tolerance")
 
 
 def format_validation_error(e: ValidationError, prefix: str = "") -> str:
@@ -80,6 +80,10 @@ class Recipe:
     path: Path | None = None
     #: reader options of the measurement files (``input:`` block), as read_cloud's keywords
     input: dict = field(default_factory=dict)
+    #: the ``uncertainty:`` block (core.uncertainty.UncertaintySpec), None when the recipe has none
+    uncertainty: Any = None
+    #: the ``tolerance:`` block (core.tolerance.ToleranceSpec), None when the recipe has none
+    tolerance: Any = None
 
     @property
     def base_dir(self) -> Path | None:
@@ -100,6 +104,10 @@ class Recipe:
         if self.inputs:
             d["inputs"] = {k: str(v) for k, v in self.inputs.items()}
         d["steps"] = [s.to_yaml_entry(full) for s in self.steps]
+        if self.uncertainty is not None:
+            d["uncertainty"] = self.uncertainty.to_dict()
+        if self.tolerance is not None:
+            d["tolerance"] = self.tolerance.to_dict()
         return d
 
     def to_yaml(self) -> str:
@@ -220,7 +228,20 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
     steps = []
     for i, entry in enumerate(raw_steps, start=1):
         steps.append(_parse_step(entry, i, at("steps"), where, registry))
-    return Recipe(steps, surface, resolved_inputs, base, reader_options)
+
+    # the shop's blocks (docs/uncertainty.md): validated here, before any file is read
+    uncertainty = tolerance = None
+    if data.get("uncertainty") is not None:
+        from .uncertainty import parse_uncertainty
+
+        uncertainty = parse_uncertainty(data["uncertainty"], at("uncertainty"), where)
+    if data.get("tolerance") is not None:
+        from .tolerance import parse_tolerance
+
+        tolerance = parse_tolerance(data["tolerance"], at("tolerance"), where)
+        # a tolerance on a quantity these steps and this surface do not compute: one line, now
+        tolerance.check_computable(steps, surface, at("tolerance"))
+    return Recipe(steps, surface, resolved_inputs, base, reader_options, uncertainty, tolerance)
 
 
 def _is_file(p: Path) -> bool:
