@@ -60,10 +60,22 @@ class ReportPanel(QtWidgets.QWidget):
         if r is None:
             return ""
         if row <= 0:
+            from pointspro.core.statement import figure_rows, verdict_banner_html
+
             s = r.summary()
-            return ("<h3>Form error after all steps</h3>" + table_html({
-                "points in": s["points_in"], "points out": s["points_out"], "RMS (µm)": s["rms_um"],
-                "PV (µm)": s["pv_um"], "PVr (µm)": s["pvr_um"], "slope RMS (µrad)": s["slope_rms_urad"]}))
+            if s.get("uncertainty"):  # value ± U95 (k = 2), noise bias removed (docs/uncertainty.md)
+                figures = figure_rows(s)
+            else:
+                figures = {"RMS (µm)": s["rms_um"], "PV (µm)": s["pv_um"], "PVr (µm)": s["pvr_um"],
+                           "slope RMS (µrad)": s["slope_rms_urad"]}
+            page = verdict_banner_html(s.get("tolerance"))  # green / red / amber, ISO 14253-1
+            page += "<h3>Form error after all steps</h3>" + table_html({
+                "points in": s["points_in"], "points out": s["points_out"], **figures})
+            if s.get("uncertainty"):
+                from pointspro.core.report import uncertainty_html
+
+                page += "".join(p for p in uncertainty_html(s["uncertainty"]) if p)
+            return page
         rec = r.steps[row - 1]
         warn = "".join(f"<p style='color:#a45200'>⚠ {html.escape(str(w))}</p>"
                        for w in rec.report.get("warnings", []) or [])

@@ -54,7 +54,10 @@ class PipelineResult:
     @property
     def artifacts(self) -> dict:
         """Every step's artifacts by the file name they are written under (StepRecord.file_name)."""
-        return {rec.file_name(name): art for rec in self.steps for name, art in rec.artifacts.items()}
+        arts = {rec.file_name(name): art for rec in self.steps for name, art in rec.artifacts.items()}
+        if self.uncertainty is not None:  # uncertainty.png, uncertainty_samples.csv (core.uncertainty)
+            arts.update(self.uncertainty.artifacts())
+        return arts
 
     _summary: dict | None = field(default=None, init=False, repr=False)
 

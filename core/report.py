@@ -151,9 +151,15 @@ def render_html(report: dict, folder=None) -> str:
              "<h2>Input</h2>", table_html({"file": report["input"], "points in": s.get("points_in"),
                                        "points out": s.get("points_out"),
                                        **report.get("input_file", {})})]
+    from .statement import figure_rows, verdict_banner_html
+
+    if s.get("tolerance"):  # the verdict against the drawing first: what a quality engineer signs
+        parts.insert(2, "<h2>Verdict against the drawing</h2>" + verdict_banner_html(s["tolerance"]))
     summary = {"RMS (µm)": s.get("rms_um"), "PV (µm)": s.get("pv_um"),
                "PVr (µm, Evans: Zernike Z1–Z36 PV + 3·RMS of the rest)": s.get("pvr_um"),
                "slope RMS (µrad, tilt removed)": s.get("slope_rms_urad")}
+    if s.get("uncertainty"):
+        summary = figure_rows(s)
     if any(v is not None for v in summary.values()):
         what = s.get("figures_of") or "residual"
         pupil = s.get("pupil") or {}
@@ -162,6 +168,8 @@ def render_html(report: dict, folder=None) -> str:
                    f"radius {pupil['norm_radius_mm']:.6g} mm — {html.escape(pupil['centre_from'])}"
                    if pupil else "") + ".</p>")
         parts += ["<h2>Form error</h2>", note, table_html(summary), _img(folder, "form_error.png")]
+    if s.get("uncertainty"):
+        parts += uncertainty_html(s["uncertainty"], folder)
     surf = report.get("recipe", {}).get("surface")
     if surf:
         parts += ["<h2>Nominal surface</h2>", table_html(surf)]
@@ -192,3 +200,39 @@ def render_html(report: dict, folder=None) -> str:
     parts.append("<h2>Recipe (every parameter, defaults included)</h2><pre>" + html.escape(recipe_text)
                  + "</pre></body></html>\n")
     return "".join(parts)
+
+
+def uncertainty_html(block: dict, folder=None) -> list[str]:
+    """report.html's uncertainty section: how it was obtained, every figure's value ± U95 with its
+    95 % interval, and the Monte Carlo histograms (uncertainty.png)."""
+    from .statement import with_uncertainty
+
+    meta = {k: v for k, v in block.items() if not _is_figure(v)}
+    rows = []
+    for name, e in block.items():
+        if not _is_figure(e):
+            continue
+        lo, hi = (e.get("interval95") or [None, None])[:2]
+        rows.append({"figure": name, "value": e.get("value"), "as measured": e.get("measured"),
+                     "bias": e.get("bias"), "u": e.get("u"), "U95": e.get("U95"),
+                     "95 % interval": "—" if lo is None else f"[{lo:.6g}, {hi:.6g}]"})
+    out = ["<h2>Uncertainty (Monte Carlo through the steps, JCGM 101)</h2>",
+           "<p class='muted'>Each figure: the value with the noise's bias removed, its standard "
+           "uncertainty u, the expanded uncertainty U95 and the 95 % coverage interval of the Monte "
+           "Carlo samples about it. What the interval includes and what it does not: "
+           "docs/uncertainty.md.</p>"]
+    for name, e in block.items():
+        if _is_figure(e) and name in ("rms_um", "pv_um", "pvr_um"):
+            out.append(f"<p><b>{html.escape(name)}</b>: "
+                       f"{html.escape(with_uncertainty(e.get('value'), e.get('U95'), 'µm'))}</p>")
+    if meta:
+        out.append(table_html({k: v for m in meta.values() if isinstance(m, dict) for k, v in m.items()}
+                              if len(meta) == 1 and isinstance(next(iter(meta.values())), dict) else meta))
+    if rows:
+        out.append(_records(rows))
+    out.append(_img(folder, "uncertainty.png"))
+    return out
+
+
+def _is_figure(e) -> bool:
+    return isinstance(e, dict) and "U95" in e and "value" in e

@@ -17,8 +17,16 @@ def entry(input_path: str, status: str, outcome=None, report: dict | None = None
             "seconds": round(outcome.seconds, 3) if outcome is not None else None,
             "points_in": s.get("points_in"), "points_out": s.get("points_out"),
             "rms_um": s.get("rms_um"), "pv_um": s.get("pv_um"),
+            # the shop's answer (core/assessment.py): the verdict against the drawing, RMS's U95
+            "verdict": (s.get("tolerance") or {}).get("verdict"),
+            "rms_U95_um": _rms_unc(s).get("U95"), "rms_corrected_um": _rms_unc(s).get("value"),
             # a failed input keeps its traceback (a bug to report, or where a user error arose)
             "traceback": getattr(outcome, "traceback", None) if status == "failed" else None}
+
+
+def _rms_unc(s: dict) -> dict:
+    e = (s.get("uncertainty") or {}).get("rms_um")
+    return e if isinstance(e, dict) else {}
 
 
 def write_summary(out_dir, recipe_path, entries: list[dict], *, workers: int, scheduler: str | None,
@@ -39,11 +47,15 @@ def table(entries: list[dict]) -> str:
     def f(v, fmt):
         return "—" if v is None else format(v, fmt)
 
-    rows = [("input", "status", "points", "RMS µm", "PV µm", "s")]
+    verdicts = any(e.get("verdict") for e in entries)  # a column only when a recipe has a tolerance
+    rows = [("input", "status", "points", "RMS µm", "PV µm", "s") + (("verdict",) if verdicts else ())]
     for e in entries:
         pts = "—" if e["points_in"] is None else f"{e['points_in']}→{e['points_out']}"
-        rows.append((e["input"], e["status"], pts, f(e["rms_um"], ".4g"), f(e["pv_um"], ".4g"),
-                     f(e["seconds"], ".2f")))
+        rms = f(e["rms_um"], ".4g")
+        if e.get("rms_U95_um") is not None and e.get("rms_corrected_um") is not None:
+            rms = f"{e['rms_corrected_um']:.4g} ± {e['rms_U95_um']:.2g}"  # noise bias removed
+        rows.append((e["input"], e["status"], pts, rms, f(e["pv_um"], ".4g"),
+                     f(e["seconds"], ".2f")) + ((e.get("verdict") or "—",) if verdicts else ()))
     widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))

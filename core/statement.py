@@ -1,0 +1,121 @@
+"""Statements of results for people: a figure with its expanded uncertainty, and the verdict
+against the drawing (docs/uncertainty.md, docs/tolerance.md).
+
+    0.5475 ± 0.0041 µm (k = 2)
+
+The expanded uncertainty is rounded to two significant digits and the value to the same decimal
+place (GUM, JCGM 100:2008 §7.2.6); the unit is the one the uncertainty's size asks for, so a 44 nm
+figure reads "43.9 ± 2.1 nm", never "4.39e-05 mm". Shared by report.html, the window's summary and
+the batch's table, so the three say the same thing.
+"""
+from __future__ import annotations
+
+import html
+import math
+
+#: the summary's figures with a readable name and the unit of their key
+SUMMARY_FIGURES = (("rms_um", "RMS", "µm"), ("pv_um", "PV", "µm"),
+                   ("pvr_um", "PVr (Evans: Zernike Z1–Z36 PV + 3·RMS of the rest)", "µm"),
+                   ("slope_rms_urad", "slope RMS (tilt removed)", "µrad"))
+
+#: verdicts (core.tolerance, ISO 14253-1) and their banner colours
+VERDICT_COLOURS = {"conforms": "#1b7f3b", "does not conform": "#b3261e", "undecided": "#a45200"}
+
+_SCALES_UM = ((1e3, "mm"), (1.0, "µm"), (1e-3, "nm"), (1e-6, "pm"))
+
+
+def _unit_for(size_um: float) -> tuple[float, str]:
+    """(scale in µm, unit) so that ``size_um`` reads between 1 and 1000 (nm below 1 µm)."""
+    a = abs(size_um)
+    for scale, unit in _SCALES_UM:
+        if a >= scale:
+            return scale, unit
+    return 1e-3, "nm"
+
+
+def _decimals(u: float) -> int:
+    """Decimal places that show ``u`` with two significant digits."""
+    if not (u > 0 and math.isfinite(u)):
+        return 3
+    return max(0, 1 - int(math.floor(math.log10(u))))
+
+
+def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k: float = 2.0) -> str:
+    """"0.5475 ± 0.0041 µm (k = 2)"; a length in µm is shown in the unit its uncertainty (or, with
+    none, its value) asks for; other units as given. "—" for no value."""
+    if value is None or not math.isfinite(value):
+        return "—"
+    if unit == "µm":
+        scale, unit = _unit_for(U if U else value)
+        value, U = value / scale, (None if U is None else U / scale)
+    if U is None or not math.isfinite(U):
+        return f"{value:.4g} {unit}"
+    d = _decimals(U)
+    return f"{value:.{d}f} ± {U:.{d}f} {unit} (k = {k:g})"
+
+
+def figure_rows(summary: dict) -> dict[str, str]:
+    """The summary's figures as display strings: with ``summary['uncertainty']`` each is the
+    bias-corrected value ± U95 and says the plain pipeline figure beside it."""
+    unc = summary.get("uncertainty") or {}
+    rows = {}
+    for key, name, unit in SUMMARY_FIGURES:
+        e = unc.get(key)
+        plain = summary.get(key)
+        if isinstance(e, dict) and e.get("value") is not None:
+            text = with_uncertainty(e["value"], e.get("U95"), unit, e.get("k", 2.0))
+            if plain is not None and e.get("bias"):
+                text += f" (as measured {with_uncertainty(plain, None, unit)}, noise bias removed)"
+            rows[name] = text
+        elif plain is not None:
+            rows[name] = with_uncertainty(plain, None, unit)
+    return rows
+
+
+def verdict_line(tolerance: dict | None) -> str | None:
+    """One line for a terminal or a status bar: the overall verdict and the items that decided it."""
+    if not tolerance:
+        return None
+    if tolerance.get("text"):
+        return str(tolerance["text"])
+    verdict = tolerance.get("verdict", "undecided")
+    items = tolerance.get("items") or []
+    worst = [i for i in items if i.get("verdict") == verdict] or items
+    parts = []
+    for i in worst[:3]:
+        u = i.get("U95")
+        val = f"{i.get('value'):.3g}" + (f" ± {u:.2g}" if u is not None else "")
+        rel = ">" if i.get("verdict") == "does not conform" else "≤"
+        unit = i.get("unit", "")
+        parts.append(f"{i.get('name')} {val} {unit} {rel} {i.get('limit'):.3g} {unit}".replace("  ", " "))
+    return verdict + (": " + "; ".join(parts) if parts else "")
+
+
+def verdict_banner_html(tolerance: dict | None) -> str:
+    """A coloured banner (green conforms, red does not conform, amber undecided) and the items'
+    table, for report.html and the window."""
+    if not tolerance:
+        return ""
+    verdict = tolerance.get("verdict", "undecided")
+    colour = VERDICT_COLOURS.get(verdict, "#a45200")
+    rule = tolerance.get("rule", "")
+    head = (f"<div style='background:{colour};color:white;padding:.5em 1em;font-weight:bold;"
+            f"font-size:1.2em'>{html.escape(verdict.upper())}"
+            f"<span style='font-weight:normal;font-size:.8em'> — decision rule: "
+            f"{html.escape(str(rule))}</span></div>")
+    rows = ["<tr><th>quantity</th><th>value</th><th>U95</th><th>limit</th><th>verdict</th></tr>"]
+    for i in tolerance.get("items") or []:
+        unit = html.escape(str(i.get("unit", "")))
+        u = i.get("U95")
+        c = VERDICT_COLOURS.get(i.get("verdict"), "#777")
+        rows.append(
+            f"<tr><td>{html.escape(str(i.get('name')))}</td>"
+            f"<td class='num'>{_num(i.get('value'))} {unit}</td>"
+            f"<td class='num'>{'—' if u is None else _num(u) + ' ' + unit}</td>"
+            f"<td class='num'>{_num(i.get('limit'))} {unit}</td>"
+            f"<td style='color:{c};font-weight:bold'>{html.escape(str(i.get('verdict')))}</td></tr>")
+    return head + "<table>" + "".join(rows) + "</table>"
+
+
+def _num(v) -> str:
+    return "—" if v is None else f"{v:.4g}"
