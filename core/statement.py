@@ -1,7 +1,7 @@
 """Statements of results for people: a figure with its expanded uncertainty, and the verdict
 against the drawing (docs/uncertainty.md, docs/tolerance.md).
 
-    0.5475 ± 0.0041 µm (k = 2)
+    547.5 ± 4.1 nm (k = 2)        (an RMS of 0.5475 µm with U95 = 0.0041 µm)
 
 The expanded uncertainty is rounded to two significant digits and the value to the same decimal
 place (GUM, JCGM 100:2008 §7.2.6); the unit is the one the uncertainty's size asks for, so a 44 nm
@@ -41,12 +41,12 @@ def _decimals(u: float) -> int:
 
 
 def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k: float = 2.0) -> str:
-    """"0.5475 ± 0.0041 µm (k = 2)"; a length in µm is shown in the unit its uncertainty (or, with
-    none, its value) asks for; other units as given. "—" for no value."""
+    """"547.5 ± 4.1 nm (k = 2)" for 0.5475 ± 0.0041 µm: a length in µm is shown in the unit its
+    value's size asks for; other units as given. "—" for no value."""
     if value is None or not math.isfinite(value):
         return "—"
     if unit == "µm":
-        scale, unit = _unit_for(U if U else value)
+        scale, unit = _unit_for(value if value else (U or 0.0))
         value, U = value / scale, (None if U is None else U / scale)
     if U is None or not math.isfinite(U):
         return f"{value:.4g} {unit}"

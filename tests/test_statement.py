@@ -1,0 +1,53 @@
+"""Statements of results (core/statement.py): value ± U95 rounded as GUM §7.2.6 asks, in the unit
+the size asks for; the verdict banner and line; the batch table's verdict column."""
+from pointspro.core.statement import figure_rows, verdict_banner_html, verdict_line, with_uncertainty
+from pointspro.core.summary import table
+
+
+def test_two_significant_digits_of_U_and_the_value_to_the_same_place():
+    assert with_uncertainty(0.547503, 0.0041) == "547.5 ± 4.1 nm (k = 2)"
+    assert with_uncertainty(4.0267, 0.212) == "4.03 ± 0.21 µm (k = 2)"
+    assert with_uncertainty(1234.5, 12.0) == "1.234 ± 0.012 mm (k = 2)"
+    assert with_uncertainty(5.908, 0.31, "µrad") == "5.91 ± 0.31 µrad (k = 2)"
+
+
+def test_a_figure_without_uncertainty_reads_in_its_own_unit():
+    assert with_uncertainty(0.0439, None) == "43.9 nm"
+    assert with_uncertainty(None, 0.1) == "—"
+
+
+def test_figure_rows_use_the_corrected_value_and_say_the_measured_one():
+    s = {"rms_um": 0.2014, "pv_um": 1.1, "pvr_um": None, "slope_rms_urad": None,
+         "uncertainty": {"rms_um": {"value": 0.1951, "measured": 0.2014, "bias": 0.0063, "u": 0.0012,
+                                    "U95": 0.0024, "interval95": [0.1927, 0.1975], "k": 2}}}
+    rows = figure_rows(s)
+    assert rows["RMS"].startswith("195.1 ± 2.4 nm (k = 2)")
+    assert "as measured 201.4 nm" in rows["RMS"]
+    assert rows["PV"] == "1.1 µm"  # no uncertainty entry: the plain figure
+
+
+def test_verdict_banner_colours_and_line():
+    tol = {"verdict": "does not conform", "rule": "ISO 14253-1 guarded",
+           "items": [{"name": "irregularity", "value": 0.62, "U95": 0.05, "limit": 0.5,
+                      "unit": "fr", "verdict": "does not conform"},
+                     {"name": "RMSi", "value": 0.01, "U95": 0.002, "limit": 0.05, "unit": "fr",
+                      "verdict": "conforms"}]}
+    html = verdict_banner_html(tol)
+    assert "#b3261e" in html and "DOES NOT CONFORM" in html and "irregularity" in html
+    assert verdict_line(tol) == "does not conform: irregularity 0.62 ± 0.05 fr > 0.5 fr"
+    assert verdict_banner_html(None) == "" and verdict_line(None) is None
+    ok = dict(tol, verdict="conforms")
+    assert "#1b7f3b" in verdict_banner_html(ok)
+
+
+def test_batch_table_gets_a_verdict_column_only_when_a_tolerance_was_asked():
+    base = {"input": "a.csv", "status": "done", "points_in": 10, "points_out": 9, "rms_um": 0.5,
+            "pv_um": 2.0, "seconds": 1.0}
+    plain = table([base])
+    assert "verdict" not in plain
+    with_v = table([dict(base, verdict="undecided", rms_U95_um=0.004, rms_corrected_um=0.49),
+                    dict(base, input="b.csv", status="failed", points_in=None)])
+    head, _, first, second = with_v.splitlines()
+    assert head.split()[-1] == "verdict"
+    assert first.split()[-1] == "undecided" and "0.49 ± 0.004" in first
+    assert second.split()[-1] == "—"
