@@ -128,10 +128,10 @@ def name_of(n: int, m: int) -> str:
     return f"Z({n},{m})"
 
 
-#: rows per chunk of the design matrix: 2¹⁶ × 36 float64 is 19 MB, inside the cache hierarchy's
-#: reach, and bounds memory whatever the number of points (a 12.6M-point map never holds its 3.6 GB
-#: design matrix)
-CHUNK = 1 << 16
+#: points per chunk: the chunk's design block, 36 rows of 2¹³ float64 (2.4 MB), stays in the
+#: cache while it is built and reduced (2¹⁶ rows ran 2× slower), and memory is bounded whatever the
+#: number of points (a 12.6M-point map never holds its 3.6 GB design matrix)
+CHUNK = 1 << 13
 
 
 def _jacobi_0b(kmax: int, beta: int, t: np.ndarray) -> list[np.ndarray]:
@@ -142,36 +142,53 @@ def _jacobi_0b(kmax: int, beta: int, t: np.ndarray) -> list[np.ndarray]:
     out = [np.ones_like(t)]
     if kmax >= 1:
         out.append(1.0 + 0.5 * (beta + 2) * (t - 1.0))
+    tmp = np.empty_like(t)
     for k in range(2, kmax + 1):
         c = 2 * k + beta
         a1 = 2.0 * k * (k + beta) * (c - 2)
-        out.append(((c - 1) * (c * (c - 2) * t - beta * beta) * out[-1]
-                    - 2.0 * (k - 1) * (k + beta - 1) * c * out[-2]) / a1)
+        # P_k = (α t + β') P_{k−1} − γ P_{k−2}, in place (no temporaries of the chunk's length)
+        pk = np.multiply(t, (c - 1) * c * (c - 2) / a1)
+        pk -= (c - 1) * beta * beta / a1
+        pk *= out[-1]
+        np.multiply(out[-2], 2.0 * (k - 1) * (k + beta - 1) * c / a1, out=tmp)
+        pk -= tmp
+        out.append(pk)
     return out
 
 
-def _design_block(u: np.ndarray, v: np.ndarray, pairs, normalization: str, out: np.ndarray) -> None:
-    """Fill ``out`` (len(u), len(pairs)) with the terms at normalised coordinates (u, v) = (x, y)/R.
+def _design_rows(u: np.ndarray, v: np.ndarray, pairs, normalization: str, out: np.ndarray) -> None:
+    """Fill ``out`` (len(pairs), len(u)), one C-contiguous row per term, with the terms at
+    normalised coordinates (u, v) = (x, y)/R.
 
     No arctan2, powers or trigonometry: ρ^|m| cos(mθ) + i ρ^|m| sin(mθ) = (u + iv)^|m| by repeated
     complex multiplication, and R_n^|m|(ρ)/ρ^|m| = P_k^(0,|m|)(2ρ² − 1) by the Jacobi recurrence
-    (tests/test_metrics.py checks both against scipy's eval_jacobi and the closed forms)."""
-    t = 2.0 * (u * u + v * v) - 1.0
+    (tests/test_metrics.py checks both against scipy's eval_jacobi and the closed forms). Rows, not
+    columns: writing a term is one contiguous pass (a column of an (n, p) block is strided, 2× slower)."""
+    t = u * u
+    t += v * v
+    t *= 2.0
+    t -= 1.0
     mmax = max(abs(m) for _, m in pairs)
-    cos_m, sin_m = [np.ones_like(u)], [np.zeros_like(u)]  # ρ^m cos mθ, ρ^m sin mθ
-    for _ in range(mmax):
+    cos_m, sin_m = [None, u], [None, v]  # ρ^m cos mθ, ρ^m sin mθ (m = 0: 1, 0)
+    for _ in range(2, mmax + 1):
         c, s = cos_m[-1], sin_m[-1]
         cos_m.append(c * u - s * v)
         sin_m.append(s * u + c * v)
     kmax: dict[int, int] = {}
     for n, m in pairs:
         kmax[abs(m)] = max(kmax.get(abs(m), 0), (n - abs(m)) // 2)
-    radial_k = {am: _jacobi_0b(k, am, t) for am, k in kmax.items()}
-    for j, (n, m) in enumerate(pairs):
-        am = abs(m)
-        ang = cos_m[am] if m >= 0 else sin_m[am]
-        np.multiply(radial_k[am][(n - am) // 2], ang, out=out[:, j])
-        out[:, j] *= norm(n, m, normalization)
+    for am, km in kmax.items():
+        radial_k = _jacobi_0b(km, am, t)
+        for j, (n, m) in enumerate(pairs):
+            if abs(m) != am:
+                continue
+            w = norm(n, m, normalization)
+            if am == 0:
+                np.multiply(radial_k[n // 2], w, out=out[j])
+            else:
+                np.multiply(radial_k[(n - am) // 2], cos_m[am] if m >= 0 else sin_m[am], out=out[j])
+                if w != 1.0:
+                    out[j] *= w
 
 
 def design_matrix(x, y, radius: float, pairs, normalization: str = "rms",
@@ -179,29 +196,38 @@ def design_matrix(x, y, radius: float, pairs, normalization: str = "rms",
     """(N, len(pairs)) values of the terms at points (x, y) (mm) normalised by ``radius`` (mm).
 
     Holds N × p floats: for millions of points use ``fit`` and ``evaluate``, which work in chunks."""
-    u = (np.asarray(x, dtype=np.float64) - center[0]) / radius
-    v = (np.asarray(y, dtype=np.float64) - center[1]) / radius
-    A = np.empty((len(u), len(pairs)))
-    for s in range(0, len(u), CHUNK):
+    x, y = np.asarray(x), np.asarray(y)
+    At = np.empty((len(pairs), len(x)))
+    for s in range(0, len(x), CHUNK):
         if len(pairs):
-            _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, A[s:s + CHUNK])
-    return A
+            u, v = _normalised(x, y, center, radius, s, s + CHUNK)
+            _design_rows(u, v, pairs, normalization, At[:, s:s + CHUNK])
+    return At.T
+
+
+def _normalised(x, y, center, radius, s: int, e: int) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v) of points s:e: only a chunk is normalised at a time (no full-length copies)."""
+    u = np.asarray(x[s:e], dtype=np.float64) - center[0]
+    u /= radius
+    v = np.asarray(y[s:e], dtype=np.float64) - center[1]
+    v /= radius
+    return u, v
 
 
 def evaluate(x, y, coef, radius: float, pairs, normalization: str = "rms",
              center=(0.0, 0.0)) -> np.ndarray:
     """Σ_j coef_j Z_j(x, y), in chunks (never the whole design matrix)."""
-    u = (np.asarray(x, dtype=np.float64) - center[0]) / radius
-    v = (np.asarray(y, dtype=np.float64) - center[1]) / radius
+    x, y = np.asarray(x), np.asarray(y)
     coef = np.asarray(coef, dtype=np.float64)
-    out = np.zeros(len(u))
+    out = np.zeros(len(x))
     if not len(pairs):
         return out
-    block = np.empty((min(CHUNK, len(u)), len(pairs)))
-    for s in range(0, len(u), CHUNK):
-        b = block[:len(u[s:s + CHUNK])]
-        _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, b)
-        np.dot(b, coef, out=out[s:s + CHUNK])
+    block = np.empty((len(pairs), min(CHUNK, len(x))))
+    for s in range(0, len(x), CHUNK):
+        u, v = _normalised(x, y, center, radius, s, s + CHUNK)
+        b = block[:, :len(u)]
+        _design_rows(u, v, pairs, normalization, b)
+        np.dot(coef, b, out=out[s:s + CHUNK])
     return out
 
 
@@ -235,21 +261,21 @@ def fit(x, y, z, radius: float, pairs, normalization: str = "rms", center=(0.0, 
     data in one corner of the disk) is solved by TSQR — the R factors of the chunks' QR stacked and
     factored again, R of [A z] giving Qᵀz in its last column — which is as accurate as a QR of the
     whole matrix. Pass 2 forms the residual."""
-    u = (np.asarray(x, dtype=np.float64) - center[0]) / radius
-    v = (np.asarray(y, dtype=np.float64) - center[1]) / radius
+    x, y = np.asarray(x), np.asarray(y)
     z = np.asarray(z, dtype=np.float64)
     npts, p = len(z), len(pairs)
     if npts < p:
         raise ValueError(f"{npts} points cannot determine {p} Zernike terms")
     if p == 0:
         return ZernikeFit(np.zeros(0), np.zeros(0), z.copy(), 1.0)
-    block = np.empty((min(CHUNK, npts), p + 1))
+    block = np.empty((p + 1, min(CHUNK, npts)))  # rows: the p terms, then z
     gram = np.zeros((p + 1, p + 1))
     for s in range(0, npts, CHUNK):
-        b = block[:len(z[s:s + CHUNK])]
-        _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, b[:, :p])
-        b[:, p] = z[s:s + CHUNK]
-        gram += b.T @ b
+        u, v = _normalised(x, y, center, radius, s, s + CHUNK)
+        b = block[:, :len(u)]
+        _design_rows(u, v, pairs, normalization, b[:p])
+        b[p] = z[s:s + CHUNK]
+        gram += b @ b.T
     G = gram[:p, :p]
     scale = np.sqrt(np.diag(G))
     scale[scale == 0] = 1.0
@@ -261,23 +287,32 @@ def fit(x, y, z, radius: float, pairs, normalization: str = "rms", center=(0.0, 
         ginv = np.linalg.inv(Gs) / np.outer(scale, scale)
         sv = np.sqrt(np.clip(np.linalg.eigvalsh(G), 0, None))[::-1]
     else:
-        coef, ginv, sv = _fit_tsqr(u, v, z, pairs, normalization, block)
-    resid = z - evaluate(x, y, coef, radius, pairs, normalization, center)
+        coef, ginv, sv = _fit_tsqr(x, y, z, radius, center, pairs, normalization, block)
+    # the residual z − A·coef in place, chunk by chunk (pass 2)
+    resid = z.copy()
+    for s in range(0, npts, CHUNK):
+        u, v = _normalised(x, y, center, radius, s, s + CHUNK)
+        b = block[:p, :len(u)]
+        _design_rows(u, v, pairs, normalization, b)
+        resid[s:s + CHUNK] -= coef @ b
     dof = max(npts - p, 1)
     s2 = float(resid @ resid) / dof
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     return ZernikeFit(coef, np.sqrt(np.clip(np.diag(ginv) * s2, 0, None)), resid, cond)
 
 
-def _fit_tsqr(u, v, z, pairs, normalization, block):
+def _fit_tsqr(x, y, z, radius, center, pairs, normalization, block):
     """(coef, (AᵀA)⁺, singular values of A) by a tall-skinny QR of [A z] over chunks."""
     p = len(pairs)
     rs = []
     for s in range(0, len(z), CHUNK):
-        b = block[:len(z[s:s + CHUNK])]
-        _design_block(u[s:s + CHUNK], v[s:s + CHUNK], pairs, normalization, b[:, :p])
-        b[:, p] = z[s:s + CHUNK]
-        rs.append(np.linalg.qr(b, mode="r"))
+        u, v = _normalised(x, y, center, radius, s, s + CHUNK)
+        b = block[:, :len(u)]
+        _design_rows(u, v, pairs, normalization, b[:p])
+        b[p] = z[s:s + CHUNK]
+        rs.append(np.linalg.qr(b.T, mode="r"))
+        if len(rs) >= 64:  # bound the stack: 64 R factors of (p+1)² are reduced to one
+            rs = [np.linalg.qr(np.vstack(rs), mode="r")]
     r = np.linalg.qr(np.vstack(rs), mode="r")
     R, qz = r[:p, :p], r[:p, p]
     coef, _, _, sv = np.linalg.lstsq(R, qz, rcond=None)  # the singular values of R are those of A
