@@ -1,0 +1,162 @@
+"""From the Monte Carlo samples to each figure's value, bias, u, U95 and 95 % interval
+(docs/uncertainty.md, Bias and Interval).
+
+The samples carry the data's own noise *plus* the same amount again (a parametric bootstrap: Efron &
+Tibshirani, An Introduction to the Bootstrap, 1993, ch. 10), so how a figure moves from the measured
+value f₀ to the samples' mean says how the noise moved it from the true value — the idea of SIMEX
+(Cook & Stefanski, JASA 89, 1994: simulate extra noise, extrapolate back to none), with the
+extrapolant each kind of figure follows:
+
+- ``quadratic`` (RMS, slope RMS, PVr's rest RMS, RMSt/RMSi/RMSa): the mean square grows by the noise's
+  variance — exactly, in expectation, for a quadratic statistic — so f_c² = f₀² − (E f_i² − f₀²).
+  A corrected square ≤ 0 is "below the noise": value 0 and the interval's upper end says how far up
+  it may be.
+- ``smooth`` (PVr's fit part, the PV of a 36-term fit): bias ∝ σ² as for any smooth statistic,
+  f_c = 2 f₀ − E f_i (Efron's bootstrap bias correction).
+- ``extreme`` (PV, irregularity): the extremes of the noise grow with σ itself, so f_c = f₀ − (E f_i
+  − f₀)/(√2 − 1). PV is not robust (Evans' point): its coverage is measured and stated, not assumed.
+- ``linear`` (Zernike coefficients, pose, sag and power): no bias; f_c = f₀.
+- ``pvr`` = its fit part + 3 × its rest part, each corrected as above.
+
+E f_i is estimated with the type-B draws as control variates (the regression of f_i on the standard
+normal draws, whose mean is known to be 0); the same regression gives each source's share of u (the
+budget). The interval is the probabilistically symmetric 95 % interval (JCGM 101 §7.7) of the samples'
+deviations from their mean placed about f_c — in the squared domain for quadratic figures — widened
+by the bias estimate's own Monte Carlo standard error (k = 1.96, in quadrature); u is the samples'
+standard deviation with that standard error in quadrature, U95 the interval's half-width.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+P = 0.95
+EXTREME_FACTOR = 1.0 / (math.sqrt(2.0) - 1.0)
+K95 = 1.959963984540054
+
+QUADRATIC = frozenset({"rms_um", "slope_rms_urad", "pvr_rest_rms_um"})
+EXTREME = frozenset({"pv_um"})
+SMOOTH = frozenset({"pvr_fit_pv_um"})
+
+
+def kind_of(name: str, kinds: dict | None = None) -> str:
+    """How a figure's bias is corrected (module doc); ``kinds`` (the tolerance's) override the names."""
+    if kinds and name in kinds:
+        return kinds[name]
+    if name == "pvr_um":
+        return "pvr"
+    if name in QUADRATIC:
+        return "quadratic"
+    if name in EXTREME:
+        return "extreme"
+    if name in SMOOTH:
+        return "smooth"
+    if name.startswith(("zernike.", "pose.")) or ".zernike." in name or ".pose." in name:
+        return "linear"
+    low = name.lower()
+    if "rms" in low:
+        return "quadratic"
+    if low.startswith(("pv", "irr")) or "_pv" in low:
+        return "extreme"
+    return "linear"
+
+
+def _cv(g: np.ndarray, Z: np.ndarray | None):
+    """Control-variate mean of g (E Z = 0), the slopes b on Z, the residuals' standard deviation."""
+    M = g.size
+    if Z is None or Z.shape[1] == 0 or M < Z.shape[1] + 10:
+        return float(g.mean()), np.zeros(0 if Z is None else Z.shape[1]), float(g.std(ddof=1))
+    A = np.column_stack([np.ones(M), Z])
+    coef, *_ = np.linalg.lstsq(A, g, rcond=None)
+    resid = g - A @ coef
+    return float(coef[0]), coef[1:], float(np.sqrt(resid @ resid / max(M - A.shape[1], 1)))
+
+
+def _quantiles(d: np.ndarray):
+    lo, hi = np.quantile(d, [(1 - P) / 2, (1 + P) / 2])
+    return float(lo), float(hi)
+
+
+def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | None,
+             parts: dict | None = None) -> dict:
+    """One figure's entry (value, measured, bias, u, U95, interval95, k, method) from its measured
+    value f0 and its samples F (NaN: a failed sample); ``parts``: pvr's fit and rest entries.
+    ``_placed`` holds the samples placed about the value (what the interval and u are of)."""
+    ok = np.isfinite(F)
+    F = F[ok]
+    Zs = None if Z is None else Z[ok]
+    M = F.size
+    below = False
+    if kind == "quadratic":
+        g = F * F
+        mean_g, _, sg = _cv(g, Zs)
+        b2 = mean_g - f0 * f0
+        v2 = f0 * f0 - b2
+        below = v2 <= 0
+        value = math.sqrt(v2) if v2 > 0 else 0.0
+        # conditional on the data the samples' f² scatter as 4σ²f₀² + 2σ⁴ (per point), the corrected
+        # value's as 4σ²f_c² + 2σ⁴: the deviations are scaled by the square root of that ratio
+        # (docs/uncertainty.md, Interval); the mean-square noise σ² is b2
+        b = max(b2, 0.0)
+        den = 2.0 * f0 * f0 + b
+        rho = (2.0 * max(v2, 0.0) + b) / den if den > 0 else 1.0
+        rho = min(max(rho, 0.0), 1.0)
+        placed = np.sqrt(np.maximum(0.0, max(v2, 0.0) + math.sqrt(rho) * (g - g.mean())))
+        se = sg / math.sqrt(M) / (2.0 * max(value, float(np.std(placed)), 1e-300))
+        method = ("quadratic: f_c² = f² − (mean of the samples' f² − f²) (control variates on the type-B "
+                  "draws); interval in the squared domain")
+    else:
+        mean_f, _, sf = _cv(F, Zs)
+        if kind == "extreme":
+            value = f0 - EXTREME_FACTOR * (mean_f - f0)
+            se = EXTREME_FACTOR * sf / math.sqrt(M)
+            placed = value + (F - F.mean())
+            method = "extreme value: f_c = f − (mean of the samples − f)/(√2 − 1) (noise bias ∝ σ)"
+        elif kind == "smooth":
+            value = 2.0 * f0 - mean_f
+            se = sf / math.sqrt(M)
+            placed = value + (F - F.mean())
+            method = "smooth: f_c = 2 f − mean of the samples (bootstrap bias correction)"
+        elif kind == "pvr" and parts:
+            fit, rest = parts["fit"], parts["rest"]
+            value = fit["value"] + 3.0 * rest["value"]
+            se = math.hypot(fit["_se"], 3.0 * rest["_se"])
+            below = rest.get("below_noise", False)
+            if fit["_placed"].size == F.size and rest["_placed"].size == F.size:
+                placed = fit["_placed"] + 3.0 * rest["_placed"]
+            else:
+                placed = value + (F - F.mean())
+            method = "PVr = PV(36-term fit) + 3·RMS(rest), each part corrected as its kind asks"
+        else:
+            value = f0
+            se = 0.0
+            placed = value + (F - F.mean())
+            method = "linear: no noise bias; the samples' deviations about the measured value"
+    lo_p, hi_p = _quantiles(placed)
+    w = K95 * se
+    lo, hi = value - math.hypot(value - lo_p, w), value + math.hypot(hi_p - value, w)
+    if kind == "quadratic":
+        lo = max(lo, 0.0)
+    u = math.hypot(float(np.std(placed, ddof=1)), se) if M > 1 else float("nan")
+    U95 = 0.5 * (hi - lo)
+    e = {"value": value, "measured": f0, "bias": f0 - value, "u": u, "U95": U95,
+         "interval95": [lo, hi], "k": U95 / u if u > 0 else None, "method": method, "_se": se,
+         "_placed": placed}
+    if below:
+        e["below_noise"] = True
+        e["method"] += "; the corrected square is ≤ 0: below the noise (value 0, upper end stated)"
+    return e
+
+
+def budget(F: np.ndarray, Z: np.ndarray, names: list[str]) -> dict:
+    """Each type-B source's share of u (|slope| of the samples on its standard-normal draw) and the
+    rest (noise and what is not linear in the sources), in the figure's unit."""
+    ok = np.isfinite(F)
+    F, Z = F[ok], Z[ok]
+    if Z.shape[1] == 0 or F.size < Z.shape[1] + 10:
+        return {"noise": float(F.std(ddof=1))} if F.size > 1 else {}
+    _, b, s = _cv(F, Z)
+    out = {"noise": s}
+    out.update({n: float(abs(v)) for n, v in zip(names, b)})
+    return out
