@@ -39,29 +39,63 @@ def run_case(tmp_path, seed, kind):
     return rms(out.cloud.xyz), rms(fit.inverse(c.work_meas)), res.report
 
 
-@pytest.mark.parametrize("seed, kind", [
-    pytest.param(0, "fourier", marks=pytest.mark.xfail(strict=True, reason=(
-        "known gap (issue 16 part 1, open): the selection has no 'no GP' candidate; on this seed the "
-        "chosen RBF's cross-validated RMS (0.720 µm) exceeds the affine transform's alone (0.690 µm), "
-        "so the volumetric step should apply no GP, yet it applies the RBF"))),
-    (1, "fourier"), (2, "fourier"), (2, "kinematic")])
+@pytest.mark.parametrize("seed, kind", [(0, "fourier"), (1, "fourier"), (2, "fourier"), (2, "kinematic"),
+                                        (3, "kinematic")])
 def test_workpiece_error_after_the_gp_over_seeds(tmp_path, seed, kind):
-    """Measured (µm, GP / affine only): fourier 0 0.80/0.86, 1 0.41/0.64, 2 0.34/0.80, kinematic 2
-    0.52/0.83 (goal of issue 16: ≤ 0.40 — met on one seed of four). The former in-sample choice took a
-    spectral mixture that interpolated the fiducials and removed ~11 % of the error (issue 16)."""
+    """Measured (µm, GP / affine only, chosen): fourier 0 0.80/0.86 matern52, 1 0.41/0.64, 2 0.34/0.80,
+    kinematic 2 0.52/0.83, kinematic 3 0.405/0.405 none (goal of issue 16: ≤ 0.40 — met on three of
+    eight cases, benchmarks/bench_fiducials.py). The former in-sample choice took a spectral mixture
+    that interpolated the fiducials and removed ~11 % of the error (issue 16). Fourier 0 was a strict
+    xfail: its RBF's CV (0.720 µm) exceeded the affine transform's in-sample residual (0.690 µm) — with
+    the transform re-fitted in each fold too, "no GP" cross-validates at 0.899 µm there and the GP
+    wins honestly."""
     gp, affine, rep = run_case(tmp_path, seed, kind)
     print(f"{kind} seed {seed}: GP {gp:.3f} µm, affine only {affine:.3f} µm, {rep['gp_selection']['chosen']}")
     sel = rep["gp_selection"]
-    assert sel["criterion"].startswith("6-fold cross-validation")
+    assert sel["criterion"].startswith("6-fold cross-validation (the affine transform and")
     assert rep["gp_cv_rms_um"] == sel["cv_rms_um"][sel["chosen"]]
-    # the chosen kernel has the lowest cross-validated error, and it is below "no GP at all"
+    assert sel["no_gp_rms_um"] == sel["cv_rms_um"]["none"]
+    # held out, "no GP" is worse than at the fiducials the transform was fitted to
+    assert sel["no_gp_rms_um"]["norm"] > sel["no_gp_in_sample_rms_um"]["norm"]
     pooled = {k: v["norm"] for k, v in sel["cv_rms_um"].items()}
-    assert sel["chosen"] == min(pooled, key=pooled.get)
-    assert rep["gp_cv_rms_um"]["norm"] < sel["no_gp_rms_um"]["norm"]
+    best = min(pooled, key=pooled.get)
+    # the chosen one is the best, or "none" where the best GP does not win by one standard error
+    assert sel["chosen"] in (best, "none")
     # the honest figure cannot be below the noise of a held-out fiducial (0.2 µm calibration noise per
     # axis: ≥ 0.35 µm in |e|), which the in-sample LOO of a spectral mixture is
     assert rep["gp_cv_rms_um"]["norm"] > 0.3
-    assert gp < 0.95 * affine, (gp, affine)
+    if sel["chosen"] == "none":
+        assert sel["kind"] == "none" and gp == pytest.approx(affine, abs=1e-9)
+    else:
+        assert rep["gp_cv_rms_um"]["norm"] < sel["no_gp_rms_um"]["norm"]
+        assert gp < 0.95 * affine, (gp, affine)
+
+
+def test_no_gp_where_the_field_is_below_the_noise(tmp_path):
+    """A field of 1 pm (nothing the balls can resolve): the model applies no GP — the workpiece gets
+    exactly the affine transform — and its uncertainty keeps the held-out error left (not zero)."""
+    from pointspro.core.calibration import volumetric_model as vm
+
+    for seed in (0, 2, 3):
+        c = case_000(seed, "fourier", rms_um=1e-6)
+        d = tmp_path / str(seed)
+        d.mkdir()
+        (d / "reference.csv").write_text(c.reference_csv(), encoding="utf-8")
+        cloud = PointCloud.from_xyz(*c.points.T, fiducial=c.ids)
+        res = FiducialsStep().run(cloud, FiducialsStep.Params(reference="reference.csv", monte_carlo_runs=0),
+                                  Context(base_dir=d))
+        sel = res.report["gp_selection"]
+        assert sel["chosen"] == "none" and sel["kind"] == "none", sel["cv_rms_um"]
+        text = res.artifacts["volumetric_model.json"]
+        spec = vm.loads(text, "m.json")
+        assert {g.kind for g in spec.gp.values()} == {"none"}
+        (d / "m.json").write_text(text, encoding="utf-8")
+        out = VolumetricStep().run(PointCloud(c.work_meas), VolumetricStep.Params(model="m.json"),
+                                   Context(base_dir=d))
+        np.testing.assert_array_equal(out.cloud.xyz, c.work_meas)      # machine frame: no correction
+        u = np.column_stack([out.cloud["u_x"], out.cloud["u_y"], out.cloud["u_z"]])
+        np.testing.assert_allclose(u[0] * 1e3, [sel["no_gp_rms_um"][k] for k in ("ex", "ey", "ez")])
+        assert out.report["kernels"] == {"ex": "none", "ey": "none", "ez": "none"}
 
 
 def test_in_sample_loo_is_biased_and_cross_validation_is_not():

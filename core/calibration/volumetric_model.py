@@ -24,7 +24,7 @@ FORMAT = 1
 
 class GPSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["spectral_mixture", "rbf", "matern52"]
+    kind: Literal["spectral_mixture", "rbf", "matern52", "none"]   # none: no GP (zero, σ = sqrt(noise))
     params: dict[str, list[float] | float]
     noise: float
     X: list[list[float]]
@@ -48,6 +48,9 @@ def _digest(d: dict) -> str:
 
 
 def encode_gp(gp, kind: str, X, y) -> dict:
+    if kind == "none":  # no GP: a zero correction; noise = the variance of the error left (mm²)
+        return {"kind": kind, "params": {}, "noise": float(gp.sigma) ** 2, "X": np.asarray(X).tolist(),
+                "y": np.asarray(y).tolist()}
     k = gp.kernel_
     main, white = k.k1, k.k2
     if kind == "spectral_mixture":
@@ -64,8 +67,10 @@ def decode_gp(spec: GPSpec):
     from sklearn.gaussian_process import GaussianProcessRegressor
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
-    from .gp import SpectralMixture
+    from .gp import SpectralMixture, ZeroGP
 
+    if spec.kind == "none":
+        return ZeroGP(float(np.sqrt(spec.noise)))
     p = spec.params
     if spec.kind == "spectral_mixture":
         main = SpectralMixture(p["weights"], p["means"], p["variances"])
@@ -110,20 +115,31 @@ def loads(text: str, source: str) -> VolumetricModelSpec:
 ERROR_COMPONENTS = ("ex", "ey", "ez")
 
 
-def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None) -> tuple[dict, dict, dict, dict]:
+def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None) -> tuple[dict, dict, dict, dict]:
     """A GP of each volumetric-error component (ex, ey, ez) at the positions X (machine frame, mm),
     their kernel chosen by K-fold cross-validation with the hyperparameters re-fitted in each fold
-    (core.calibration.gp.select_gps). ``noise_var``: the known variance (mm²) of each component's
+    (core.calibration.gp.select_gps) among the candidate kernels and "none" (no GP: the affine
+    transform alone, kind "none" in the model file). ``ref``: the calibrated centres (mm) the transform
+    was fitted to (errors = transform(ref) − X); given, the transform is re-fitted in each fold too,
+    so the held-out errors are out of sample. ``noise_var``: the known variance (mm²) of each component's
     error at a fiducial (measured and calibrated centres' σ²), a floor for the GP's noise. Returns
     (regressors, their specs for the model file, {component: closed-form LOO RMS µm per kernel and
     the chosen one — in-sample, for comparison}, the selection: {"criterion", "chosen",
     "cv_rms_um": {kernel: {component: RMS}}, "gp_cv_rms_um": the chosen kernel's {component: RMS,
-    "norm": RMS of |e|}, "no_gp_rms_um": the same without a GP}). ``check`` (e.g. a Progress's) is
+    "norm": RMS of |e|}, "no_gp_rms_um": the same without a GP (held out, the transform re-fitted
+    without the held-out fiducials when ``ref`` is given), "no_gp_in_sample_rms_um": the errors' own RMS
+    at the fiducials the transform was fitted to (smaller: not a fair comparison)}). ``check`` (e.g. a Progress's) is
     called between candidate kernels, so a cancel stops between fits."""
     from .gp import select_gps
 
     errors = np.asarray(errors, dtype=np.float64)
-    gp_list, info = select_gps(X, errors, Q=Q, noise_var=noise_var, check=check)
+    affine = None
+    if ref is not None:
+        X = np.asarray(X, dtype=np.float64)
+        design = np.column_stack([np.asarray(ref, dtype=np.float64), np.ones(len(X))])
+        # e_k = design · θ_k − X_k with θ_k the least-squares fit of X_k (the transform's components)
+        affine = [(design, X[:, k]) for k in range(3)]
+    gp_list, info = select_gps(X, errors, Q=Q, noise_var=noise_var, check=check, affine=affine)
     chosen, kind = info["chosen"], info["kind"]
     gps, specs, loo = {}, {}, {}
     for k, name in enumerate(ERROR_COMPONENTS):
@@ -137,7 +153,8 @@ def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None) -> tuple[d
 
     selection = {"criterion": info["criterion"], "chosen": chosen, "kind": kind,
                  "gp_cv_rms_um": per_component(info["cv_rms"][chosen]),
-                 "no_gp_rms_um": per_component(info["zero_rms"]),
+                 "no_gp_rms_um": per_component(info["cv_rms"]["none"]),
+                 "no_gp_in_sample_rms_um": per_component(info["zero_rms"]),
                  "cv_rms_um": {kk: per_component(v) for kk, v in info["cv_rms"].items()}}
     return gps, specs, loo, selection
 

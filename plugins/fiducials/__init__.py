@@ -6,9 +6,10 @@ frame). Each ball's centre is fitted (sphere of the calibrated ``diameter``, or 
 uncertainty; the 12-parameter transform by weighted least squares with its GUM covariance, checked by
 Monte Carlo (GUM Supplement 1); the volumetric errors at the fiducials and Ev; the fiducial-count study
 (000 Fig. 3); a GP of the volumetric error (core.calibration.gp: spectral mixtures of Q = 1, 2, 4, …
-≤ ``Q`` components, RBF and Matérn 5/2, chosen by 6-fold cross-validation with the hyperparameters
-re-fitted in each fold — reported as ``gp_cv_rms_um``; the noise term is bounded below by the centres'
-known σ). Writes ``volumetric_model.json`` (what `volumetric` applies), ``volumetric_grid.csv``
+≤ ``Q`` components, RBF and Matérn 5/2, and "none" (the transform alone), chosen by 6-fold
+cross-validation with the transform and the hyperparameters re-fitted in each fold — reported as
+``gp_cv_rms_um`` beside ``no_gp_rms_um``; a GP only where it beats "none" by more than one standard
+error; the noise term is bounded below by the centres' known σ). Writes ``volumetric_model.json`` (what `volumetric` applies), ``volumetric_grid.csv``
 (predicted error and its uncertainty on a grid over the workspace) and figures. The cloud passes
 through unchanged.
 """
@@ -150,7 +151,7 @@ class FiducialsStep(Step):
         # found from the ball fits; σ_reference is a declared figure, often conservative, so it is
         # left to the marginal likelihood
         gps, gp_specs, loo, selection = vm.fit_error_gps(meas, e, Q=params.Q, check=ctx.progress.check,
-                                                         noise_var=sm**2)
+                                                         noise_var=sm**2, ref=ref)
         ctx.progress.update(0.85, "grid")
         axes = [np.linspace(lo[d], hi[d], params.grid) for d in range(3)]
         G = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
