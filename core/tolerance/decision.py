@@ -39,7 +39,8 @@ def item_verdict(value: float | None, U: float | None, limit: float, rule: str) 
     if rule == "simple":
         return (CONFORMS if value <= limit + slack else NOT), None
     if U is None or not math.isfinite(U):
-        return UNDECIDED, NO_UNCERTAINTY
+        return UNDECIDED, NO_UNCERTAINTY + ("; the value alone exceeds the limit" if value > limit + slack
+                                            else "")
     if value + U <= limit + slack:
         return CONFORMS, None
     if value - U > limit + slack:
