@@ -1,7 +1,8 @@
 """Undo and redo for the window's model: snapshots of (recipe, displayed cloud), kept by reference.
 
 Cheap: a Recipe is immutable (every edit returns a new one that shares the unchanged steps) and so
-is a PointCloud, so a snapshot is two references, never a copy.
+is a PointCloud, so a snapshot is two references, never a copy; the points the window's deletions
+hide are one bit per point (``keep``, numpy.packbits: 1.6 MB at 12.6 million points).
 """
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ LIMIT = 100  # undo steps kept
 class Snapshot:
     recipe: Recipe
     shown: PointCloud | None
+    #: np.packbits of the mask of ``shown``'s points displayed (None: all of them)
+    keep: Any = None
 
 
 class History:
