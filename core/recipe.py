@@ -234,7 +234,8 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
     if data.get("uncertainty") is not None:
         from .uncertainty import parse_uncertainty
 
-        uncertainty = parse_uncertainty(data["uncertainty"], at("uncertainty"), where)
+        # steps: a source needing a step the recipe lacks (probe_radius) is refused here too
+        uncertainty = parse_uncertainty(data["uncertainty"], at("uncertainty"), where, steps=steps)
     if data.get("tolerance") is not None:
         from .tolerance import parse_tolerance
 

@@ -80,17 +80,6 @@ def _ordered(names) -> list[str]:
     return first + rest + zern + pose
 
 
-def _residual_values(cloud, surface):
-    from ..metrics.pupil import is_flat
-    from ..pipeline import remove_piston_tilt
-
-    if "residual" in cloud.channels:
-        return cloud["residual"], "the final residual"
-    if is_flat(surface) and cloud.n >= 3:
-        return remove_piston_tilt(cloud.x, cloud.y, cloud.z), "the heights, piston and tilt removed"
-    return cloud.z, "the heights"
-
-
 def propagate(recipe, result, *, extra_figures=None, progress: Progress | None = None,
               workers: int | None = None) -> UncertaintyResult:
     """Monte Carlo through the recipe's steps (module doc, docs/uncertainty.md) for ``result`` — the
@@ -111,6 +100,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
     plan, nominal, reports = mc.make_plan(recipe, result.input_cloud, result.surface,
                                           progress=progress.sub(0.0, 0.08))
     f0 = mc.all_figures(nominal, reports, plan, extra_figures)
+    knots = f0.pop("_knot_spacing", None)
     summary = result.summary() if hasattr(result, "summary") else {}
     warnings = []
     for key in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad"):
@@ -122,14 +112,17 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
         raise PointsProError("uncertainty: the steps leave no figure to give an uncertainty for (no residual "
                              "and no nominal; nothing in the summary)")
     if spec.noise is None:
-        v, of = _residual_values(nominal, plan.surface)
+        v, of = mc.residual_values(nominal, plan.surface)
         sigma = estimate_sigma(nominal.x, nominal.y, v)
         noise_from = f"auto: {method_text()} ({of})"
     else:
         sigma = spec.noise
         noise_from = f"given in the recipe ({spec.noise_text})"
     names = _ordered(list(f0))
-    job = mc.Job(plan, result.input_cloud, sigma, spec.sources, spec.seed, names, extra_figures)
+    levels = [f"pv_um@{lam:g}" for lam in mc.LEVELS] if "pv_um" in f0 else []
+    v0 = mc.residual_values(nominal, plan.surface)[0] if levels else None
+    job = mc.Job(plan, result.input_cloud, sigma, spec.sources, spec.seed, names + levels, extra_figures,
+                 knots, v0, nominal["index"])
     w = workers or spec.workers or mc.default_workers()
     used, results = mc.run_samples(job, spec.samples, w, progress.sub(0.08, 0.97))
     S = np.array([r[1] for r in results])
@@ -150,6 +143,8 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
                 parts = {"fit": entries["pvr_fit_pv_um"], "rest": entries["pvr_rest_rms_um"]}
             else:
                 kind = "extreme"
+        if kind == "extreme" and name == "pv_um" and levels:
+            parts = {lam: S[:, len(names) + k] for k, lam in enumerate(mc.LEVELS)}
         entries[name] = est.estimate(name, kind, f0[name], S[:, j], Z, parts)
         if name in SUMMARY_ORDER or kinds and name in kinds:
             budgets[name] = est.budget(S[:, j], Z, src_names)

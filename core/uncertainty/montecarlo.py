@@ -180,9 +180,14 @@ def run_plan(plan: Plan, cloud: PointCloud, params_of=None):
 
 # -- the figures of one run ---------------------------------------------------------------------------
 
-def summary_figures(cloud: PointCloud, surface) -> dict:
+_PAIRS = {}
+
+
+def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = None) -> dict:
     """rms_um, pv_um, pvr_um, slope_rms_urad as core.pipeline.summarize computes them, plus PVr's two
-    parts (``pvr_fit_pv_um``: PV of the 36-term fit; ``pvr_rest_rms_um``: RMS of what it leaves)."""
+    parts (``pvr_fit_pv_um``: PV of the 36-term fit; ``pvr_rest_rms_um``: RMS of what it leaves).
+    ``knot_spacing``: the slope spline's (the nominal run's, reused by the samples; None: its default)."""
+    from ..maps.bspline import default_knot_spacing, fit_bspline
     from ..metrics import zernike as zk
     from ..metrics.form import PVR_TERMS, slope_rms_urad
     from ..metrics.pupil import is_flat, pupil_of
@@ -204,7 +209,7 @@ def summary_figures(cloud: PointCloud, surface) -> dict:
     if _is_stylus_profile(cloud):
         return out
     pupil = pupil_of(x, y, surface)
-    pairs = zk.terms(PVR_TERMS, "fringe")
+    pairs = _PAIRS.get(PVR_TERMS) or _PAIRS.setdefault(PVR_TERMS, zk.terms(PVR_TERMS, "fringe"))
     R = pupil.radius if pupil.radius > 0 else 1.0
     if len(v) > 2 * len(pairs):
         resid = zk.fit(x, y, v, R, pairs, center=pupil.center).residual
@@ -215,7 +220,15 @@ def summary_figures(cloud: PointCloud, surface) -> dict:
         out["pvr_um"] = (fit_pv + 3.0 * rest) * 1e3
     else:
         out["pvr_um"] = out["pv_um"]
-    s = slope_rms_urad(x, y, v)
+    spline = None
+    if len(v) >= 50:
+        try:
+            h = knot_spacing if knot_spacing is not None else default_knot_spacing(x, y)
+            spline = fit_bspline(x, y, v, knot_spacing=h)
+            out["_knot_spacing"] = h
+        except ValueError:
+            spline = None
+    s = slope_rms_urad(x, y, v, spline) if spline is not None else None
     if s is not None:
         out["slope_rms_urad"] = s
     return out
@@ -243,8 +256,8 @@ def report_figures(reports: dict, plan: Plan) -> dict:
     return out
 
 
-def all_figures(cloud, reports, plan, extra_figures=None) -> dict:
-    f = summary_figures(cloud, plan.surface)
+def all_figures(cloud, reports, plan, extra_figures=None, knot_spacing=None) -> dict:
+    f = summary_figures(cloud, plan.surface, knot_spacing)
     f.update(report_figures(reports, plan))
     if extra_figures is not None:
         for k, v in (extra_figures(cloud, plan.surface) or {}).items():
@@ -264,6 +277,25 @@ class Job:
     seed: int
     names: list  # figure names, in the order of the returned vector
     extra_figures: object = None
+    knot_spacing: float | None = None  # the slope spline's, from the nominal run
+    v0: np.ndarray | None = None  # the nominal's residual values (for PV at other noise levels)
+    index0: np.ndarray | None = None
+
+
+#: extra noise levels λ (variance λσ² on top of the data's) at which PV is evaluated by scaling each
+#: sample's change of the residual by √λ (core.uncertainty.estimate: the extreme-value extrapolation)
+LEVELS = (0.5, 2.0)
+
+
+def residual_values(cloud, surface):
+    from ..metrics.pupil import is_flat
+    from ..pipeline import remove_piston_tilt
+
+    if "residual" in cloud.channels:
+        return np.asarray(cloud["residual"], dtype=np.float64), "the final residual"
+    if is_flat(surface) and cloud.n >= 3:
+        return remove_piston_tilt(cloud.x, cloud.y, cloud.z), "the heights, piston and tilt removed"
+    return np.asarray(cloud.z, dtype=np.float64), "the heights"
 
 
 def draws(job: Job, i: int):
@@ -309,7 +341,11 @@ def one_sample(job: Job, i: int):
     cloud, params_of = perturbed(job, zb, zn)
     try:
         out, reports = run_plan(job.plan, cloud, params_of)
-        f = all_figures(out, reports, job.plan, job.extra_figures)
+        f = all_figures(out, reports, job.plan, job.extra_figures, job.knot_spacing)
+        if job.v0 is not None and out.n == job.v0.size and np.array_equal(out["index"], job.index0):
+            dv = residual_values(out, job.plan.surface)[0] - job.v0
+            for lam in LEVELS:
+                f[f"pv_um@{lam:g}"] = float(np.ptp(job.v0 + np.sqrt(lam) * dv)) * 1e3
     except PointsProError as e:
         return i, np.full(len(job.names), np.nan), zb, str(e).splitlines()[0] if str(e) else type(e).__name__
     return i, np.array([f.get(n, np.nan) for n in job.names], dtype=np.float64), zb, None

@@ -187,8 +187,6 @@ def parse_uncertainty(data, at: str, where: str, steps=None) -> UncertaintySpec:
             cte, cte_text = _quantity(value["cte"], CTE_UNITS, key + ".cte", _where(value, "cte", sl, where),
                                       "an expansion coefficient")
             sources.append(Source(name, u, text, cte, cte_text))
-    if "length_scale" in sources_in and "temperature" in sources_in:
-        pass  # both act on x, y, z: independent draws, stated in the budget
     spec = UncertaintySpec(samples, seed, sigma, noise_text, tuple(sources), workers, lines)
     if steps is not None:
         spec.check_steps(steps, at)

@@ -1,0 +1,214 @@
+"""Issue 23 (part 1): the uncertainty: block, the noise estimate, the Monte Carlo through the steps
+(docs/uncertainty.md). Coverage over repeated simulations: test_uncertainty_coverage.py."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pointspro.core.errors import Cancelled, RecipeError
+from pointspro.core.pipeline import run_pipeline
+from pointspro.core.progress import Progress
+from pointspro.core.recipe import parse_recipe
+from pointspro.core.uncertainty import propagate
+from pointspro.core.uncertainty.noise import estimate_sigma
+from pointspro.core.yamlio import load_yaml
+
+from .paper002 import machining_marks, radial, raster, star
+from .test_uncertainty_sim import CASES
+
+HEAD = ("pointspro: 1\nsurface: {type: even_asphere, c: 3.3e-4, k: -0.98, aperture: 1300}\n"
+        "steps:\n  - misalignment: {}\n  - zernike: {terms: 36, remove: [piston, tilt]}\n")
+
+
+def parse(text):
+    return parse_recipe(load_yaml(text, "r.yaml"), "r.yaml")
+
+
+# -- the block ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("block, words", [
+    ("uncertainty:\n  samples: 3\n", ["r.yaml, line 7", "'samples'", "JCGM 101", "at least 50"]),
+    ("uncertainty:\n  sources:\n    z_scale: 50\n", ["r.yaml, line 8", "'sources.z_scale'", "no unit", "ppm"]),
+    ("uncertainty:\n  noise: 0.05\n", ["line 7", "'noise'", "no unit", "nm", "um"]),
+    ("uncertainty:\n  noise: 50 furlongs\n", ["line 7", "'noise'", "'furlongs'", "nm"]),
+    ("uncertainty:\n  sources:\n    probe_radius: 0.5 um\n", ["line 8", "'sources.probe_radius'",
+                                                             "no enabled 'probe_radius' step"]),
+    ("uncertainty:\n  sources:\n    wind: 3 um\n", ["line 8", "unknown source", "probe_radius"]),
+    ("uncertainty:\n  sampels: 200\n", ["line 7", "unknown key 'sampels'"]),
+    ("uncertainty:\n  sources:\n    temperature: 0.2 K\n", ["line 8", "cte"]),
+    ("uncertainty:\n  sources:\n    temperature: {u: 0.2, cte: 2.6 ppm/K}\n", ["'sources.temperature.u'",
+                                                                            "no unit", "K"]),
+    ("uncertainty:\n  samples: 200.5\n", ["'samples'", "integer"]),
+])
+def test_bad_blocks_are_one_line_naming_line_and_key(block, words):
+    with pytest.raises(RecipeError) as e:
+        parse(HEAD + block)
+    msg = str(e.value)
+    assert "\n" not in msg
+    for w in words:
+        assert w in msg, (w, msg)
+
+
+def test_a_good_block_round_trips_with_its_units():
+    r = parse(HEAD.replace("  - misalignment: {}", "  - probe_radius: {radius: 2.0}")
+              + "uncertainty:\n  samples: 80\n  seed: 5\n  noise: 40 nm\n  sources:\n"
+              "    probe_radius: 0.5 um\n    z_scale: 50 ppm\n    temperature: {u: 0.2 K, cte: 2.6 ppm/K}\n")
+    u = r.uncertainty
+    assert (u.samples, u.seed) == (80, 5)
+    assert u.noise == pytest.approx(40e-6)
+    by = {s.name: s for s in u.sources}
+    assert by["probe_radius"].u == pytest.approx(0.5e-3)
+    assert by["z_scale"].relative == pytest.approx(50e-6)
+    assert by["temperature"].relative == pytest.approx(0.2 * 2.6e-6)
+    d = r.to_dict()["uncertainty"]
+    assert d["noise"] == "40 nm" and d["sources"]["temperature"] == {"u": "0.2 K", "cte": "2.6 ppm/K"}
+    again = parse(r.to_yaml())
+    assert again.uncertainty.to_dict() == d
+
+
+# -- the noise estimate ---------------------------------------------------------------------------------
+
+def _smooth(x, y, d):
+    r = np.hypot(x, y) / (d / 2)
+    t = np.arctan2(y, x)
+    return 1e-3 * (0.4 * r ** 2 * np.cos(2 * t) + 0.2 * r ** 3 * np.cos(3 * t + 1) - 0.1 * r ** 4)
+
+
+@pytest.mark.parametrize("pattern", ["raster", "star", "radial", "random"])
+def test_noise_sigma_is_within_a_few_percent_on_smooth_forms(pattern):
+    """Several patterns and densities, five seeds each, two noise levels: each estimate within 10 %,
+    their mean within 4 % of the true σ."""
+    if pattern == "raster":
+        x, y = raster(600, 12.0)
+    elif pattern == "star":
+        x, y = star(1300, 18, 5.0)
+    elif pattern == "radial":
+        x, y = radial(1000, 36, 2000)
+    else:
+        x, y = np.random.default_rng(3).uniform(-300, 300, (2, 3000))
+    d = float(np.ptp(x))
+    for sigma in (20e-6, 300e-6):
+        est = [estimate_sigma(x, y, _smooth(x, y, d) + np.random.default_rng(s).normal(0, sigma, x.size)) / sigma
+               for s in range(5)]
+        assert np.all(np.abs(np.array(est) - 1) < 0.10), est
+        assert abs(np.mean(est) - 1) < 0.04, est
+
+
+def test_noise_sigma_is_conservative_where_the_form_has_structure_at_the_neighbour_scale():
+    x, y = raster(600, 12.0)
+    v = machining_marks(x, y, 600) + np.random.default_rng(0).normal(0, 50e-6, x.size)
+    assert estimate_sigma(x, y, v) > 1.5 * 50e-6
+
+
+# -- the Monte Carlo ------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def issue_run():
+    case = CASES["issue"]
+    noisy, _ = case.measure(11)
+    r = case.recipe("{samples: 60, seed: 3, workers: 2}")
+    return case, noisy, r, run_pipeline(noisy, r)
+
+
+def test_block_has_every_figure_with_value_u_and_interval(issue_run):
+    _, _, _, res = issue_run
+    s = res.summary()
+    b = s["uncertainty"]
+    for key in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad", "zernike.Z4_nm", "zernike.Z9_nm",
+                "pose.alpha_deg", "pose.dx_mm"):
+        e = b[key]
+        assert set(e) >= {"value", "measured", "bias", "u", "U95", "interval95", "k", "method"}, key
+        lo, hi = e["interval95"]
+        assert lo <= e["value"] <= hi and e["u"] > 0 and e["U95"] > 0, key
+    for key in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad"):  # the plain figure beside the corrected
+        assert b[key]["measured"] == s[key]
+        assert b[key]["bias"] > 0  # noise inflates them
+    zern = next(st for st in res.steps if st.id == "zernike").report["coefficients"]
+    assert b["zernike.Z9_nm"]["measured"] == pytest.approx(zern[8]["coefficient_nm"], abs=1e-9)
+    assert b["zernike.Z9_nm"]["bias"] == 0
+    m = b["_meta"]
+    assert m["samples"] == 60 and m["samples_failed"] == 0 and "warnings" not in m
+    assert 40 < m["noise_sigma_um"] * 1e3 < 60  # the case's 50 nm
+    assert "aperture" in m["reuse"] and "conditional" in m["reuse"]
+    assert "outlier" in m["not_included"]
+
+
+def test_results_are_the_same_for_one_and_two_workers(issue_run):
+    case, noisy, r, res = issue_run
+    one = propagate(r, res, workers=1)
+    two = res.uncertainty
+    assert np.array_equal(one.samples, two.samples, equal_nan=True)
+    b1, b2 = one.block(), two.block()
+    for key in b1:
+        if key != "_meta":
+            assert b1[key] == b2[key], key
+
+
+def test_artifacts_are_a_histogram_and_the_samples_csv(issue_run, tmp_path):
+    _, _, _, res = issue_run
+    arts = res.artifacts
+    csv = arts["uncertainty_samples.csv"]
+    lines = [ln for ln in csv.splitlines() if not ln.startswith("#")]
+    head = lines[0].split(",")
+    assert head[:3] == ["sample", "rms_um", "pv_um"] and "zernike.Z4_nm" in head
+    assert len(lines) == 61
+    rms = np.array([float(ln.split(",")[1]) for ln in lines[1:]])
+    assert np.array_equal(rms, res.uncertainty.samples[:, 0])
+    p = tmp_path / "uncertainty.png"
+    arts["uncertainty.png"](p)
+    assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_type_b_source_adds_what_its_sensitivity_predicts():
+    """z_scale: the power term's sensitivity to ε by a finite difference times u(ε) is the budget's
+    share, and u² grows by its square."""
+    case = CASES["issue"]
+    noisy, _ = case.measure(12)
+    plain = case.recipe()
+    base = run_pipeline(noisy, plain)
+    eps = 1e-5
+    scaled = noisy.replace(xyz=noisy.xyz * np.array([1.0, 1.0, 1.0 + eps]))
+
+    def z4(res):
+        return next(st for st in res.steps if st.id == "zernike").report["coefficients"][3]["coefficient_nm"]
+
+    sens = (z4(run_pipeline(scaled, plain)) - z4(base)) / eps  # nm per unit ε
+    u_eps = 20e-6
+    with_src = run_pipeline(noisy, case.recipe("{samples: 100, seed: 2, noise: 50 nm, sources: {z_scale: 20 ppm}}"))
+    without = run_pipeline(noisy, case.recipe("{samples: 100, seed: 2, noise: 50 nm}"))
+    e = with_src.summary()["uncertainty"]["zernike.Z4_nm"]
+    e0 = without.summary()["uncertainty"]["zernike.Z4_nm"]
+    predicted = abs(sens) * u_eps
+    assert predicted > 2 * e0["u"]  # the source dominates: the test can see it
+    assert e["u"] == pytest.approx(np.hypot(e0["u"], predicted), rel=0.15)
+    share = with_src.uncertainty.budgets.get("zernike.Z4_nm") or {}
+    rms_budget = with_src.summary()["uncertainty"]["rms_um"]["budget"]
+    assert "z_scale" in rms_budget and "noise" in rms_budget
+    assert not share or share["z_scale"] == pytest.approx(predicted, rel=0.15)
+
+
+def test_cancel_stops_the_samples(issue_run):
+    _, _, r, res = issue_run
+    p = Progress()
+    p.token.cancel()
+    with pytest.raises(Cancelled):
+        propagate(r, res, progress=p, workers=2)
+
+
+def test_the_example_recipe_gets_its_uncertainty():
+    from pointspro.core.io import read_cloud
+
+    from .conftest import EXAMPLE
+
+    text = (EXAMPLE / "recipe.yaml").read_text(encoding="utf-8")
+    r = parse(text + "uncertainty: {samples: 50, seed: 1, sources: {probe_radius: 0.5 um}}\n")
+    res = run_pipeline(read_cloud(EXAMPLE / "asphere_cmm.csv"), r)
+    b = res.summary()["uncertainty"]
+    m = b["_meta"]
+    assert "warnings" not in m, m.get("warnings")
+    assert abs(m["noise_sigma_um"] - 0.3) < 0.03  # make_example.py's 0.3 µm
+    for name in ("manual_edit", "knn_denoise", "aperture"):
+        assert name in m["reuse"].split("skipped")[0]
+    assert "skipped bspline_map" in m["reuse"]
+    assert b["rms_um"]["value"] < b["rms_um"]["measured"]
+    assert "probe_radius" in b["rms_um"]["budget"]
