@@ -26,7 +26,7 @@ from .quantities import AREAL, ISO_KEYS, KINDS, SUMMARY_KEYS, compute
 
 __all__ = ["ToleranceSpec", "Limit", "parse_tolerance", "Form", "parse_form", "NotationError"]
 
-#: ISO 10110-5:2015 §4.1: fringes are counted at the e-line of mercury unless the drawing says otherwise
+#: ISO 10110-5:2015: fringes are counted at the e-line of mercury unless the drawing says otherwise
 DEFAULT_WAVELENGTH_NM = 546.07
 UNITS = {"fringes": "fringes", "fringe": "fringes", "fr": "fringes", "um": "um", "µm": "um",
          "μm": "um", "nm": "nm"}

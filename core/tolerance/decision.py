@@ -3,7 +3,7 @@
 Every limit of ISO 10110-5 is an upper limit (a PV or an RMS; for the sagitta deviation a bound on
 |A|, i.e. −L ≤ A ≤ L, which for an interval symmetric about A is the same comparison on |A|).
 
-- ``guarded`` (the default; ISO 14253-1:2017 §5 and §8, guard band = U95 on both sides):
+- ``guarded`` (the default; ISO 14253-1:2017, guard band = U95 on both sides):
   ``conforms`` only when value + U95 ≤ limit, ``does not conform`` only when value − U95 > limit,
   else ``undecided``. An item with no uncertainty (the recipe has no ``uncertainty:`` block) cannot be
   proved either way: ``undecided``, with the note NO_UNCERTAINTY — an accredited laboratory states

@@ -1,4 +1,4 @@
-"""The surface form tolerance as written on a drawing, ISO 10110-5:2015 §4 (docs/tolerance.md):
+"""The surface form tolerance as written on a drawing, ISO 10110-5:2015 (docs/tolerance.md):
 
     3/A(B/C)                        A sagitta deviation, B irregularity, C rotationally symmetric
     3/A(B)   3/-(B/C)   3/A(-/C)    irregularity (each a maximum PV); '-' = not toleranced
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-#: the RMS kinds of ISO 10110-5:2015 §4.2.2 (t: total, i: irregularity, a: non-rotationally symmetric)
+#: the RMS kinds of ISO 10110-5:2015 (t: total, i: irregularity, a: non-rotationally symmetric)
 RMS_KINDS = ("t", "i", "a")
 
 

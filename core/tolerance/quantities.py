@@ -1,8 +1,8 @@
-"""The quantities of ISO 10110-5:2015 §4 as ISO 14999-4:2015 §5 defines them, computed on the final
+"""The quantities of ISO 10110-5:2015 as ISO 14999-4:2015 defines them, computed on the final
 cloud's form deviation (docs/tolerance.md, "Quantities"). Every value is in µm of surface height, in
 the sign of the residual (``z − sag``, docs/conventions.md: positive = material above the nominal).
 
-The form deviation w (ISO 14999-4 §3.3 "surface form deviation") is the ``residual`` channel over the
+The form deviation w (ISO 14999-4:2015, "surface form deviation") is the ``residual`` channel over the
 points the recipe kept (its aperture applied), or — a height map with no nominal or a flat — the
 heights with their least-squares plane removed, as ``summary.rms_um`` (core.pipeline.summarize).
 
@@ -23,12 +23,12 @@ about R/6 wide. Rotationally symmetric structure finer than that stays in RMSa (
     sag_um   A  sagitta deviation: the power term's departure at the test area's edge from its
                 centre, P(ρ = 1) − P(0) = 2√3·c₄ (signed: > 0 when the edge lies higher relative to
                 the centre than on the nominal, i.e. the part is more concave, seen from +z); the
-                tolerance bounds |A| (ISO 14999-4 §5.2, the sagitta of the best-fit sphere's
+                tolerance bounds |A| (ISO 14999-4:2015, the sagitta of the best-fit sphere's
                 departure over the test area)
-    irr_um   B  irregularity: PV of w − piston − tilt − P over the points (ISO 14999-4 §5.3)
+    irr_um   B  irregularity: PV of w − piston − tilt − P over the points (ISO 14999-4:2015)
     rsi_um   C  rotationally symmetric irregularity: PV of S(ρ) over the radii the points span
-                (ISO 14999-4 §5.4)
-    rmst_um     RMSt: RMS of w − piston − tilt (ISO 14999-4 §5.5, "total")
+                (ISO 14999-4:2015)
+    rmst_um     RMSt: RMS of w − piston − tilt (ISO 14999-4:2015)
     rmsi_um     RMSi: RMS of the irregularity w − piston − tilt − P
     rmsa_um     RMSa: RMS of the irregularity minus S (the non-rotationally symmetric part)
 
