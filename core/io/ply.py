@@ -41,6 +41,7 @@ def read_ply(path: Path):
         dup = sorted({p for p in names if names.count(p) > 1})
         if dup:
             raise InputError(f"{path}: PLY vertex property {dup[0]!r} is declared twice")
+        _check_memory(f, path, fmt, n, props)
         cols = _read_ascii(f, path, n, props) if fmt == "ascii" else _read_binary(f, path, fmt, n, props)
     xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")]).astype(np.float64)
     if not np.all(np.isfinite(xyz)):
@@ -93,6 +94,18 @@ def _read_header(f, path: Path) -> tuple[str, list]:
     if fmt is None:
         raise InputError(f"{path}: PLY header has no format line")
     return fmt, elements
+
+
+def _check_memory(f, path: Path, fmt: str, n: int, props) -> None:
+    """Refuse, from the header alone, a cloud too large for the memory available (core.io.memory):
+    nothing of the vertex data is read."""
+    from .memory import check_fits
+
+    short = False
+    if fmt != "ascii":
+        need = np.dtype([(p, t) for p, t in props]).itemsize * n
+        short = path.stat().st_size - f.tell() < need
+    check_fits(path, n, where="PLY header (element vertex)", file_short=short)
 
 
 def _read_ascii(f, path: Path, n: int, props) -> dict:

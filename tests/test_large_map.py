@@ -1,0 +1,181 @@
+"""Issue 26: large maps in bounded memory — chunked fits equal to the full design matrix, memory per
+point bounded, a map too large for memory refused from its header before reading."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from pointspro.core.errors import InputError
+from pointspro.core.io import memory as mem
+from pointspro.core.io import read_cloud
+from pointspro.core.maps import bspline as bs
+from pointspro.core.metrics import zernike as zk
+
+
+def _disk(n, seed, corner=False):
+    rng = np.random.default_rng(seed)
+    r = 50 * np.sqrt(rng.random(n))
+    t = rng.random(n) * 2 * np.pi
+    x, y = r * np.cos(t), r * np.sin(t)
+    if corner:  # the data in one quadrant of the unit disk: an ill-conditioned fit (TSQR path)
+        x, y = np.abs(x) * 0.5, np.abs(y) * 0.5
+    z = 1e-4 * (x / 50) ** 2 - 3e-5 * (x * y / 2500) + 2e-6 * rng.standard_normal(n)
+    return x, y, z
+
+
+@pytest.mark.parametrize("n,seed,corner,terms", [
+    (3 * zk.CHUNK + 17, 0, False, 36), (zk.CHUNK - 5, 1, False, 15), (50_000, 2, True, 36),
+    (20_000, 3, True, 10), (40_000, 4, False, 66)])
+def test_chunked_zernike_fit_equals_the_full_design_matrix(n, seed, corner, terms):
+    x, y, z = _disk(n, seed, corner)
+    pairs = zk.terms(terms, "fringe")
+    f = zk.fit(x, y, z, 50.0, pairs)
+    A = zk.design_matrix(x, y, 50.0, pairs)
+    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
+    _, sv, vt = np.linalg.svd(A, full_matrices=False)
+    cond = sv[0] / sv[-1]
+    assert f.cond == pytest.approx(cond, rel=1e-6)
+    # the same numbers to 1e-9 relative on a well-posed pupil; on an ill-posed one (the data in a
+    # corner: cond ~10⁸) no solver pins the coefficients below ε·cond, but the fit itself agrees
+    tol = 1e-9 if cond < 1e4 else 1e-15 * cond * 10
+    assert np.allclose(f.coef, coef, rtol=tol, atol=tol * np.abs(coef).max())
+    resid = z - A @ coef
+    assert np.abs(f.residual - resid).max() <= 1e-9 * np.abs(z).max()
+    dof = n - len(pairs)
+    ginv = (vt.T / sv**2) @ vt  # (AᵀA)⁻¹ from the SVD (forming AᵀA would square the condition)
+    sd = np.sqrt(np.diag(ginv) * (resid @ resid) / dof)
+    assert np.allclose(f.sd, sd, rtol=max(1e-6, tol))
+
+
+def test_zernike_fit_holds_no_full_length_temporaries():
+    """Beyond its inputs the fit holds the residual (one column) and chunk-sized blocks: the
+    earlier form held u, v and the evaluated fit as full-length columns too (4 columns)."""
+    n = 1_000_000
+    x, y, z = _disk(n, 5)
+    pairs = zk.terms(36, "fringe")
+    tracemalloc.start()
+    try:
+        zk.fit(x, y, z, 50.0, pairs)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 * n + 12 * 2**20, peak / n
+
+
+def _dense_spline_system(x, y, z, w, h, x0, y0, nx, ny):
+    shell = bs.TensorBSpline(x0, y0, h, np.zeros((nx + 3, ny + 3)))
+    Bx = shell.design_1d(x, x0, nx).toarray()
+    By = shell.design_1d(y, y0, ny).toarray()
+    B = (Bx[:, :, None] * By[:, None, :]).reshape(len(x), -1)
+    return B.T @ (w[:, None] * B), B.T @ (w * z)
+
+
+@pytest.mark.parametrize("seed,order", [(0, "random"), (1, "rows"), (2, "random")])
+def test_chunked_spline_moments_equal_the_dense_normal_equations(seed, order, monkeypatch):
+    monkeypatch.setattr(bs, "CHUNK", 1000)  # many chunks, partial last one
+    rng = np.random.default_rng(seed)
+    n = 5_321
+    x, y = rng.uniform(-5, 5, n), rng.uniform(-4, 4, n)
+    if order == "rows":
+        k = np.lexsort((x, np.round(y, 1)))
+        x, y = x[k], y[k]
+    z = np.sin(x) * np.cos(y) + 0.01 * rng.standard_normal(n)
+    w = rng.uniform(0.5, 2.0, n)
+    h, nx, ny = 1.0, 10, 8
+    x0, y0 = -5.0, -4.0
+    mom = bs._cell_moments(x, y, z, w, x0, y0, h, nx, ny)
+    ab, rhs, bw = bs._banded_normal_equations(mom, nx, ny)
+    A, b = _dense_spline_system(x, y, z, w, h, x0, y0, nx, ny)
+    N = A.shape[0]
+    full = np.zeros_like(A)
+    for d in range(bw + 1):  # upper band storage: ab[bw + i − j, j] = A[i, j]
+        j = np.arange(d, N)
+        full[j - d, j] = ab[bw - d, d:]
+    full = np.triu(full) + np.triu(full, 1).T
+    assert np.allclose(full, A, rtol=1e-12, atol=1e-12 * np.abs(A).max())
+    assert np.allclose(rhs, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+
+
+def test_weighted_spline_equals_the_fit_of_repeated_points():
+    """Weight w (an integer here) = the point counted w times: Σ w (z − s)² (module doc). The system,
+    penalty scale included (it follows trace(BᵀWB)), is then the same; the earlier weighting (bx
+    and by both scaled by √w) gave w² and failed this."""
+    rng = np.random.default_rng(7)
+    n = 4000
+    x, y = rng.uniform(-5, 5, n), rng.uniform(-5, 5, n)
+    z = 0.1 * x * y + 0.05 * rng.standard_normal(n)
+    w = rng.integers(1, 4, n)
+    b = (-5.0, 5.0, -5.0, 5.0)
+    s = bs.fit_bspline(x, y, z, knot_spacing=1.25, weights=w.astype(float), bounds=b)
+    rep = np.repeat(np.arange(n), w)
+    r = bs.fit_bspline(x[rep], y[rep], z[rep], knot_spacing=1.25, bounds=b)
+    assert np.allclose(s.coef, r.coef, rtol=1e-9, atol=1e-10)
+
+
+def test_spline_fit_memory_per_point_is_small():
+    """The linear part of fit_bspline's memory: a few bytes a point (chunked moments), not the
+    ~200 B/point of 116 full-length products."""
+    peaks = []
+    for n in (400_000, 800_000):
+        x, y, z = _disk(n, 3)
+        tracemalloc.start()
+        try:
+            bs.fit_bspline(x, y, z, knot_spacing=100 / 150)
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+    assert (peaks[1] - peaks[0]) / 400_000 < 16, [p / 1e6 for p in peaks]
+
+
+# --- a map too large for memory: refused from its header, before reading ---------------------------
+def _fake_ply(path, n):
+    path.write_bytes(("ply\nformat binary_little_endian 1.0\n"
+                      f"element vertex {n}\nproperty double x\nproperty double y\nproperty double z\n"
+                      "end_header\n").encode("ascii") + np.zeros(30).tobytes())
+    return path
+
+
+def test_a_header_claiming_1e11_points_is_refused_before_reading(tmp_path, monkeypatch):
+    monkeypatch.delenv("POINTSPRO_MEMORY_CHECK", raising=False)
+    p = _fake_ply(tmp_path / "huge.ply", 10**11)
+    with pytest.raises(InputError) as e:
+        read_cloud(p)
+    msg = str(e.value)
+    assert "huge.ply" in msg and "100,000,000,000 points" in msg and "nothing was read" in msg
+    assert "decimate" in msg and "crop" in msg and "--cloud-format" in msg
+    assert "header may be damaged" in msg
+
+
+def test_memory_check_against_a_stated_budget(tmp_path, monkeypatch):
+    monkeypatch.delenv("POINTSPRO_MEMORY_CHECK", raising=False)
+    budget = mem.BASE_BYTES + 1_000_000 * mem.BYTES_PER_POINT
+    mem.check_fits("m.ply", 1_000_000, available=budget)  # fits exactly
+    with pytest.raises(InputError, match=r"m\.ply: its header states 4,000,000 points.*About "
+                                         r"1,000,000 points fit.*k ≥ 2 along each axis"):
+        mem.check_fits("m.ply", 4_000_000, available=budget)
+    monkeypatch.setenv("POINTSPRO_MEMORY_CHECK", "0")
+    mem.check_fits("m.ply", 4_000_000, available=budget)
+
+
+def test_available_bytes_is_plausible():
+    a = mem.available_bytes()
+    assert a is None or 0 <= a < 2**50
+
+
+def test_batch_refuses_the_huge_map_in_one_line_and_writes_nothing(tmp_path):
+    p = _fake_ply(tmp_path / "huge.ply", 10**11)
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("pointspro: 1\nsteps:\n  - zernike: {terms: 36}\n  - bspline_map: {}\n",
+                      encoding="utf-8")
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "pointspro.core.cli", "--batch", str(recipe), str(p),
+                           "--out", str(out), "--quiet"], capture_output=True, text=True,
+                          encoding="utf-8", env={**__import__("os").environ, "POINTSPRO_MEMORY_CHECK": "1"})
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr + proc.stdout
+    assert "100,000,000,000 points" in proc.stderr + proc.stdout
+    assert not (out / "huge").exists()
