@@ -88,7 +88,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
     (figure → quadratic, extreme, smooth or linear) to say how each is bias-corrected."""
     from . import estimate as est
     from . import montecarlo as mc
-    from .noise import estimate_sigma, method_text
+    from .noise import estimate_sigma, method_text, relative_uncertainty
 
     spec: UncertaintySpec = recipe.uncertainty
     if spec is None:
@@ -114,10 +114,11 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
     if spec.noise is None:
         v, of = mc.residual_values(nominal, plan.surface)
         sigma = estimate_sigma(nominal.x, nominal.y, v)
-        noise_from = f"auto: {method_text()} ({of})"
+        u_rel = relative_uncertainty(nominal.n)
+        noise_from = f"auto: {method_text()} ({of}); relative standard uncertainty {100 * u_rel:.2g} %"
     else:
-        sigma = spec.noise
-        noise_from = f"given in the recipe ({spec.noise_text})"
+        sigma, u_rel = spec.noise, 0.0
+        noise_from = f"given in the recipe ({spec.noise_text}), taken as exact"
     names = _ordered(list(f0))
     levels = [f"pv_um@{lam:g}" for lam in mc.LEVELS] if "pv_um" in f0 else []
     v0 = mc.residual_values(nominal, plan.surface)[0] if levels else None
@@ -145,7 +146,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
                 kind = "extreme"
         if kind == "extreme" and name == "pv_um" and levels:
             parts = {lam: S[:, len(names) + k] for k, lam in enumerate(mc.LEVELS)}
-        entries[name] = est.estimate(name, kind, f0[name], S[:, j], Z, parts)
+        entries[name] = est.estimate(name, kind, f0[name], S[:, j], Z, parts, u_rel)
         if name in SUMMARY_ORDER or kinds and name in kinds:
             budgets[name] = est.budget(S[:, j], Z, src_names)
     for key in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad"):
@@ -157,7 +158,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
                   "removed per figure (docs/uncertainty.md)",
         "samples": spec.samples, "samples_failed": len(failed), "seed": spec.seed, "workers": used,
         "same_for_any_workers": True, "coverage_probability": COVERAGE,
-        "noise_sigma_um": sigma * 1e3, "noise_from": noise_from,
+        "noise_sigma_um": sigma * 1e3, "noise_sigma_u_rel": u_rel, "noise_from": noise_from,
         "noise_axis": "z of the input (the instrument's measuring axis), independent N(0, σ²) per point",
         "sources": {s.name: _source_meta(s) for s in spec.sources},
         "reuse": plan.reuse_text(),

@@ -22,8 +22,9 @@ E f_i is estimated with the type-B draws as control variates (the regression of 
 normal draws, whose mean is known to be 0); the same regression gives each source's share of u (the
 budget). The interval is the probabilistically symmetric 95 % interval (JCGM 101 §7.7) of the samples'
 deviations from their mean placed about f_c — in the squared domain for quadratic figures — widened
-by the bias estimate's own Monte Carlo standard error (k = 1.96, in quadrature); u is the samples'
-standard deviation with that standard error in quadrature, U95 the interval's half-width.
+by the bias estimate's own standard uncertainty (k = 1.96, in quadrature): its Monte Carlo standard
+error and, when σ was estimated from the data, σ's relative uncertainty times the bias's power of σ;
+u is the placed samples' standard deviation with that in quadrature, U95 the interval's half-width.
 """
 from __future__ import annotations
 
@@ -79,10 +80,12 @@ def _quantiles(d: np.ndarray):
 
 
 def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | None,
-             parts: dict | None = None) -> dict:
+             parts: dict | None = None, u_rel_sigma: float = 0.0) -> dict:
     """One figure's entry (value, measured, bias, u, U95, interval95, k, method) from its measured
     value f0 and its samples F (NaN: a failed sample); ``parts``: pvr's fit and rest entries.
-    ``_placed`` holds the samples placed about the value (what the interval and u are of)."""
+    ``_placed`` holds the samples placed about the value (what the interval and u are of).
+    ``u_rel_sigma``: the relative standard uncertainty of the noise's σ when it was estimated from the
+    data; the bias (∝ σ² or σ^p) carries it into the corrected value."""
     ok = np.isfinite(F)
     F = F[ok]
     Zs = None if Z is None else Z[ok]
@@ -110,19 +113,19 @@ def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | Non
         mean_f, _, sf = _cv(F, Zs)
         if kind == "extreme" and parts:
             value, p, spread = simex_power(f0, mean_f, {lam: v[ok] for lam, v in parts.items()})
-            se = math.hypot(EXTREME_FACTOR * sf / math.sqrt(M), spread)
+            se = math.hypot(EXTREME_FACTOR * sf / math.sqrt(M), spread, p * (f0 - value) * u_rel_sigma)
             placed = value + (F - F.mean())
             method = (f"extreme value: SIMEX — the mean PV at extra noise λσ² (λ = 0, 0.5, 1, 2) fitted by "
                       f"a + b·(1 + λ)^(p/2), p = {p:.2g} in [1, 2], extrapolated to λ = −1; the fit's spread "
                       "over p in [1, 2] is in u")
         elif kind == "extreme":
             value = f0 - EXTREME_FACTOR * (mean_f - f0)
-            se = EXTREME_FACTOR * sf / math.sqrt(M)
+            se = math.hypot(EXTREME_FACTOR * sf / math.sqrt(M), (f0 - value) * u_rel_sigma)
             placed = value + (F - F.mean())
             method = "extreme value: f_c = f − (mean of the samples − f)/(√2 − 1) (noise bias ∝ σ)"
         elif kind == "smooth":
             value = 2.0 * f0 - mean_f
-            se = sf / math.sqrt(M)
+            se = math.hypot(sf / math.sqrt(M), 2.0 * (f0 - value) * u_rel_sigma)
             placed = value + (F - F.mean())
             method = "smooth: f_c = 2 f − mean of the samples (bootstrap bias correction)"
         elif kind == "pvr" and parts:

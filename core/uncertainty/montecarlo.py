@@ -5,7 +5,8 @@ to the cloud —
 
 - ``skip``: the cloud came out as it went in (bspline_map, fiducials: artifacts only). Not run again.
 - ``select``: the cloud came out as a subset of its rows, coordinates and channels untouched
-  (manual_edit, knn_denoise, aperture — whether or not it removed anything). Each sample keeps the
+  (manual_edit, knn_denoise, aperture — whether or not it removed anything) and its report carries no
+  figure (a zernike step whose removal changed nothing is still run: its coefficients are figures). Each sample keeps the
   *same rows* (the nominal run's decision; the interval is conditional on it). Channels the step added
   (knn_denoise's ω) are the nominal's.
 - ``run``: anything else (probe_radius, misalignment, zernike, …): run again on every sample; if it
@@ -134,7 +135,9 @@ def make_plan(recipe, cloud: PointCloud, surface, allowed_dirs=None, progress=No
         plan.steps.append(ps)
         res = _run_step(plan, rs, current, progress=sub)
         out = res.cloud
-        rows = _rows_of(current, out)
+        # a step whose report carries figures (Zernike coefficients, a pose) is always run again, even
+        # where its cloud came out unchanged (a piston and tilt already zero after the pose fit)
+        rows = None if report_figures({pos: res.report}, plan) else _rows_of(current, out)
         if rows is not None and rows.size == current.n and np.array_equal(rows, np.arange(current.n)) \
                 and set(out.channels) == set(current.channels):
             ps.kind = "skip"
