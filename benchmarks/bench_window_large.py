@@ -63,12 +63,11 @@ def lasso_polygon(cx: float, cy: float, r: float, k: int = 40) -> np.ndarray:
 
 
 def flush(app, win) -> None:
-    """Run what is pending and force both views' drawing now (not at the next idle)."""
+    """Run what is pending — the 3D view's paint renders it — and draw the 2D map now if a full
+    draw is pending (edits blit at once)."""
     app.processEvents()
-    win.map.canvas.flush_events()
     if win.map.canvas.figure.stale:
         win.map.canvas.draw()
-    win.view3d.plotter.render()
     app.processEvents()
 
 
@@ -118,7 +117,7 @@ def main():
     if prof is not None:
         prof.disable()
         _print_profile(prof, "open + first render")
-    assert win.session.shown.n == n, win.log_widget.toPlainText()
+    assert win.session.n_shown == n, win.log_widget.toPlainText()
     rss_open = peak_rss_mb()
     app.processEvents()
     time.sleep(0.5)  # the step classes load at idle after opening
@@ -128,7 +127,7 @@ def main():
     W, H = w.width(), w.height()
     rows = []
     for k, (fx, fy) in enumerate(((0.45, 0.45), (0.6, 0.35), (0.35, 0.62))):
-        before = win.session.shown.n
+        before = win.session.n_shown
         poly = lasso_polygon(fx * W, fy * H, 0.08 * min(W, H))
         if prof is not None and k == 1:
             prof = cProfile.Profile()
@@ -147,7 +146,7 @@ def main():
             prof.disable()
             _print_profile(prof, "lasso + delete")
             prof = None
-        assert win.session.shown.n == before - m
+        assert win.session.n_shown == before - m
         rows.append((m, t_sel, t_del))
     t0 = time.perf_counter()
     win.session.undo()
