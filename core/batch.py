@@ -45,8 +45,10 @@ class InputOutcome:
     log: list = field(default_factory=list, repr=False)
 
 
-#: what ``--cloud-format`` may name: the processed cloud is written as ``cloud.<format>``
-CLOUD_FORMATS = ("csv", "ply", "npz")
+#: what ``--cloud-format`` may name: the processed cloud is written as ``cloud.<format>``; "auto"
+#: (the default): cloud.x3p when the input was a regular grid of pixels and the points still lie on
+#: it (core.io.gridcloud: the map stays a map), else cloud.csv — the report says which and why
+CLOUD_FORMATS = ("csv", "ply", "npz", "x3p")
 
 
 def check_output_folder(out: Path) -> None:
@@ -86,7 +88,7 @@ def write_artifact(folder: Path, name: str, art) -> None:
 
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
-                  timings: dict | None = None, fork_csv: bool = False, cloud_format: str = "csv",
+                  timings: dict | None = None, fork_csv: bool = False, cloud_format: str = "auto",
                   overrides=(), paths=None) -> dict:
     """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
     artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
@@ -98,10 +100,17 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     or npz — the cloud is ``cloud.<format>``, named in report.json's ``cloud_file``. ``overrides``:
     the ``--set`` texts the recipe was run with, listed in report.json's ``overrides``. ``paths``: a
     ``cluster.PathMap`` that names a worker's private files as the client does, in the report."""
+    from .io.gridcloud import grid_channel, grid_of, write_x3p_cloud
     from .report import SUMMARY_FIGURE, skipped_figures
 
-    if cloud_format not in CLOUD_FORMATS:
+    if cloud_format not in (*CLOUD_FORMATS, "auto"):
         raise ValueError(f"cloud format {cloud_format!r} is not one of {', '.join(CLOUD_FORMATS)}")
+    asked = cloud_format
+    grid, why = grid_of(result.cloud) if cloud_format in ("auto", "x3p") else (None, "")
+    if cloud_format == "auto":
+        cloud_format = "x3p" if grid is not None else "csv"
+    elif cloud_format == "x3p" and grid is None:
+        raise PointsProError(f"--cloud-format x3p: {why}; use csv, ply or npz")
     cloud_name = f"cloud.{cloud_format}"
 
     timings = {} if timings is None else timings
@@ -119,16 +128,24 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
         report = paths.deep(report)
     timings["report (summary)"] = time.perf_counter() - t0
     report["cloud_file"] = cloud_name
+    report["cloud_format_asked"] = asked
+    if cloud_format == "x3p":
+        report["cloud_file_note"] = (f"{why}: cloud.x3p holds the {grid_channel(result.cloud)} on that "
+                                     "grid (metres, NaN where no point); --cloud-format csv writes "
+                                     "every channel as text")
+    elif asked == "auto":
+        report["cloud_file_note"] = f"cloud.csv: {why}"
     if overrides:
         report["overrides"] = [str(o) for o in overrides]
-    writer = {"csv": write_csv, "ply": write_ply_cloud, "npz": write_npz_cloud}[cloud_format]
+    writer = {"csv": write_csv, "ply": write_ply_cloud, "npz": write_npz_cloud,
+              "x3p": lambda c, path: write_x3p_cloud(path, c, grid)}[cloud_format]
     with atomic_dir(folder) as tmp:
         # cloud.csv is formatted in a forked process while the figures are drawn, where a core is
         # free (core/io/background.py); else here. Either way it is complete before the rename.
         # The binary formats (ply, npz) are a memory copy: written here.
         t1 = time.perf_counter()
         csv = BackgroundWrite(writer, result.cloud, tmp / cloud_name, what=f"{folder.name}/{cloud_name}",
-                              fork=fork_csv and cloud_format == "csv")
+                              fork=fork_csv and cloud_format in ("csv", "x3p"))
         timings[cloud_name + (" (started in a forked process)" if csv.forked else "")] = \
             time.perf_counter() - t1
         try:
@@ -459,7 +476,7 @@ def remove_leftovers(paths) -> list[str]:
 
 
 def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
-                cloud_format: str = "csv") -> dict | None:
+                cloud_format: str = "auto") -> dict | None:
     """The report of a complete earlier output of this input with this recipe, else None.
 
     Output folders appear only when complete (atomic rename); the report must also name the same
@@ -470,7 +487,7 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
     folder = Path(out_dir) / stem
     rep = folder / "report.json"
     cloud_name = f"cloud.{cloud_format}"
-    if not (rep.is_file() and (folder / cloud_name).is_file()):
+    if cloud_format != "auto" and not (rep.is_file() and (folder / cloud_name).is_file()):
         return None
     try:
         data = json.loads(rep.read_text(encoding="utf-8"))
@@ -480,6 +497,11 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
 
     if data.get("input") != str(path) or data.get("recipe") != jsonable(recipe.to_dict(full=True)):
         return None
-    if data.get("cloud_file", "cloud.csv") != cloud_name:
+    if cloud_format == "auto":  # what "auto" chose (x3p for a grid, else csv), when it was asked
+        done = data.get("cloud_file", "cloud.csv")
+        if data.get("cloud_format_asked", "auto" if done == "cloud.csv" else None) != "auto" \
+                or not (folder / done).is_file():
+            return None
+    elif data.get("cloud_file", "cloud.csv") != cloud_name:
         return None
     return data

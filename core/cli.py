@@ -6,7 +6,7 @@
     pointspro --batch RECIPE INPUT… --out DIR [--workers N] [--scheduler ADDRESS [--ship]]
                                         [--check-only] [--resume]
                                         [--allow-path DIR]… [--set STEP.KEY=VALUE]…
-                                        [--cloud-format csv|ply|npz] [-v|-vv] [--log-file FILE]
+                                        [--cloud-format csv|ply|npz|x3p] [-v|-vv] [--log-file FILE]
     pointspro info FILE [--json]                        what a measurement file holds
     pointspro steps                                     list the installed steps
     pointspro simulate / explain                        simulated measurements, missing effects
@@ -97,10 +97,12 @@ def _parser() -> argparse.ArgumentParser:
                    "[1, 2], true); STEP is a step id that occurs once, its 1-based position, or "
                    "surface / input for those blocks; KEY enabled switches a step (repeatable; "
                    "validated like the recipe file, listed in report.json's overrides)")
-    p.add_argument("--cloud-format", choices=["csv", "ply", "npz"], default=None,
-                   help="with --batch: the processed cloud as cloud.csv (default; every channel, "
-                   "shortest round-trip decimals), cloud.ply (binary float64) or cloud.npz (NumPy, "
-                   "with a pointspro_meta JSON entry)")
+    p.add_argument("--cloud-format", choices=["csv", "ply", "npz", "x3p"], default=None,
+                   help="with --batch: the processed cloud as cloud.csv (every channel, shortest "
+                   "round-trip decimals), cloud.ply (binary float64), cloud.npz (NumPy, with a "
+                   "pointspro_meta JSON entry) or cloud.x3p (a gridded input's residual as a map); "
+                   "default: x3p when the input is a regular pixel grid (an interferometer's map), "
+                   "else csv")
     p.add_argument("--screenshot", metavar="PNG", help="open the window, render, save PNG, exit")
     p.add_argument("--run", action="store_true", help="with a data file and a recipe: run the "
                    "recipe's steps in the window at once (before --screenshot's picture)")
@@ -263,7 +265,7 @@ def cmd_batch(args) -> int:
     if args.check_only:
         return _check_only(args, recipe, inputs, out, session)
     try:
-        results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "csv")
+        results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "auto")
         # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
         runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed, session)
         if session is not None:  # the cluster's workers, as the pre-flight found them
@@ -476,7 +478,7 @@ def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, wo
 
     # plain values for the workers: the cloud format, the --set texts (each worker applies them to
     # the recipe file it reads) and the level of the log records they send back
-    options = {"cloud_format": args.cloud_format or "csv", "overrides": list(args.overrides),
+    options = {"cloud_format": args.cloud_format or "auto", "overrides": list(args.overrides),
                "log_level": logging.getLogger("pointspro").getEffectiveLevel()}
     if session is not None:  # --scheduler: the recipe travels as data, the paths as absolute ones
         return executors.run_dask(session, session.bundle, jobs, out, allowed, args.figures, options,

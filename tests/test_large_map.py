@@ -179,3 +179,94 @@ def test_batch_refuses_the_huge_map_in_one_line_and_writes_nothing(tmp_path):
     assert "Traceback" not in proc.stderr + proc.stdout
     assert "100,000,000,000 points" in proc.stderr + proc.stdout
     assert not (out / "huge").exists()
+
+
+# --- a gridded input stays a grid ----------------------------------------------------------------
+def _grid_ply(path, n=120, seed=0, shuffle=False, jitter=0.0):
+    from pointspro.core.io.ply import write_ply
+
+    rng = np.random.default_rng(seed)
+    h = 100.0 / n
+    ax = -50.0 + h * (np.arange(n) + 0.5)
+    X, Y = np.meshgrid(ax, ax)
+    keep = (X**2 + Y**2 <= 2500) & (rng.random(X.shape) > 0.02)  # a disk with dropouts
+    x, y = X[keep], Y[keep]
+    x = x + jitter * h * rng.standard_normal(len(x))
+    z = 1e-4 * ((x / 50) ** 2 + (y / 50) ** 2) + 3e-5 * (x / 50) ** 3 + 1e-6 * rng.standard_normal(len(x))
+    if shuffle:
+        k = rng.permutation(len(x))
+        x, y, z = x[k], y[k], z[k]
+    write_ply(path, np.column_stack([x, y, z]), {})
+    return path
+
+
+@pytest.mark.parametrize("n,seed,shuffle", [(120, 0, False), (97, 1, True), (64, 2, False)])
+def test_ply_pixel_grid_is_recorded(tmp_path, n, seed, shuffle):
+    c = read_cloud(_grid_ply(tmp_path / "g.ply", n, seed, shuffle))
+    assert c.meta["grid"] == [n, n]
+    assert c.meta["pixel_mm"] == pytest.approx([100.0 / n] * 2, rel=1e-12)
+    assert c.meta["grid_origin_mm"] == pytest.approx([-50 + 50.0 / n] * 2, rel=1e-12)
+
+
+def test_scattered_or_jittered_ply_is_no_grid(tmp_path):
+    assert "grid" not in read_cloud(_grid_ply(tmp_path / "j.ply", 80, 3, jitter=1e-3)).meta
+    from pointspro.core.io.gridcloud import detect_grid
+
+    rng = np.random.default_rng(4)
+    assert detect_grid(rng.random(5000), rng.random(5000)) is None
+    # the same pixel twice is no map
+    x = np.repeat(np.arange(10.0), 10)
+    y = np.tile(np.arange(10.0), 10)
+    assert detect_grid(np.r_[x, 3.0], np.r_[y, 4.0]) is None
+
+
+def _batch(tmp_path, data, recipe_text, out, *extra):
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text(recipe_text, encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-m", "pointspro.core.cli", "--batch", str(recipe), str(data),
+                           "--out", str(out), "--quiet", "--figures", "none", *extra],
+                          capture_output=True, text=True, encoding="utf-8")
+    assert proc.returncode == 0, proc.stderr
+    import json
+
+    return json.loads((out / data.stem / "report.json").read_text(encoding="utf-8"))
+
+
+ZRECIPE = "pointspro: 1\nsteps:\n  - zernike: {terms: 36, remove: [piston, tilt, power]}\n"
+
+
+def test_gridded_input_writes_cloud_x3p_by_default_and_csv_on_request(tmp_path):
+    data = _grid_ply(tmp_path / "map.ply", 90, 5, shuffle=True)
+    rep = _batch(tmp_path, data, ZRECIPE, tmp_path / "a")
+    folder = tmp_path / "a" / "map"
+    assert rep["cloud_file"] == "cloud.x3p" and rep["cloud_format_asked"] == "auto"
+    assert "regular grid (90 × 90 pixels" in rep["cloud_file_note"]
+    assert "--cloud-format csv" in rep["cloud_file_note"]
+    assert sorted(p.name for p in folder.glob("cloud.*")) == ["cloud.x3p"]
+    rep_csv = _batch(tmp_path, data, ZRECIPE, tmp_path / "b", "--cloud-format", "csv")
+    assert rep_csv["cloud_file"] == "cloud.csv"
+    ref = read_cloud(tmp_path / "b" / "map" / "cloud.csv")
+    got = read_cloud(folder / "cloud.x3p")  # the residual as the map's heights
+    assert got.n == ref.n
+    a = np.lexsort((ref.x, ref.y))
+    b = np.lexsort((got.x, got.y))
+    assert np.allclose(got.x[b], ref.x[a], rtol=0, atol=1e-12)
+    assert np.allclose(got.y[b], ref.y[a], rtol=0, atol=1e-12)
+    assert np.allclose(got.z[b], ref["residual"][a], rtol=1e-14, atol=1e-20)
+    # --resume with the default finds the x3p output complete
+    recipe = tmp_path / "r.yaml"
+    proc = subprocess.run([sys.executable, "-m", "pointspro.core.cli", "--batch", str(recipe), str(data),
+                           "--out", str(tmp_path / "a"), "--quiet", "--figures", "none", "--resume"],
+                          capture_output=True, text=True, encoding="utf-8")
+    assert proc.returncode == 0, proc.stderr
+    import json
+
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text(encoding="utf-8"))
+    assert summary["inputs"][0]["status"] == "skipped"
+
+
+def test_scattered_input_keeps_cloud_csv_and_says_why(tmp_path):
+    data = _grid_ply(tmp_path / "s.ply", 60, 6, jitter=1e-3)
+    rep = _batch(tmp_path, data, ZRECIPE, tmp_path / "o")
+    assert rep["cloud_file"] == "cloud.csv"
+    assert "not a regular grid" in rep["cloud_file_note"]

@@ -47,7 +47,15 @@ def read_ply(path: Path):
     if not np.all(np.isfinite(xyz)):
         row = int(np.argwhere(~np.isfinite(xyz))[0, 0])
         raise InputError(f"{path}: vertex {row} has a NaN/inf coordinate")
-    return xyz, cols, {"format": "ply"}
+    meta = {"format": "ply"}
+    # an interferometer's map exported as x, y, z: its pixel grid is recorded (core.io.gridcloud),
+    # so that the processed cloud can be written as a map again (cloud.x3p)
+    from .gridcloud import detect_grid
+
+    grid = detect_grid(xyz[:, 0], xyz[:, 1])
+    if grid is not None:
+        meta.update(grid)
+    return xyz, cols, meta
 
 
 def _read_header(f, path: Path) -> tuple[str, list]:
