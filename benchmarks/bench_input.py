@@ -84,6 +84,13 @@ def run_cli(recipe: Path, data: Path, out: Path, extra=()) -> tuple[float, float
 
 def stage_table(recipe: Path, data: Path, out: Path, profile: bool = False) -> list[tuple[str, float]]:
     """[(stage, seconds)] of one input run in process (imports already paid)."""
+    from pointspro.core.parallel import single_threaded_blas
+
+    with single_threaded_blas():  # as the batch command runs an input (core.executors)
+        return _stage_table(recipe, data, out, profile)
+
+
+def _stage_table(recipe, data, out, profile):
     from pointspro.core.batch import write_outputs
     from pointspro.core.io import read_cloud
     from pointspro.core.pipeline import run_pipeline

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Iterator
 
 from .batch import InputOutcome, failed_outcome, process_input, process_job
+from .parallel import single_threaded_blas
 
 
 def run_sequential(recipe, surface, jobs, out_dir: Path, bar_factory=None,
@@ -24,11 +25,14 @@ def run_sequential(recipe, surface, jobs, out_dir: Path, bar_factory=None,
     for k, (path, stem) in enumerate(jobs, 1):
         bar = bar_factory(k, path) if bar_factory else None
         try:
-            # the batch's own process: cloud.csv may be formatted by a fork beside the figures
-            yield process_input(path, recipe, out_dir, stem, sink=bar, surface=surface,
-                                allowed_dirs=allowed_dirs, figures=figures, fork_csv=True,
-                                cloud_format=options.get("cloud_format", "csv"),
-                                overrides=tuple(options.get("overrides") or ()))
+            # the batch's own process: cloud.csv may be formatted by a fork beside the figures;
+            # BLAS on one thread (core.parallel.single_threaded_blas: narrow calls, spinning threads)
+            with single_threaded_blas():
+                outcome = process_input(path, recipe, out_dir, stem, sink=bar, surface=surface,
+                                        allowed_dirs=allowed_dirs, figures=figures, fork_csv=True,
+                                        cloud_format=options.get("cloud_format", "csv"),
+                                        overrides=tuple(options.get("overrides") or ()))
+            yield outcome
         finally:
             if bar is not None:
                 bar.done()

@@ -1,4 +1,4 @@
-"""How many threads a computation in this process may use (neighbour searches, for now).
+"""How many threads a computation in this process may use (neighbour searches, BLAS).
 
 The batch's worker processes run with a single-threaded BLAS (core.executors.SINGLE_THREADED sets
 OMP_NUM_THREADS=1 and the like): N workers × N threads on N cores ran 5× slower than one worker.
@@ -17,3 +17,38 @@ def thread_count() -> int:
     if env.isdigit() and int(env) > 0:
         return int(env)
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+class single_threaded_blas:
+    """Context: BLAS (OpenBLAS, MKL, …) runs one thread in this process while it is open.
+
+    The pipeline's BLAS calls are narrow — ≤ 36-column chunks of 2¹³ rows (Zernike, PVr), 3 × N pose
+    products, banded Cholesky solves of the B-spline (band ≈ 3 × the knots across) — where BLAS
+    threads only synchronise, and OpenBLAS's waiting threads spin: with another process on the cores
+    (a colleague's job, a second batch) they were descheduled mid-call and the summary's B-spline
+    solve took 15–26 s instead of 0.23 s, a 50,000-point input 60 s instead of 10 s
+    (benchmarks/bench_input.py, 2026-11-23). Neighbour searches thread by themselves
+    (``thread_count``), untouched. A library loaded while the context is open (scipy's own OpenBLAS,
+    loaded by the first ``scipy.linalg`` import) reads ``OPENBLAS_NUM_THREADS`` and keeps one thread
+    after the context closes; the variable itself is restored."""
+
+    _VARS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+
+    def __enter__(self):
+        from threadpoolctl import threadpool_limits
+
+        self._saved = {k: os.environ.get(k) for k in self._VARS}
+        os.environ.update({k: "1" for k in self._VARS})
+        self._limits = threadpool_limits(1, user_api="blas")
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            self._limits.restore_original_limits()
+        finally:
+            for k, v in self._saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+        return False

@@ -1,0 +1,67 @@
+"""Issue 17: the batch's own process runs BLAS on one thread (core.parallel.single_threaded_blas).
+
+OpenBLAS's spinning threads made narrow calls (the B-spline's banded solve, PVr's 36-column
+chunks) 30–60× slower when another process shared the cores; the numbers must not change."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
+
+from pointspro.core import executors
+from pointspro.core.metrics import form_metrics
+from pointspro.core.parallel import single_threaded_blas
+
+
+def _blas_threads() -> list[int]:
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_context_limits_blas_and_restores():
+    with threadpool_limits(2, user_api="blas"):
+        saved = os.environ.get("OPENBLAS_NUM_THREADS")
+        assert set(_blas_threads()) == {2}
+        with single_threaded_blas():
+            assert set(_blas_threads()) == {1}
+            assert os.environ["OPENBLAS_NUM_THREADS"] == "1"  # for a BLAS loaded meanwhile
+        assert os.environ.get("OPENBLAS_NUM_THREADS") == saved
+        assert set(_blas_threads()) == {2}
+
+
+def test_sequential_batch_runs_each_input_on_one_blas_thread(monkeypatch, tmp_path):
+    seen = []
+
+    def fake_process_input(path, recipe, out_dir, stem, **kw):
+        seen.append((stem, _blas_threads()))
+        return stem
+
+    monkeypatch.setattr(executors, "process_input", fake_process_input)
+    jobs = [(Path(tmp_path / "a.csv"), "a"), (Path(tmp_path / "b.csv"), "b")]
+    with threadpool_limits(2, user_api="blas"):
+        between = []
+        for oc in executors.run_sequential(None, None, jobs, tmp_path):
+            between.append(set(_blas_threads()))  # the caller's code between inputs: its own limit
+        assert [s for s, _ in seen] == ["a", "b"]
+        assert all(set(t) == {1} for _, t in seen)
+        assert between == [{2}, {2}]
+
+
+@pytest.mark.parametrize("seed,n", [(0, 3000), (1, 12_000), (2, 30_000)])
+def test_form_metrics_same_on_one_blas_thread(seed, n):
+    """PV, RMS, PVr and slope RMS with one BLAS thread equal those with two (to rounding)."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-100, 100, n)
+    y = rng.uniform(-100, 100, n)
+    keep = x * x + y * y < 100.0 ** 2
+    x, y = x[keep], y[keep]
+    r = (2e-4 * np.sin(x / (13 + seed)) * np.cos(y / 9) + 3e-5 * (x * x - y * y) / 1e4
+         + 1e-6 * rng.standard_normal(len(x)))
+    with threadpool_limits(2, user_api="blas"):
+        many = form_metrics(x, y, r, 100.0)
+    with single_threaded_blas():
+        one = form_metrics(x, y, r, 100.0)
+    for k in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad"):
+        assert one[k] == pytest.approx(many[k], rel=1e-12, abs=0), k
