@@ -106,7 +106,9 @@ def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | Non
         rho = (2.0 * max(v2, 0.0) + b) / den if den > 0 else 1.0
         rho = min(max(rho, 0.0), 1.0)
         placed = np.sqrt(np.maximum(0.0, max(v2, 0.0) + math.sqrt(rho) * (g - g.mean())))
-        se = sg / math.sqrt(M) / (2.0 * max(value, float(np.std(placed)), 1e-300))
+        # the Monte Carlo's standard error of the mean square and σ's own uncertainty (b2 ∝ σ²)
+        se2 = math.hypot(sg / math.sqrt(M), 2.0 * b * u_rel_sigma)
+        se = se2 / (2.0 * max(value, float(np.std(placed)), 1e-300))
         method = ("quadratic: f_c² = f² − (mean of the samples' f² − f²) (control variates on the type-B "
                   "draws); interval in the squared domain")
     else:
