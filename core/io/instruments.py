@@ -249,6 +249,12 @@ def read_surface_topography(path: Path, opts=None, head: bytes | None = None):
     if head is None:
         with open(path, "rb") as f:
             head = f.read(4096)
+    if head[:4] in METROPRO_MAGICS:  # the common MetroPro map without importing SurfaceTopography
+        from .metropro import read_metropro
+
+        got = read_metropro(path, opts)
+        if got is not None:
+            return got
     with quiet():  # the library warns about metadata and prints; never on the terminal
         try:
             from SurfaceTopography.IO import open_topography
