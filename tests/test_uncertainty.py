@@ -212,3 +212,21 @@ def test_the_example_recipe_gets_its_uncertainty():
     assert "skipped bspline_map" in m["reuse"]
     assert b["rms_um"]["value"] < b["rms_um"]["measured"]
     assert "probe_radius" in b["rms_um"]["budget"]
+
+
+def test_extra_figures_get_their_entries_corrected_by_their_kind(issue_run):
+    """The tolerance's quantities (core/assessment.py passes them as extra_figures): an
+    irregularity-like PV and an RMS computed like pv_um and rms_um get the same entries as those."""
+    _, _, r, res = issue_run
+
+    def extra(cloud, surface):
+        v = np.asarray(cloud["residual"])
+        return {"irr_um": float(np.ptp(v)) * 1e3, "rmsi_um": float(np.std(v)) * 1e3}
+
+    extra.kinds = {"irr_um": "extreme", "rmsi_um": "quadratic"}
+    out = propagate(r, res, extra_figures=extra, workers=2)
+    b = out.block()
+    for mine, theirs in (("irr_um", "pv_um"), ("rmsi_um", "rms_um")):
+        for key in ("value", "measured", "u", "U95"):
+            assert b[mine][key] == pytest.approx(b[theirs][key], rel=1e-9), (mine, key)
+    assert "SIMEX" in b["irr_um"]["method"] and "budget" in b["rmsi_um"]

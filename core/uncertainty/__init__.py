@@ -120,10 +120,12 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
         sigma, u_rel = spec.noise, 0.0
         noise_from = f"given in the recipe ({spec.noise_text}), taken as exact"
     names = _ordered(list(f0))
-    levels = [f"pv_um@{lam:g}" for lam in mc.LEVELS] if "pv_um" in f0 else []
+    kinds = getattr(extra_figures, "kinds", None)
+    extreme = [n for n in names if est.kind_of(n, kinds) == "extreme"]
+    levels = [f"{n}@{lam:g}" for n in extreme for lam in mc.LEVELS]
     v0 = mc.residual_values(nominal, plan.surface)[0] if levels else None
     job = mc.Job(plan, result.input_cloud, sigma, spec.sources, spec.seed, names + levels, extra_figures,
-                 knots, v0, nominal["index"])
+                 knots, v0, nominal["index"], tuple(n for n in extreme if n != "pv_um"))
     w = workers or spec.workers or mc.default_workers()
     used, results = mc.run_samples(job, spec.samples, w, progress.sub(0.08, 0.97))
     S = np.array([r[1] for r in results])
@@ -132,7 +134,6 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
     if len(failed) > MAX_FAILED * spec.samples:
         raise PointsProError(f"uncertainty: {len(failed)} of {spec.samples} Monte Carlo samples failed (first: "
                              f"{failed[0]}); the steps are not stable under noise of σ = {sigma * 1e6:.3g} nm")
-    kinds = getattr(extra_figures, "kinds", None)
     entries, budgets = {}, {}
     src_names = [s.name for s in spec.sources]
     for name in sorted(names, key=lambda n: n == "pvr_um"):  # PVr after its two parts
@@ -144,8 +145,11 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
                 parts = {"fit": entries["pvr_fit_pv_um"], "rest": entries["pvr_rest_rms_um"]}
             else:
                 kind = "extreme"
-        if kind == "extreme" and name == "pv_um" and levels:
-            parts = {lam: S[:, len(names) + k] for k, lam in enumerate(mc.LEVELS)}
+        if kind == "extreme":
+            cols = {lam: job.names.index(f"{name}@{lam:g}") for lam in mc.LEVELS}
+            parts = {lam: S[:, c] for lam, c in cols.items()}
+            if not all(np.isfinite(v).any() for v in parts.values()):
+                parts = None  # no levels (the rows changed): the fixed extrapolant
         entries[name] = est.estimate(name, kind, f0[name], S[:, j], Z, parts, u_rel)
         if name in SUMMARY_ORDER or kinds and name in kinds:
             budgets[name] = est.budget(S[:, j], Z, src_names)

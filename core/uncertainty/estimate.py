@@ -167,7 +167,7 @@ def simex_power(f0: float, mean1: float, levels: dict) -> tuple[float, float, fl
     ∝ σ … σ²) chosen by least squares; returns a = f(−1), p and the standard uncertainty of a over
     p in [1, 2] (a rectangular distribution of the extrapolant's unknown form, GUM 4.3.7)."""
     lam = [0.0, 1.0] + [float(k) for k in levels]
-    fv = [f0, mean1] + [float(np.mean(v)) for v in levels.values()]
+    fv = [f0, mean1] + [float(np.nanmean(v)) for v in levels.values()]
     lam, fv = np.array(lam), np.array(fv)
     best = None
     ends = []

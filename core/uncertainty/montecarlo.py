@@ -283,6 +283,9 @@ class Job:
     knot_spacing: float | None = None  # the slope spline's, from the nominal run
     v0: np.ndarray | None = None  # the nominal's residual values (for PV at other noise levels)
     index0: np.ndarray | None = None
+    #: extra figures of the extreme kind (an irregularity): evaluated at the LEVELS too, on the
+    #: sample's cloud with its residual's change scaled
+    extreme_extras: tuple = ()
 
 
 #: extra noise levels λ (variance λσ² on top of the data's) at which PV is evaluated by scaling each
@@ -348,7 +351,13 @@ def one_sample(job: Job, i: int):
         if job.v0 is not None and out.n == job.v0.size and np.array_equal(out["index"], job.index0):
             dv = residual_values(out, job.plan.surface)[0] - job.v0
             for lam in LEVELS:
-                f[f"pv_um@{lam:g}"] = float(np.ptp(job.v0 + np.sqrt(lam) * dv)) * 1e3
+                v = job.v0 + np.sqrt(lam) * dv
+                f[f"pv_um@{lam:g}"] = float(np.ptp(v)) * 1e3
+                if job.extreme_extras and "residual" in out.channels:
+                    more = job.extra_figures(out.replace(channels={"residual": v}), job.plan.surface) or {}
+                    for name in job.extreme_extras:
+                        if isinstance(more.get(name), (int, float)):
+                            f[f"{name}@{lam:g}"] = float(more[name])
     except PointsProError as e:
         return i, np.full(len(job.names), np.nan), zb, str(e).splitlines()[0] if str(e) else type(e).__name__
     return i, np.array([f.get(n, np.nan) for n in job.names], dtype=np.float64), zb, None
