@@ -151,7 +151,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
             if not all(np.isfinite(v).any() for v in parts.values()):
                 parts = None  # no levels (the rows changed): the fixed extrapolant
         entries[name] = est.estimate(name, kind, f0[name], S[:, j], Z, parts, u_rel)
-        if name in SUMMARY_ORDER or kinds and name in kinds:
+        if src_names or name in SUMMARY_ORDER or kinds and name in kinds:  # each source's share
             budgets[name] = est.budget(S[:, j], Z, src_names)
     for key in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad"):
         if key in entries and summary.get(key) is not None:
