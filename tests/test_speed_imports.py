@@ -1,0 +1,31 @@
+"""Issue 17: the batch's start-up imports only what every input needs; scipy.optimize (0.8 s) and
+scipy.special (0.85 s with numpy.f2py, pulled in by scipy's array-API layer) load when a fit or a
+Forbes surface first asks for them."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+
+def test_batch_start_does_not_import_optimize_or_special():
+    code = ("import sys, pointspro.core.batch, pointspro.core.executors, pointspro.core.params, "
+            "pointspro.core.surfaces; "
+            "print(sorted(m for m in ('scipy.optimize', 'scipy.special', 'numpy.f2py') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         encoding="utf-8")
+    assert out.stdout.strip() == "[]"
+
+
+def test_lazy_imports_still_work():
+    import numpy as np
+
+    from pointspro.core.geometry import fit_sphere
+    from pointspro.core.surfaces.forbes import qcon_series
+
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal((200, 3))
+    p = 5.0 * d / np.linalg.norm(d, axis=1)[:, None] + [1.0, 2.0, 3.0]
+    fit = fit_sphere(p)
+    assert np.allclose(fit.params["radius"], 5.0, atol=1e-9)
+    s, s1, s2 = qcon_series([1.0, 0.5], np.linspace(0.0, 1.0, 5))
+    assert np.all(np.isfinite(s)) and s[0] != s[-1]
