@@ -14,9 +14,9 @@ the threshold whose ω is at least 0.8 of the largest ω within 2a of them (the 
 whose windows it lifted; all of a cluster of low points together), then ω is computed again without
 them, until no point is above the threshold. On a clean measurement nothing exceeds it.
 
-`method: robust` (issue 16; robust.py; opt-in until it meets 2 s for 10⁶ points — 12 s now) judges each point against the leave-one-out,
-iteratively trimmed local quadratic of its 2a × 2a window, in robust σ (global and local), after a
-coarse pass for digs, with an absolute `floor` and a check that the neighbouring windows' fits agree
+`method: robust` (issue 16; robust.py; ~1.5 s of one core for 10⁶ points) judges each point
+against the leave-one-out, iteratively trimmed local quadratic of its 2a × 2a window, in robust σ
+(global and local), after a coarse pass for digs, with an absolute `floor` and a check that the neighbouring windows' fits agree
 at the point (model error at a kink is not an outlier); digs and scratches are grown from their
 flagged points. It finds spikes of 6σ and digs the paper's ω misses (issue 16: F1 0.867 → ≥ 0.99 on
 the issue's mixture). `method: paper` (the default) is the paper's ω with its rounds as before.

@@ -33,10 +33,15 @@ On Gaussian noise the false-positive rate claimed is erfc(threshold_sigma / √2
 Vectorised on a grid of cells of `spacing`: the window sums Σ w·(1, x, y, x², xy, y², D, xD, yD) of
 every cell come from one box filter each (the box of (2·round(a/h) + 1)² cells around the point's
 cell), and each point's own term is subtracted from its window's sums (leave-one-out), then a closed-form
-3 × 3 solve per point. No neighbour search, no loop over points.
+solve per cell. No neighbour search, no loop over points. Speed (issue 16: 12 s → ≤ 2 s at 10⁶ points,
+the same decisions): the points are taken in the order of their fine cells; the per-cell sums over all
+points are formed once per pass and each round subtracts its trimmed points (weights are 0 or 1); the
+box of cells is summed separably (x, then y); the monomials are formed slice by slice (not stored) and
+the per-point and per-cell work runs in slices on up to THREADS threads.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,8 +55,10 @@ COARSE_ROUNDS = 3
 RIDGE = 1e-6           # relative ridge on the slope and curvature terms: a window of collinear points
                        # (a star's line) gets no slope across the line instead of a singular system
 MIN_QUADRATIC = 12     # fewer points in a window: a plane
-CHUNK = 1 << 16
 AGREE = 1.25
+CHUNK = 1 << 15        # points per slice of the per-point work (a slice's arrays stay in cache)
+CELL_CHUNK = 1 << 13   # cells per slice of the per-cell solves
+THREADS = min(8, os.cpu_count() or 1)
 
 
 @dataclass
@@ -85,6 +92,41 @@ def _shift_matrix(monos, dx, dy):
     return T
 
 
+def _cell_grid(x, y, c):
+    """(cell index per point, nx, ny, the cells' origin x0, y0) of a grid of square cells of side c."""
+    x0, y0 = x.min(), y.min()
+    nx = int(np.floor((x.max() - x0) / c)) + 1
+    ny = int(np.floor((y.max() - y0) / c)) + 1
+    ix = np.clip(np.floor((x - x0) / c).astype(np.int64), 0, nx - 1)
+    iy = np.clip(np.floor((y - y0) / c).astype(np.int64), 0, ny - 1)
+    return iy * nx + ix, ix, iy, nx, ny, x0, y0
+
+
+def _monomials(u, v) -> np.ndarray:
+    """u^a v^b for MONO, as a (15, n) array (rows contiguous: one bincount or product per monomial);
+    its first six rows are BASIS. Integer powers by products (no pow)."""
+    up, vp = [None, u], [None, v]
+    for k in range(2, 5):
+        up.append(up[-1] * u)
+        vp.append(vp[-1] * v)
+    out = np.empty((len(MONO), len(u)))
+    for r, (a, b) in enumerate(MONO):
+        if a == 0 and b == 0:
+            out[r] = 1.0
+        elif b == 0:
+            out[r] = up[a]
+        elif a == 0:
+            out[r] = vp[b]
+        else:
+            np.multiply(up[a], vp[b], out=out[r])
+    return out
+
+
+# leverage gᵀ M⁻¹ g = Σ_k mono_k · (M⁻¹ summed over the pairs (i, j) whose product is monomial k)
+_LEV = np.zeros((36, len(MONO)))
+_LEV[np.arange(36), _MMAT.ravel()] = 1.0
+
+
 class _Windows:
     """Cells of side 2a / CELLS (the window = CELLS × CELLS cells around the point's cell) and the
     window sums of per-cell moments, computed in each cell's own coordinates (units of a) and shifted
@@ -95,79 +137,162 @@ class _Windows:
     def __init__(self, x, y, window):
         self.a = float(window)
         self.c = 2.0 * self.a / self.CELLS
-        x0, y0 = x.min(), y.min()
-        self.nx = int(np.floor((x.max() - x0) / self.c)) + 1
-        self.ny = int(np.floor((y.max() - y0) / self.c)) + 1
-        ix = np.clip(np.floor((x - x0) / self.c).astype(np.int64), 0, self.nx - 1)
-        iy = np.clip(np.floor((y - y0) / self.c).astype(np.int64), 0, self.ny - 1)
-        self.cell = iy * self.nx + ix
+        self.cell, ix, iy, self.nx, self.ny, x0, y0 = _cell_grid(x, y, self.c)
         self.ncell = self.nx * self.ny
         # coordinates relative to the own cell's centre, in units of a
         self.u = (x - (x0 + (ix + 0.5) * self.c)) / self.a
         self.v = (y - (y0 + (iy + 0.5) * self.c)) / self.a
-        self.g = np.stack([self.u ** a * self.v ** b for a, b in BASIS], axis=1)  # n × 6
-        self.mono = np.stack([self.u ** a * self.v ** b for a, b in MONO], axis=1)  # n × 15
         half = self.CELLS // 2
         self.shifts = [(sx, sy) for sy in range(-half, half + 1) for sx in range(-half, half + 1)]
         step = self.c / self.a
         self.T = [_shift_matrix(MONO, sx * step, sy * step) for sx, sy in self.shifts]
         self.Tb = [_shift_matrix(BASIS, sx * step, sy * step) for sx, sy in self.shifts]
 
+    def mono(self, idx):
+        """The monomials MONO (15 × k) of the points ``idx`` (a slice or indices), computed when needed
+        (not stored: 120 bytes a point); the first six rows are BASIS."""
+        return _monomials(self.u[idx], self.v[idx])
+
     def cell_sums(self, w, vals):
-        """Per-cell Σ w · vals[:, j] (ncell × m)."""
-        out = np.empty((self.ncell, vals.shape[1]))
-        for j in range(vals.shape[1]):
-            out[:, j] = np.bincount(self.cell, weights=w * vals[:, j], minlength=self.ncell)
+        """Per-cell Σ w · vals[j] (ncell × m) of the rows of ``vals`` (m × n)."""
+        out = np.empty((self.ncell, len(vals)))
+        for j in range(len(vals)):
+            out[:, j] = np.bincount(self.cell, weights=w * vals[j], minlength=self.ncell)
+        return out
+
+    def full_sums(self, d):
+        """(per-cell Σ of the monomials MONO, per-cell Σ d · BASIS) over all points: ncell × 15 and
+        ncell × 6, summed slice by slice (a slice's cells are a short range: the points are in the
+        order of the fine cells)."""
+        mom = np.zeros((self.ncell, len(MONO)))
+        dat = np.zeros((self.ncell, len(BASIS)))
+
+        def part(sl):
+            cell = self.cell[sl]
+            lo = int(cell.min())
+            c = cell - lo
+            size = int(c.max()) + 1
+            m = self.mono(sl)
+            pm = np.stack([np.bincount(c, weights=m[k], minlength=size) for k in range(len(MONO))], axis=1)
+            dd = d[sl]
+            pd = np.stack([np.bincount(c, weights=m[k] * dd, minlength=size) for k in range(len(BASIS))],
+                          axis=1)
+            return lo, size, pm, pd
+
+        for lo, size, pm, pd in _in_chunks(part, len(d)):
+            mom[lo:lo + size] += pm
+            dat[lo:lo + size] += pd
+        return mom, dat
+
+    def binary_sums(self, w, full, d=None):
+        """The per-cell sums of ``full_sums`` for weights of 0 or 1: the few points of weight 0 (the
+        trimmed ones) subtracted, instead of summing every point again. d None: the monomials' sums
+        (``full`` the first of full_sums); else the sums of d · BASIS (``full`` the second)."""
+        off = np.flatnonzero(w == 0)
+        out = full.copy()
+        if off.size == 0:
+            return out
+        cell = self.cell[off]
+        m = self.mono(off)
+        if d is not None:
+            m = m[:len(BASIS)] * d[off]
+        for j in range(out.shape[1]):
+            out[:, j] -= np.bincount(cell, weights=m[j], minlength=self.ncell)
         return out
 
     def window(self, per_cell, T=None):
         """Window sums at every cell: Σ over the box of the neighbour cells' sums, each shifted to the
-        target cell's coordinates by T (None: plain sums)."""
+        target cell's coordinates by T (None: plain sums). The box is summed separably — along x, then
+        along y — since a shift by (sx, sy) is the shift by (sx, 0) followed by the one by (0, sy):
+        2 · CELLS shifted sums instead of CELLS²."""
         g = per_cell.reshape(self.ny, self.nx, -1)
-        out = np.zeros_like(g)
-        for k, (sx, sy) in enumerate(self.shifts):
-            src = g[max(sy, 0):self.ny + min(sy, 0), max(sx, 0):self.nx + min(sx, 0)]
-            if T is not None:
-                src = src @ T[k].T
-            out[max(-sy, 0):self.ny + min(-sy, 0), max(-sx, 0):self.nx + min(-sx, 0)] += src
-        return out.reshape(self.ncell, -1)
+        half = self.CELLS // 2
+        for axis in (1, 0):
+            out = np.zeros_like(g)
+            n = g.shape[axis]
+            for s in range(-half, half + 1):
+                if abs(s) >= n:
+                    continue
+                lo_src, hi_src = max(s, 0), n + min(s, 0)
+                lo_dst, hi_dst = max(-s, 0), n + min(-s, 0)
+                if axis == 1:
+                    src = g[:, lo_src:hi_src]
+                else:
+                    src = g[lo_src:hi_src]
+                if T is not None:
+                    src = src @ T[self.shifts.index((s, 0) if axis == 1 else (0, s))].T
+                if axis == 1:
+                    out[:, lo_dst:hi_dst] += src
+                else:
+                    out[lo_dst:hi_dst] += src
+            g = out
+        return g.reshape(self.ncell, -1)
 
 
-def _plane_loo(win: _Windows, d, w):
+def _plane_loo(win: _Windows, d, w, full):
     """z = leave-one-out residual of the weighted local quadratic (a plane where the window holds
-    fewer than MIN_QUADRATIC points), scaled to one point's noise, for every point."""
-    mom = win.window(win.cell_sums(w, win.mono), win.T)                  # ncell × 15
-    dat = win.window(win.cell_sums(w * d, win.g), win.Tb)                # ncell × 6
+    fewer than MIN_QUADRATIC points), scaled to one point's noise, for every point. w: 0 or 1 per
+    point; ``full``: the per-cell sums of the monomials and of d · g over all points (_full_sums)."""
+    mom = win.window(win.binary_sums(w, full[0]), win.T)                 # ncell × 15
+    dat = win.window(win.binary_sums(w, full[1], d), win.Tb)             # ncell × 6
     S0 = mom[:, 0]
-    M = mom[:, _MMAT]                                                    # ncell × 6 × 6
     live = S0 > 0
     quad = S0 >= MIN_QUADRATIC
     scale = np.where(live, S0, 1.0)
     ridge = np.where(quad, RIDGE, 1e6)[:, None] * np.array([0, 0, 0, 1, 1, 1.0]) + RIDGE * np.array(
         [0, 1, 1, 0, 0, 0.0])
-    M = M + (ridge * scale[:, None])[:, :, None] * np.eye(6)
-    M[~live] = np.eye(6)
-    Minv = np.linalg.inv(M)
-    beta = np.einsum("cij,cj->ci", Minv, dat)
-    out_z = np.empty(len(d))
-    out_ok = np.empty(len(d), dtype=bool)
-    for lo in range(0, len(d), CHUNK):
-        sl = slice(lo, lo + CHUNK)
-        c = win.cell[sl]
-        g = win.g[sl]
-        fit = np.einsum("pi,pi->p", g, beta[c])
-        lev = np.einsum("pi,pij,pj->p", g, Minv[c], g)
-        e = d[sl] - fit
+    ridge *= scale[:, None]
+    beta = np.empty((win.ncell, len(BASIS)))
+    betaT = np.empty((len(BASIS), win.ncell))
+    levT = np.empty((len(MONO), win.ncell))
+    diag = np.arange(6)
+
+    def cells(sl):
+        M = mom[sl][:, _MMAT]                                            # cells × 6 × 6
+        M[:, diag, diag] += ridge[sl]
+        M[~live[sl]] = np.eye(6)
+        Minv = np.linalg.inv(M)
+        beta[sl] = np.einsum("cij,cj->ci", Minv, dat[sl])
+        betaT[:, sl] = beta[sl].T
+        levT[:, sl] = (Minv.reshape(-1, 36) @ _LEV).T
+
+    _in_chunks(cells, win.ncell, CELL_CHUNK)
+    z = np.empty(len(d))
+
+    def chunk(sl):
+        # the point's own cell's quadratic and leverage, term by term (a chunk stays in cache)
+        cell = win.cell[sl]
+        mono = win.mono(sl)
+        fit = mono[0] * np.take(betaT[0], cell)
+        for k in range(1, 6):
+            fit += mono[k] * np.take(betaT[k], cell)
+        lev = mono[0] * np.take(levT[0], cell)
+        for k in range(1, len(MONO)):
+            lev += mono[k] * np.take(levT[k], cell)
         ws = w[sl]
-        others = S0[c] - ws
-        with np.errstate(invalid="ignore", divide="ignore"):
-            # in the fit (w = 1): LOO residual e / (1 − h), its variance σ² / (1 − h);
-            # out of it (w = 0): prediction residual e, variance σ² (1 + h)
-            z = np.where(ws > 0, e / np.sqrt(np.clip(1.0 - lev, 1e-12, None)), e / np.sqrt(1.0 + lev))
-        ok = others >= 3 - 1e-9
-        out_z[sl] = np.where(ok, z, np.nan)
-        out_ok[sl] = ok
-    return out_z, beta, live
+        # in the fit (w = 1): LOO residual e / (1 − h), its variance σ² / (1 − h);
+        # out of it (w = 0): prediction residual e, variance σ² (1 + h)
+        den = np.where(ws > 0, np.clip(1.0 - lev, 1e-12, None), 1.0 + lev)
+        zz = (d[sl] - fit) / np.sqrt(den)
+        ok = np.take(S0, cell) - ws >= 3 - 1e-9
+        z[sl] = np.where(ok, zz, np.nan)
+
+    _in_chunks(chunk, len(d))
+    return z, beta, live
+
+
+def _in_chunks(fn, n, size=None):
+    """[fn(slice)] over consecutive slices of ``size`` (CHUNK) points, on up to THREADS threads (numpy's gathers
+    and arithmetic release the GIL); each slice writes its own part of an output or returns it."""
+    size = size or CHUNK
+    slices = [slice(lo, min(lo + size, n)) for lo in range(0, n, size)]
+    threads = min(THREADS, len(slices))
+    if threads <= 1:
+        return [fn(sl) for sl in slices]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(threads) as pool:
+        return list(pool.map(fn, slices))
 
 
 def _disagreement(win: _Windows, beta, live, pos):
@@ -200,6 +325,7 @@ def _robust_sigma(z):
 def _trim_rounds(win, d, w, max_rounds, progress, offset):
     """Iteratively trimmed local fits: returns the final weights, z, σ(P), σ_g, the cells' fits."""
     n = len(d)
+    full = win.full_sums(d)
     prev = None
     sig = None
     rounds = 0
@@ -207,19 +333,21 @@ def _trim_rounds(win, d, w, max_rounds, progress, offset):
         rounds += 1
         if progress is not None:
             progress.update(min(0.85, 0.1 + 0.06 * (rounds + offset)), f"round {rounds + offset}")
-        z, beta, live = _plane_loo(win, d, w)
+        z, beta, live = _plane_loo(win, d, w, full)
         sg = _robust_sigma(z)
         # local σ: RMS of z over the window's points inside the trim (w), truncation corrected
         fin = np.isfinite(z)
         zf = np.where(fin, z, 0.0)
         # (without the point itself: an outlier does not inflate its own σ)
         inside = w * fin
-        cq = win.window(win.cell_sums(inside, np.column_stack([np.ones(n), zf * zf])))[win.cell]
-        cq[:, 0] -= inside
-        cq[:, 1] -= inside * zf * zf
+        z2 = zf * zf
+        cw = win.window(np.column_stack([win.binary_sums(inside, full[0][:, :1])[:, 0],
+                                         win.cell_sums(inside, z2[None, :])[:, 0]]))
+        c0 = np.take(np.ascontiguousarray(cw[:, 0]), win.cell) - inside
+        c1 = np.take(np.ascontiguousarray(cw[:, 1]), win.cell) - inside * z2
         with np.errstate(invalid="ignore", divide="ignore"):
-            sl = np.sqrt(np.clip(cq[:, 1], 0, None) / cq[:, 0] / TRUNCATED_VAR)
-        sig = np.fmax(sg, np.where(cq[:, 0] >= 8, sl, 0.0))
+            sl = np.sqrt(np.clip(c1, 0, None) / c0 / TRUNCATED_VAR)
+        sig = np.fmax(sg, np.where(c0 >= 8, sl, 0.0))
         trimmed = fin & ~(np.abs(zf) < TRIM * sig)  # an unjudged point keeps its weight
         if prev is not None and np.count_nonzero(trimmed != prev) <= max(0, n // 100_000):
             break
@@ -233,6 +361,10 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
     y = np.asarray(y, dtype=np.float64)
     d = np.asarray(d, dtype=np.float64)
     n = len(d)
+    # the points in the order of their fine cells: the per-cell sums and the gathers run through
+    # memory in order (2–3× faster at 10⁶ points); the results are put back in the input's order
+    order = np.argsort(_cell_grid(x, y, 2.0 * float(window) / _Windows.CELLS)[0], kind="stable")
+    x, y, d = x[order], y[order], d[order]
     # a coarse pass first (window COARSE · a): a dig or scratch that fills a good part of the 2a window
     # is a small part of the larger one, so its points are trimmed before the fine planes see them
     coarse = _Windows(x, y, COARSE * window)
@@ -256,7 +388,9 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
     grown = 0
     if flagged.any():
         grown = _grow(x, y, z, growable, flagged)
-    return RobustResult(flagged, z, sig, sg, thr, rounds, grown, int((~fin).sum()))
+    back = np.empty_like(order)
+    back[order] = np.arange(n)
+    return RobustResult(flagged[back], z[back], sig[back], sg, thr[back], rounds, grown, int((~fin).sum()))
 
 
 def _grow(x, y, z, cand, flagged) -> int:
