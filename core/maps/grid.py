@@ -102,11 +102,14 @@ def coverage_mask(px, py, xs, ys, cell: float) -> np.ndarray:
     x0, y0 = xs[0] - cell, ys[0] - cell
     ncx = int(np.ceil((xs[-1] - x0) / cell)) + 2
     ncy = int(np.ceil((ys[-1] - y0) / cell)) + 2
-    ix = np.floor((np.asarray(px) - x0) / cell).astype(np.intp)
-    iy = np.floor((np.asarray(py) - y0) / cell).astype(np.intp)
-    ok = (ix >= 0) & (ix < ncx) & (iy >= 0) & (iy < ncy)
     occ = np.zeros(ncy * ncx, dtype=bool)
-    occ[iy[ok] * ncx + ix[ok]] = True
+    px, py = np.asarray(px), np.asarray(py)
+    step = 1 << 18  # chunks: no full-length index columns (issue 26)
+    for s in range(0, len(px), step):
+        ix = np.floor((px[s:s + step] - x0) / cell).astype(np.intp)
+        iy = np.floor((py[s:s + step] - y0) / cell).astype(np.intp)
+        ok = (ix >= 0) & (ix < ncx) & (iy >= 0) & (iy < ncy)
+        occ[iy[ok] * ncx + ix[ok]] = True
     occ = occ.reshape(ncy, ncx)
     occ |= ndimage.binary_closing(occ, structure=np.ones((3, 3), bool))
     jx = np.floor((xs - x0) / cell).astype(np.intp)

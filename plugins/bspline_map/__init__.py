@@ -109,7 +109,8 @@ class BSplineMapStep(Step):
         except ValueError as e:
             raise StepError(str(e)) from None
         ctx.progress.update(0.9, "map")
-        fit_res = v - spline(x, y)
+        fit_res = spline(x, y)
+        np.subtract(v, fit_res, out=fit_res)  # in place: one full-length column (issue 26)
         zv = grid.z[grid.valid]
         warnings = []
         if cells > 0.3:
@@ -121,7 +122,7 @@ class BSplineMapStep(Step):
             "channel": channel, "knot_spacing": spline.h, "intervals": list(spline.intervals),
             "smoothing": params.smoothing, "spacing": spacing, "grid": [len(grid.xs), len(grid.ys)],
             "nodes": int(zv.size), "diameter": diameter, "centre_mm": [float(center[0]), float(center[1])],
-            "fit_residual_rms_um": float(np.sqrt(np.mean(fit_res**2)) * 1e3),
+            "fit_residual_rms_um": float(np.sqrt(fit_res @ fit_res / len(fit_res)) * 1e3),
             "map_rms_um": float(np.std(zv) * 1e3), "map_pv_um": float(np.ptp(zv) * 1e3),
             "empty_cell_fraction": cells, "warnings": warnings,
         }
@@ -213,10 +214,11 @@ def _write_psd(path, grid) -> None:
 def _empty_fraction(x, y, spline) -> float:
     """Fraction of knot cells inside the points' hull-ish box that hold no point."""
     nx, ny = spline.intervals
-    kx = np.clip(((x - spline.x0) / spline.h).astype(np.intp), 0, nx - 1)
-    ky = np.clip(((y - spline.y0) / spline.h).astype(np.intp), 0, ny - 1)
     occ = np.zeros((nx, ny), bool)
-    occ[kx, ky] = True
+    for s in range(0, len(x), 1 << 18):  # chunks: no full-length index columns (issue 26)
+        kx = np.clip(((x[s:s + (1 << 18)] - spline.x0) / spline.h).astype(np.intp), 0, nx - 1)
+        ky = np.clip(((y[s:s + (1 << 18)] - spline.y0) / spline.h).astype(np.intp), 0, ny - 1)
+        occ[kx, ky] = True
     # cells between occupied cells along x (inside the measured outline)
     first = np.where(occ.any(axis=0), occ.argmax(axis=0), 0)
     last = np.where(occ.any(axis=0), nx - 1 - occ[::-1].argmax(axis=0), -1)

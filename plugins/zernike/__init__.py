@@ -78,11 +78,10 @@ class ZernikeStep(Step):
         x, y = cloud.x, cloud.y
         pupil = pupil_of(x, y, ctx.surface, params.given_centre, params.norm_radius)
         c, R = pupil.center, pupil.radius
-        rr = np.hypot(x - c[0], y - c[1])
         if not R > 0:
             raise StepError("the points have no extent to normalise the Zernike disk by")
         warnings = []
-        outside = int((rr > R * (1 + 1e-9)).sum())
+        outside = _count_outside(x, y, c, R * (1 + 1e-9))
         if outside:
             warnings.append(f"{outside} points lie outside the normalisation radius {R:g} mm "
                             "(polynomials are extrapolated there); use aperture first")
@@ -91,13 +90,15 @@ class ZernikeStep(Step):
             raise StepError(f"{cloud.n} points cannot determine {len(pairs)} Zernike terms")
         ctx.progress.update(0.2, "fitting")
         coef, sd, resid, cond = zk.fit(x, y, v, R, pairs, params.normalization, c)
+        fit_rms = float(np.sqrt(resid @ resid / len(resid)))
+        del resid  # one full-length column less while the removal is evaluated (issue 26)
         ctx.progress.check()
         gone = removed_pairs(params.remove, params.ordering, pairs)
         cols = [pairs.index(p) for p in gone]
         # only the removed terms are evaluated again (in chunks: never the N × p design matrix)
-        removed = zk.evaluate(x, y, coef[cols], R, gone, params.normalization, c)
-        after = v - removed
-        rms_before, rms_after = float(np.std(v)), float(np.std(after))
+        after = zk.evaluate(x, y, coef[cols], R, gone, params.normalization, c)
+        np.subtract(v, after, out=after)  # v − removed terms, in place
+        rms_before, rms_after = _std(v), _std(after)
         if gone and rms_after > 1.05 * rms_before:
             # Removing least-squares terms cannot raise the RMS unless the kept and the removed terms
             # trade against each other (nearly dependent on this sampling): the "form" left is then
@@ -120,7 +121,7 @@ class ZernikeStep(Step):
             "channel": channel, "terms": len(pairs),
             "removed_terms": [zk.index_of(n, m, params.ordering) for n, m in gone],
             "coefficients": rows, "condition_number": cond,
-            "fit_residual_rms_um": float(np.sqrt(np.mean(resid**2)) * 1e3),
+            "fit_residual_rms_um": fit_rms * 1e3,
             "rms_before_um": rms_before * 1e3, "rms_after_um": rms_after * 1e3,
             "pv_after_um": float(np.ptp(after) * 1e3), "warnings": warnings,
         }
@@ -142,6 +143,33 @@ class ZernikeStep(Step):
                      len(gone), rms_before * 1e3, rms_after * 1e3)
         out = cloud.replace(channels={"residual": after})
         return StepResult(out, report, arts)
+
+
+#: points per chunk of the step's own full-length reductions
+_CHUNK = 1 << 18
+
+
+def _count_outside(x, y, c, r: float) -> int:
+    """Points farther than r from c, in chunks (no full-length radius column)."""
+    out = 0
+    for s in range(0, len(x), _CHUNK):
+        dx = x[s:s + _CHUNK] - c[0]
+        dy = y[s:s + _CHUNK] - c[1]
+        out += int(np.count_nonzero(dx * dx + dy * dy > r * r))
+    return out
+
+
+def _std(v) -> float:
+    """np.std(v) (about the mean, two passes) in chunks: no full-length temporary."""
+    n = len(v)
+    if not n:
+        return float("nan")
+    m = float(np.sum(v)) / n
+    acc = 0.0
+    for s in range(0, n, _CHUNK):
+        d = v[s:s + _CHUNK] - m
+        acc += float(d @ d)
+    return float(np.sqrt(acc / n))
 
 
 def _um(v_mm: float) -> str:
