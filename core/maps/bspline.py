@@ -77,29 +77,30 @@ class TensorBSpline:
         return k, s - k  # outside the domain u leaves [0, 1]: polynomial continuation of the rim
 
     def __call__(self, x, y, dx: int = 0, dy: int = 0) -> np.ndarray:
-        """Values (or ∂/∂x with dx=1, ∂/∂y with dy=1) at points."""
+        """Values (or ∂/∂x with dx=1, ∂/∂y with dy=1) at points, in chunks of CHUNK points: the
+        result is the only full-length array (issue 26)."""
         nx, ny = self.intervals
-        kx, ux = self._local(x, self.x0, nx)
-        ky, uy = self._local(y, self.y0, ny)
-        bx = _basis(ux, dx)
-        by = _basis(uy, dy)
-        if dx:
-            bx /= self.h**dx
-        if dy:
-            by /= self.h**dy
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
         flat = self.coef.ravel()
         my = self.coef.shape[1]
-        out = np.empty(len(kx))
-        for s in range(0, len(kx), CHUNK):  # chunks: the temporaries stay in the cache
+        out = np.empty(len(x))
+        for s in range(0, len(x), CHUNK):
             e = s + CHUNK
-            bxs, bys, kys = bx[s:e], by[s:e], ky[s:e]
-            acc_x = np.zeros(len(kys))
+            kx, ux = self._local(x[s:e], self.x0, nx)
+            ky, uy = self._local(y[s:e], self.y0, ny)
+            bx = _basis(ux, dx)
+            by = _basis(uy, dy)
+            if dx:
+                bx /= self.h**dx
+            if dy:
+                by /= self.h**dy
+            acc_x = np.zeros(len(ky))
             for a in range(4):
-                base = (kx[s:e] + a) * my + kys
-                acc = flat[base] * bys[:, 0]
+                base = (kx + a) * my + ky
+                acc = flat[base] * by[:, 0]
                 for b in range(1, 4):
-                    acc += flat[base + b] * bys[:, b]
-                acc *= bxs[:, a]
+                    acc += flat[base + b] * by[:, b]
+                acc *= bx[:, a]
                 acc_x += acc
             out[s:e] = acc_x
         return out
@@ -128,9 +129,9 @@ def default_knot_spacing(x, y, extent: float | None = None) -> float:
        extent / MAX_INTERVALS                   (bounds the system's size)."""
     from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
-    pts = np.column_stack([x, y])
-    step = max(len(pts) // 200_000, 1)  # the hull of every k-th point: same area within a fraction
-    sub = pts[::step]
+    npts = len(x)
+    step = max(npts // 200_000, 1)  # the hull of every k-th point: same area within a fraction
+    sub = np.column_stack([x[::step], y[::step]])  # never all N points as one (N, 2) copy
     try:
         hull = ConvexHull(sub) if len(sub) >= 3 else None
     except QhullError:
@@ -138,7 +139,7 @@ def default_knot_spacing(x, y, extent: float | None = None) -> float:
     span = extent if extent is not None else float(max(np.ptp(x), np.ptp(y)))
     if hull is None or hull.volume <= 0 or span <= 0:
         raise ValueError("the points do not span an area (all on a line or one point)")
-    mean_spacing = np.sqrt(hull.volume / len(pts))
+    mean_spacing = np.sqrt(hull.volume / npts)
     lo, hi = sub.min(axis=0), sub.max(axis=0)
     g = np.stack(np.meshgrid(np.linspace(lo[0], hi[0], 120), np.linspace(lo[1], hi[1], 120)),
                  -1).reshape(-1, 2)
