@@ -20,8 +20,10 @@ from pathlib import Path
 
 from ..errors import InputError
 
-#: peak bytes a run holds per point of the input (see module doc; measured ~110–150 B/point for
-#: zernike + bspline_map from 4M points up; the margin covers steps that keep a few more columns)
+#: peak bytes a run holds per point of the input (see module doc). Measured (peak RSS, interpreter
+#: included): 96 B/point for zernike 36 + bspline_map at 12.6M points with cloud.x3p, 188 B/point
+#: with cloud.csv before the spline's evaluation was chunked; 200 leaves room for steps that hold a
+#: few more columns (misalignment's Jacobian, knn_denoise's neighbour tree)
 BYTES_PER_POINT = 200
 #: the interpreter, numpy/scipy/matplotlib and the steps' fixed working sets (the 150² spline system)
 BASE_BYTES = 400 * 2**20
