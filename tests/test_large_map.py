@@ -270,3 +270,20 @@ def test_scattered_input_keeps_cloud_csv_and_says_why(tmp_path):
     rep = _batch(tmp_path, data, ZRECIPE, tmp_path / "o")
     assert rep["cloud_file"] == "cloud.csv"
     assert "not a regular grid" in rep["cloud_file_note"]
+
+
+def test_spline_evaluation_holds_only_its_result():
+    """s(x, y) and its slopes: the result (8 bytes a point) and chunk-sized blocks; the earlier form
+    held ~100 bytes a point of cell indices and basis values (bspline_map's and the summary's peak)."""
+    x, y, z = _disk(50_000, 8)
+    s = bs.fit_bspline(x, y, z, knot_spacing=5.0)
+    peaks = []
+    for n in (400_000, 800_000):
+        x, y, _ = _disk(n, 9)
+        tracemalloc.start()
+        try:
+            s(x, y, dx=1)
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+    assert (peaks[1] - peaks[0]) / 400_000 < 16, [p / 1e6 for p in peaks]
