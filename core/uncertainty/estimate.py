@@ -18,9 +18,10 @@ extrapolant each kind of figure follows:
 - ``linear`` (Zernike coefficients, pose, sag and power): no bias; f_c = f₀.
 - ``pvr`` = its fit part + 3 × its rest part, each corrected as above.
 
-E f_i is estimated with the type-B draws as control variates (the regression of f_i on the standard
-normal draws, whose mean is known to be 0); the same regression gives each source's share of u (the
-budget). The interval is the probabilistically symmetric 95 % interval (JCGM 101 §7.7) of the samples'
+E f_i is estimated with the type-B draws as control variates: the regression of f_i on the standard
+normal draws and their squares, whose intercept is the figure's mean with the sources at their
+nominal values — the noise's effect alone; a source's variance is not noise bias. The same
+regression's slopes give each source's share of u (the budget). The interval is the probabilistically symmetric 95 % interval (JCGM 101 §7.7) of the samples'
 deviations from their mean placed about f_c — in the squared domain for quadratic figures — widened
 by the bias estimate's own standard uncertainty (k = 1.96, in quadrature): its Monte Carlo standard
 error and, when σ was estimated from the data, σ's relative uncertainty times the bias's power of σ;
@@ -64,14 +65,21 @@ def kind_of(name: str, kinds: dict | None = None) -> str:
 
 
 def _cv(g: np.ndarray, Z: np.ndarray | None):
-    """Control-variate mean of g (E Z = 0), the slopes b on Z, the residuals' standard deviation."""
+    """The mean of g at the type-B sources' nominal values (the noise's effect alone), the slopes b
+    on Z, the residuals' standard deviation.
+
+    g is regressed on the standard normal draws Z *and their squares*: a source acts on a mean-square
+    figure quadratically too (a z-scale error ε adds (ε·power)² to RMS²), and E Z² = 1 ≠ 0, so a
+    regression on Z alone would count the sources' variance as noise bias and over-correct (the
+    example with z_scale 50 ppm read RMS "0 ± 0.85 µm"). The intercept is g at Z = 0."""
     M = g.size
-    if Z is None or Z.shape[1] == 0 or M < Z.shape[1] + 10:
-        return float(g.mean()), np.zeros(0 if Z is None else Z.shape[1]), float(g.std(ddof=1))
-    A = np.column_stack([np.ones(M), Z])
+    k = 0 if Z is None else Z.shape[1]
+    if k == 0 or M < 2 * k + 10:
+        return float(g.mean()), np.zeros(k), float(g.std(ddof=1))
+    A = np.column_stack([np.ones(M), Z, Z * Z])
     coef, *_ = np.linalg.lstsq(A, g, rcond=None)
     resid = g - A @ coef
-    return float(coef[0]), coef[1:], float(np.sqrt(resid @ resid / max(M - A.shape[1], 1)))
+    return float(coef[0]), coef[1:1 + k], float(np.sqrt(resid @ resid / max(M - A.shape[1], 1)))
 
 
 def _quantiles(d: np.ndarray):
