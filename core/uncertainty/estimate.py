@@ -22,7 +22,8 @@ E f_i is estimated with the type-B draws as control variates: the regression of 
 normal draws and their squares, whose intercept is the figure's mean with the sources at their
 nominal values — the noise's effect alone; a source's variance is not noise bias. The same
 regression's slopes give each source's share of u (the budget). The interval is the probabilistically symmetric 95 % interval (JCGM 101 §7.7) of the samples'
-deviations from their mean placed about f_c — in the squared domain for quadratic figures — widened
+deviations from their mean placed about f_c, its ends taken as order statistics that make it a 95 %
+prediction interval for finite M (``_quantiles``) — in the squared domain for quadratic figures — widened
 by the bias estimate's own standard uncertainty (k = 1.96, in quadrature): its Monte Carlo standard
 error and, when σ was estimated from the data, σ's relative uncertainty times the bias's power of σ;
 u is the placed samples' standard deviation with that in quadrature, U95 the interval's half-width.
@@ -83,8 +84,18 @@ def _cv(g: np.ndarray, Z: np.ndarray | None):
 
 
 def _quantiles(d: np.ndarray):
-    lo, hi = np.quantile(d, [(1 - P) / 2, (1 + P) / 2])
-    return float(lo), float(hi)
+    """The 95 % interval's ends from the samples' order statistics, chosen so that a value drawn
+    from the same distribution — the noise-free truth seen from the measured value — lies between
+    them with probability ≥ 95 %: between the i-th and j-th of M sorted samples it lies with
+    probability (j − i)/(M + 1) (distribution-free prediction interval; Wilks, Ann. Math. Stat. 12,
+    1941; Hahn & Meeker, Statistical Intervals, 2nd ed. 2017, ch. 5), so i = ⌊0.025(M + 1)⌋ and
+    j = ⌈0.975(M + 1)⌉. The interpolated percentiles (np.quantile) cover only ~93 % at M = 100 and
+    ~94 % at M = 200 — measured as the shortfall of PVr's and the Zernike coefficients' coverage."""
+    x = np.sort(np.asarray(d, dtype=np.float64))
+    M = x.size
+    i = max(int(math.floor((1 - P) / 2 * (M + 1))), 1)
+    j = min(int(math.ceil((1 + P) / 2 * (M + 1))), M)
+    return float(x[i - 1]), float(x[j - 1])
 
 
 def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | None,
