@@ -42,9 +42,12 @@ def read_ply(path: Path):
         if dup:
             raise InputError(f"{path}: PLY vertex property {dup[0]!r} is declared twice")
         _check_memory(f, path, fmt, n, props)
-        cols = _read_ascii(f, path, n, props) if fmt == "ascii" else _read_binary(f, path, fmt, n, props)
-    xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")]).astype(np.float64)
-    if not np.all(np.isfinite(xyz)):
+        if fmt == "ascii":
+            cols = _read_ascii(f, path, n, props)
+            xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")])
+        else:
+            xyz, cols = _read_binary(f, path, fmt, n, props)
+    if not np.isfinite(xyz).all():
         row = int(np.argwhere(~np.isfinite(xyz))[0, 0])
         raise InputError(f"{path}: vertex {row} has a NaN/inf coordinate")
     meta = {"format": "ply"}
@@ -128,18 +131,45 @@ def _read_ascii(f, path: Path, n: int, props) -> dict:
     return {p: data[:, j] for j, (p, _) in enumerate(props)}
 
 
-def _read_binary(f, path: Path, fmt: str, n: int, props) -> dict:
+def _read_binary(f, path: Path, fmt: str, n: int, props) -> tuple[np.ndarray, dict]:
+    """(xyz, the other channels): the vertex data read straight from the file into numpy arrays.
+
+    x, y, z as three float64 properties in that order and nothing else (the usual map, and what
+    PointsPro writes) are read into the (n, 3) coordinate array itself: one copy of the bytes, from
+    the file to where they stay (byte-swapped in place from big-endian). Other layouts are read into
+    one structured array, whose columns are then copied out once each (x, y, z into the coordinate
+    array, every other property to float64 or int64)."""
     order = "<" if fmt == "binary_little_endian" else ">"
     dt = np.dtype([(p, order + t) for p, t in props])
     need = dt.itemsize * n
     left = path.stat().st_size - f.tell()
     if left < need:  # before reading: a damaged count must not allocate terabytes
         raise InputError(f"{path}: PLY file is truncated ({max(left, 0)} of {need} bytes)")
-    buf = f.read(need)
-    if len(buf) < need:
-        raise InputError(f"{path}: PLY file is truncated ({len(buf)} of {need} bytes)")
-    arr = np.frombuffer(buf, dtype=dt, count=n)
-    return {p: arr[p].astype(np.float64 if arr[p].dtype.kind == "f" else np.int64) for p, _ in props}
+    if props == [("x", "f8"), ("y", "f8"), ("z", "f8")]:
+        xyz = np.empty((n, 3), dtype=np.float64)
+        _read_into(f, path, xyz, need)
+        if np.dtype(order + "f8") != np.dtype(np.float64):  # not the machine's byte order
+            xyz.byteswap(inplace=True)
+        return xyz, {}
+    arr = np.empty(n, dtype=dt)
+    _read_into(f, path, arr, need)
+    xyz = np.empty((n, 3), dtype=np.float64)
+    for j, a in enumerate("xyz"):
+        xyz[:, j] = arr[a]
+    cols = {p: arr[p].astype(np.float64 if arr[p].dtype.kind == "f" else np.int64)
+            for p, _ in props if p not in ("x", "y", "z")}
+    return xyz, cols
+
+
+def _read_into(f, path: Path, out: np.ndarray, need: int) -> None:
+    """Fill ``out`` (C-contiguous, ``need`` bytes) from the file; InputError when it ends first."""
+    view = out.reshape(-1).view(np.uint8)
+    got = 0
+    while got < need:  # a single read returns at most ~2 GB on Linux
+        k = f.readinto(view[got:])
+        if not k:
+            raise InputError(f"{path}: PLY file is truncated ({got} of {need} bytes)")
+        got += k
 
 
 def write_ply(path: Path, xyz: np.ndarray, channels: dict) -> None:
