@@ -24,6 +24,13 @@ def _ply(path, n, seed):
     return path
 
 
+def _removed_rows(params) -> np.ndarray:
+    """The input rows a manual_edit step removes (``remove`` and the ``remove_ranges`` runs)."""
+    parts = [np.asarray(params.remove, dtype=np.int64)]
+    parts += [np.arange(a, b + 1) for a, b in params.remove_ranges]
+    return np.unique(np.concatenate(parts))
+
+
 def _reference_map(m, cloud):
     """The map image of ``cloud`` (rows of the view's cloud) computed from scratch with the view's
     extent, bins and values (z about the mean of the view's cloud, kept through edits)."""
@@ -73,7 +80,7 @@ def test_two_million_points_draw_a_lod_and_delete_exactly(qtbot, tmp_path):
     # full resolution for computing: exactly those input rows gone, recorded by manual_edit
     assert s.n_shown == n - k and s.shown.n == n - k
     assert np.array_equal(s.shown.index, np.flatnonzero(~mask))
-    assert s.recipe.steps[-1].params.remove == np.flatnonzero(mask).tolist()
+    assert np.array_equal(_removed_rows(s.recipe.steps[-1].params), np.flatnonzero(mask))
     assert s.view[0] is inp and s.history._undo[-1].shown is inp  # a mask, not a copy of the cloud
     # both views follow: the map's bins equal a map drawn from scratch, the 3D view drops the rows
     assert _same_image(m.im.get_array(), _reference_map(m, s.shown))
@@ -170,7 +177,7 @@ def test_session_deletes_by_mask_over_either_cloud_and_keeps_bits_for_undo():
     assert s.history._undo[-1].keep.dtype == np.uint8  # packed bits, 1/8 byte a point
     over_view = c.z > 0.9  # over the view's cloud: the deleted ones are not counted again
     assert s.delete(over_view) == int((over_view & ~gone).sum())
-    assert s.recipe.steps[-1].params.remove == np.flatnonzero(over_view & ~gone).tolist()
+    assert np.array_equal(_removed_rows(s.recipe.steps[-1].params), np.flatnonzero(over_view & ~gone))
     s.undo()
     s.undo()
     assert np.array_equal(s.shown.index, np.flatnonzero(~first))
