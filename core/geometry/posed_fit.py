@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import DomainError, StepError
-from ..surfaces import EvenAsphere, NominalSurface
+from ..surfaces import EvenAsphere, NominalSurface, SurfaceOfRevolution
 from .lsq import levenberg_marquardt
 from .pose import Pose, rot_x, rot_y
 
@@ -55,6 +55,14 @@ class PosedFitResult:
     converged: bool
     part: np.ndarray  # (N, 3) the points in the part frame at the fitted pose
     warnings: list[str] = field(default_factory=list)
+    foot_shift: np.ndarray | None = None  # normal residual on a surface of revolution: ρ_p − ρ_foot
+
+    def foot_point(self):
+        """(foot, n̂, d) of `part` on the fitted surface — for a surface of revolution warm-started
+        from the fit's last foot radii (one Newton step that moves them by rounding only)."""
+        if self.foot_shift is not None:
+            return self.surface.foot_point_warm(self.part, self.foot_shift)[:3]
+        return self.surface.foot_point(self.part)
 
     def report(self) -> dict:
         rep = {}
@@ -93,6 +101,10 @@ class PosedSurfaceFit:
         self.offset = float(offset)
         self.max_iter = max_iter
         self.check = check
+        # warm start of the foot-point solves (normal residual, surface of revolution): the foot shifts
+        # ρ_p − ρ of the latest evaluation, and those of the lowest-cost one (LM's current iterate)
+        self._shift = None
+        self._best = (np.inf, None, None)
 
     # -- parameter vector <-> pose and surface ------------------------------------------------------
     def _design_value(self, surf: EvenAsphere, name):
@@ -160,8 +172,16 @@ class PosedSurfaceFit:
             rho = np.sqrt(r2) if self.design_free else None
             dz_design = 1.0
         else:
-            foot, n, dist = surf.foot_point(np.column_stack([px, py, pz]))
+            if isinstance(surf, SurfaceOfRevolution):
+                foot, n, dist, shift = surf.foot_point_warm(np.column_stack([px, py, pz]), self._shift)
+                self._shift = shift
+            else:
+                foot, n, dist = surf.foot_point(np.column_stack([px, py, pz]))
             r = dist - self.offset
+            if isinstance(surf, SurfaceOfRevolution):
+                cost = float(r @ r)
+                if cost <= self._best[0]:  # LM accepts a step whose cost is ≤ the current one
+                    self._best = (cost, np.array(x, dtype=np.float64), shift)
             if not want_jac:
                 return r, None
             G = np.ascontiguousarray(n.T)
@@ -263,5 +283,8 @@ class PosedSurfaceFit:
                 "meaningful: fix one of each pair (leave it out of `dof`, give it in `initial`) to read "
                 "the others")
         pose = Pose(vals["alpha"], vals["beta"], vals["dx"], vals["dy"], vals["dz"])
+        _, x_best, shift = self._best
+        if x_best is None or not np.array_equal(x_best, res.x):
+            shift = self._shift
         return PosedFitResult(pose, surf, list(self.free), values, unc, corr, float(cond), res.residuals,
-                              res.iterations, res.converged, self.part_points(vals), warnings)
+                              res.iterations, res.converged, self.part_points(vals), warnings, shift)

@@ -109,7 +109,7 @@ class ProbeRadiusStep(Step):
 
             raise with_profile_hint(e) from None
         ctx.progress.update(0.8, "compensating")
-        foot, n, dist = fit.surface.foot_point(fit.part)
+        foot, n, dist = fit.foot_point()  # warm-started from the fit's last foot radii
         check_no_fold(fit.surface, foot, s, rho_b)
         e = dist - s * rho_b  # envelope residual: form error along the normal, plus noise (mm)
         report = fit.report()

@@ -41,9 +41,7 @@ def residual_slopes(xy: np.ndarray, e: np.ndarray, k: int = 16) -> tuple[np.ndar
 
     n = len(xy)
     k = int(min(k, n))
-    _, idx = cKDTree(xy).query(xy, k=k, workers=thread_count())
-    if k == 1:
-        idx = idx[:, None]
+    idx = _knn(cKDTree(xy), xy, k, thread_count())
     # rows in chunks: the (chunk, k) temporaries stay in cache instead of 128 MB arrays per operation
     chunks = [slice(s, s + _CHUNK) for s in range(0, n, _CHUNK)]
     local = np.empty(n)
@@ -71,6 +69,29 @@ def residual_slopes(xy: np.ndarray, e: np.ndarray, k: int = 16) -> tuple[np.ndar
 
 
 _CHUNK = 1 << 15
+
+
+def _knn(tree, xy: np.ndarray, k: int, workers: int) -> np.ndarray:
+    """(N, k) indices of the k nearest neighbours, as ``tree.query(xy, k)``, found faster: the query
+    is first bounded by 1.1× the 95th percentile of the k-th neighbour distance on a subsample (the
+    search then prunes from its first node instead of widening from infinity: 10⁶ raster points
+    3.3 → 2.4 s CPU), and the points with fewer than k neighbours inside the bound (edges, sparse
+    parts of a star pattern) are asked again without it. The same neighbours: within the bound the
+    k nearest are the k nearest."""
+    n = len(xy)
+    if n < 4 * _SAMPLE or k < 2:
+        _, idx = tree.query(xy, k=k, workers=workers)
+        return idx.reshape(n, k)
+    d_sub, _ = tree.query(xy[:: n // _SAMPLE], k=k, workers=workers)
+    bound = 1.1 * float(np.quantile(d_sub[:, -1], 0.95))
+    d, idx = tree.query(xy, k=k, workers=workers, distance_upper_bound=bound)
+    again = np.flatnonzero(~np.isfinite(d[:, -1]))
+    if again.size:
+        idx[again] = tree.query(xy[again], k=k, workers=workers)[1]
+    return idx
+
+
+_SAMPLE = 2000  # points whose k-th neighbour distance sets the bound of the query
 
 
 def _local_planes(dx, dy, ek):
