@@ -13,7 +13,8 @@ Measured, in this process, under Xvfb (software OpenGL):
   through the 3D view over all points and highlighted in both views, then deleted (manual_edit
   recorded, undo snapshot, both views redrawn) — each part timed, and the sum;
 - undo of the last deletion (both views redrawn);
-- the autosave after each deletion (the project with its manual_edit rows, written in a thread),
+- the autosave after each deletion (the project with its manual_edit steps — runs of consecutive
+  rows as remove_ranges pairs — written in a thread),
   waited for before the next lasso and timed apart;
 - peak RSS of the process (imports, the window and the map included).
 
@@ -163,6 +164,9 @@ def main():
     t_undo = time.perf_counter() - t0
     rss = peak_rss_mb()
     med = sorted(rows, key=lambda r: r[1] + r[2])[1]
+    edits = [st.params for st in win.session.recipe.steps if st.id == "manual_edit"]
+    print(f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; manual_edit pairs, single rows: "
+          f"{', '.join(f'{len(p.remove_ranges):,}, {len(p.remove):,}' for p in edits)}")
     print(f"{win.view3d.info.text()}; {win.map.im.get_array().shape[0]}² map bins; "
           f"deleted per lasso: {', '.join(f'{r[0]:,}' for r in rows)}")
     print("| action | points | seconds | goal |\n|---|---:|---:|---:|")
@@ -175,8 +179,8 @@ def main():
     print(f"| **lasso + delete, median of 3** (all three: "
           f"{', '.join(f'{r[1] + r[2]:.3f}' for r in rows)}) | {n:,} | {med[1] + med[2]:.3f} | 0.5 |")
     print(f"| undo of the last deletion (both views redrawn) | {n:,} | {t_undo:.3f} | – |")
-    print(f"| autosave of the project after each deletion (a thread; the recipe lists every deleted "
-          f"row) | {n:,} | {', '.join(f'{a:.2f}' for a in autosaves)} | – |")
+    print(f"| autosave of the project after each deletion (a thread; manual_edit's runs of rows as "
+          f"remove_ranges pairs) | {n:,} | {', '.join(f'{a:.2f}' for a in autosaves)} | – |")
     print(f"peak RSS: {rss_before:.0f} MB before the window, {rss_open:.0f} MB after opening, "
           f"{rss:.0f} MB at the end (file {path.stat().st_size / 1e6:.0f} MB)")
     win.close()
