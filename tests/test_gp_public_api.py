@@ -55,7 +55,11 @@ def test_fit_gp_uses_public_api_and_matches_the_previous_results(guarded_sklearn
     assert info["chosen"] == REF_CHOSEN
     assert info["loo_rms"].keys() == REF_LOO.keys()
     for k, v in REF_LOO.items():
-        assert info["loo_rms"][k] == pytest.approx(v, rel=1e-12, abs=0)
+        # the spectral mixture's kernel is evaluated vectorised over its components since issue 16
+        # (another summation order): L-BFGS stops at an optimum within its tolerance of the old one
+        # (3e-5 relative); the public-API change this test guards is exact for the other kernels
+        rel = 1e-4 if k == "spectral_mixture" else 1e-12
+        assert info["loo_rms"][k] == pytest.approx(v, rel=rel, abs=0)
     mean, std = gp.predict(G, return_std=True)
     np.testing.assert_allclose(mean, REF_MEAN, rtol=1e-12, atol=0)
     np.testing.assert_allclose(std, REF_STD, rtol=1e-12, atol=0)
