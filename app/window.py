@@ -301,6 +301,13 @@ class MainWindow(QtWidgets.QMainWindow):
         rms = (f", {_what(s)} RMS {format_length(s['rms_um'] * 1e-3, 4)}, PV {format_length(s['pv_um'] * 1e-3, 4)}"
                if s["rms_um"] is not None else "")
         self.log(f"ran {len(res.steps)} step(s): {res.cloud.n:,} points{rms}")
+        if s.get("uncertainty") or s.get("tolerance"):  # the shop's answer (core/assessment.py)
+            from pointspro.core.statement import figure_rows, verdict_line
+
+            if s.get("uncertainty"):
+                self.log("  RMS " + figure_rows(s).get("RMS", "—") + " — Report tab: every figure")
+            if s.get("tolerance"):
+                self.log("  " + verdict_line(s["tolerance"]))
         for rec in res.steps:
             for w in rec.report.get("warnings", []) or []:
                 self.log(f"  {rec.id}: {w}")

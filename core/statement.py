@@ -51,7 +51,7 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
     if U is None or not math.isfinite(U):
         return f"{value:.4g} {unit}"
     d = _decimals(U)
-    return f"{value:.{d}f} ± {U:.{d}f} {unit} (k = {k:g})"
+    return f"{value:.{d}f} ± {U:.{d}f} {unit} (k = {k:.3g})"
 
 
 def figure_rows(summary: dict) -> dict[str, str]:
