@@ -33,29 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-
-def make_map(path: Path, npoints: int, seed: int = 0) -> int:
-    """Write the circular map as binary PLY (x, y, z float64, mm), row by row; returns the count."""
-    n = int(round(np.sqrt(4 * npoints / np.pi)))
-    h = 100.0 / n
-    rng = np.random.default_rng(seed)
-    axis = -50.0 + h * (np.arange(n) + 0.5)
-    count = sum(int(np.count_nonzero(axis * axis + y * y <= 2500.0)) for y in axis)
-    header = ("ply\nformat binary_little_endian 1.0\ncomment issue-26 window benchmark map (mm)\n"
-              f"element vertex {count}\nproperty double x\nproperty double y\nproperty double z\n"
-              "end_header\n").encode("ascii")
-    with open(path, "wb") as f:
-        f.write(header)
-        for y in axis:
-            x = axis[axis * axis + y * y <= 2500.0]
-            u, v = x / 50.0, y / 50.0
-            r2 = u * u + v * v
-            z = 1e-4 * (2 * r2 - 1) + 8e-5 * (u * u - v * v) + 5e-5 * (3 * r2 - 2) * u \
-                + 3e-5 * (6 * r2 * r2 - 6 * r2 + 1) + 2e-6 * rng.standard_normal(len(x))
-            block = np.empty((len(x), 3))
-            block[:, 0], block[:, 1], block[:, 2] = x, y, z
-            f.write(block.astype("<f8").tobytes())
-    return count
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+# the same 100 mm circular map as bench_large_map.py (binary PLY, x, y, z float64)
+from bench_large_map import make_map  # noqa: E402
 
 
 def lasso_polygon(cx: float, cy: float, r: float, k: int = 40) -> np.ndarray:
