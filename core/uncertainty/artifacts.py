@@ -23,6 +23,7 @@ def placed(res, name: str) -> np.ndarray:
 
 def histogram_figure(res):
     from ..figures import _figure
+    from ..statement import with_uncertainty
 
     names = [n for n in HISTOGRAM_FIGURES if n in res.names]
     names += [n for n in res.names if n not in names and n not in ("pvr_fit_pv_um", "pvr_rest_rms_um")
@@ -41,7 +42,10 @@ def histogram_figure(res):
         ax.axvline(e["measured"], color="#b71c1c", lw=1.2, ls="--", label="as measured")
         ax.set_xlabel(f"{name} ({_unit(name)})")
         ax.set_ylabel("samples")
-        ax.set_title(f"{name}: {e['value']:.4g} ± {e['U95']:.2g} (k = 2)", fontsize=9)
+        # stated as report.html and the window state it (core/statement.py: GUM §7.2.6 rounding)
+        unit = _unit(name)
+        ax.set_title(f"{name}: {with_uncertainty(e['value'], e['U95'], unit, e.get('k') or 2.0)}",
+                     fontsize=9)
         if k == 0:
             ax.legend(fontsize=7, loc="upper right")
     return fig
