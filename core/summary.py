@@ -53,7 +53,11 @@ def table(entries: list[dict]) -> str:
         pts = "—" if e["points_in"] is None else f"{e['points_in']}→{e['points_out']}"
         rms = f(e["rms_um"], ".4g")
         if e.get("rms_U95_um") is not None and e.get("rms_corrected_um") is not None:
-            rms = f"{e['rms_corrected_um']:.4g} ± {e['rms_U95_um']:.2g}"  # noise bias removed
+            # noise bias removed; U95 to two significant digits, the value to the same place (GUM)
+            from .statement import _decimals
+
+            d = min(_decimals(e["rms_U95_um"]), 9)
+            rms = f"{e['rms_corrected_um']:.{d}f} ± {e['rms_U95_um']:.{d}f}"
         rows.append((e["input"], e["status"], pts, rms, f(e["pv_um"], ".4g"),
                      f(e["seconds"], ".2f")) + ((e.get("verdict") or "—",) if verdicts else ()))
     widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]

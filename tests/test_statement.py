@@ -49,5 +49,5 @@ def test_batch_table_gets_a_verdict_column_only_when_a_tolerance_was_asked():
                     dict(base, input="b.csv", status="failed", points_in=None)])
     head, _, first, second = with_v.splitlines()
     assert head.split()[-1] == "verdict"
-    assert first.split()[-1] == "undecided" and "0.49 ± 0.004" in first
+    assert first.split()[-1] == "undecided" and "0.4900 ± 0.0040" in first
     assert second.split()[-1] == "—"
