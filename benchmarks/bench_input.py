@@ -82,15 +82,17 @@ def run_cli(recipe: Path, data: Path, out: Path, extra=()) -> tuple[float, float
     return wall, ru.ru_maxrss / 1024
 
 
-def stage_table(recipe: Path, data: Path, out: Path, profile: bool = False) -> list[tuple[str, float]]:
-    """[(stage, seconds)] of one input run in process (imports already paid)."""
+def stage_table(recipe: Path, data: Path, out: Path, profile: bool = False,
+                extra: dict | None = None) -> list[tuple[str, float]]:
+    """[(stage, seconds)] of one input run in process (imports already paid); ``extra``: keywords
+    of write_outputs (bench_large_map.py passes the cloud format)."""
     from pointspro.core.parallel import single_threaded_blas
 
     with single_threaded_blas():  # as the batch command runs an input (core.executors)
-        return _stage_table(recipe, data, out, profile)
+        return _stage_table(recipe, data, out, profile, extra or {})
 
 
-def _stage_table(recipe, data, out, profile):
+def _stage_table(recipe, data, out, profile, extra):
     from pointspro.core.batch import write_outputs
     from pointspro.core.io import read_cloud
     from pointspro.core.pipeline import run_pipeline
@@ -113,7 +115,7 @@ def _stage_table(recipe, data, out, profile):
     rows.append(("summary (RMS, PV, PVr, slope RMS)", time.perf_counter() - t0))
     timings: dict = {}
     out.mkdir(parents=True, exist_ok=True)
-    write_outputs(out / data.stem, str(data), rec, result, timings=timings, fork_csv=True)
+    write_outputs(out / data.stem, str(data), rec, result, timings=timings, fork_csv=True, **extra)
     rows += [(f"write {k}", v) for k, v in timings.items()]
     if prof is not None:
         import pstats

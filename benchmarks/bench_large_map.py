@@ -32,7 +32,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from bench_input import bandwidth_bytes_per_s, workload_seconds  # noqa: E402
+from bench_input import bandwidth_bytes_per_s, stage_table, workload_seconds  # noqa: E402
 
 RECIPE = """pointspro: 1
 steps:
@@ -82,39 +82,6 @@ def run_cli(recipe: Path, data: Path, out: Path, extra=()) -> tuple[float, float
     if os.waitstatus_to_exitcode(status) != 0:
         raise SystemExit(f"{' '.join(cmd)}\n{err}")
     return wall, ru.ru_maxrss / 1024
-
-
-def stage_table(recipe: Path, data: Path, out: Path, profile: bool, extra: dict) -> list:
-    from pointspro.core.batch import write_outputs
-    from pointspro.core.io import read_cloud
-    from pointspro.core.pipeline import run_pipeline
-    from pointspro.core.recipe import load_recipe
-
-    rec = load_recipe(recipe)
-    prof = None
-    if profile:
-        import cProfile
-
-        prof = cProfile.Profile()
-        prof.enable()
-    t0 = time.perf_counter()
-    cloud = read_cloud(data, **rec.input)
-    rows = [("read", time.perf_counter() - t0)]
-    result = run_pipeline(cloud, rec)
-    rows += [(f"step {r.id}", r.seconds) for r in result.steps]
-    t0 = time.perf_counter()
-    result.summary()
-    rows.append(("summary (RMS, PV, PVr, slope RMS)", time.perf_counter() - t0))
-    timings: dict = {}
-    out.mkdir(parents=True, exist_ok=True)
-    write_outputs(out / data.stem, str(data), rec, result, timings=timings, fork_csv=True, **extra)
-    rows += [(f"write {k}", v) for k, v in timings.items()]
-    if prof is not None:
-        import pstats
-
-        prof.disable()
-        pstats.Stats(prof).sort_stats("cumulative").print_stats(35)
-    return rows
 
 
 def main():
