@@ -30,9 +30,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_batch import make_input  # noqa: E402
+from bench_batch import run as run_batch  # noqa: E402
 
 DASK = Path(sys.executable).parent / "dask"
-RECIPE = ROOT / "resources" / "example" / "recipe.yaml"
 
 
 def free_port() -> int:
@@ -76,15 +76,9 @@ class Cluster:
 
 
 def run(files, out: Path, extra) -> float:
+    """Wall seconds of one `--batch` of the example recipe into a fresh ``out`` (bench_batch.run)."""
     shutil.rmtree(out, ignore_errors=True)
-    cmd = [sys.executable, "-m", "pointspro.core.cli", "--batch", str(RECIPE), *map(str, files),
-           "--out", str(out), "--quiet", *extra]
-    t0 = time.perf_counter()
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    dt = time.perf_counter() - t0
-    if res.returncode != 0:
-        raise SystemExit(res.stderr)
-    return dt
+    return run_batch(None, files, out, extra)
 
 
 def main():
