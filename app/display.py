@@ -130,6 +130,29 @@ def profile_along(x, y, v, p0, p1, half_width: float) -> tuple[np.ndarray, np.nd
     return s[keep][order], np.asarray(v)[keep][order]
 
 
+PROFILE_DOT_BUDGET = 20_000
+
+
+def envelope_rows(s: np.ndarray, v: np.ndarray, budget: int = PROFILE_DOT_BUDGET) -> np.ndarray | None:
+    """Which of a profile's points to draw as dots when there are more than ``budget``: in each of
+    ``budget // 2`` equal intervals along the cut the lowest and the highest value (min-max
+    decimation, as an oscilloscope draws), so that the drawn cloud has the envelope of all points
+    — a spike or a dig stays visible — at a fraction of the markers. ``s`` sorted ascending. None:
+    draw them all. The profile's numbers (PV, the mean per bin) always come from every point."""
+    n = s.size
+    if n <= budget:
+        return None
+    nb = max(budget // 2, 1)
+    span = s[-1] - s[0]
+    j = np.zeros(n, dtype=np.int64) if span <= 0 else np.minimum(
+        ((s - s[0]) * (nb / span)).astype(np.int64), nb - 1)
+    order = np.lexsort((v, j))  # by interval, then by value
+    jo = j[order]
+    first = np.flatnonzero(np.r_[True, jo[1:] != jo[:-1]])
+    last = np.r_[first[1:] - 1, n - 1]
+    return np.unique(order[np.r_[first, last]])
+
+
 # -- selection over millions of points: cells first, points only where the outline passes -------------
 class CellIndex:
     """The points grouped by the cell of a ``g`` × ``g`` grid in x, y (a counting sort by a 16-bit

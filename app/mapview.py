@@ -264,9 +264,18 @@ class MapView(QtWidgets.QWidget):
         for a in self._profile_artists:
             self.pax.draw_artist(a)
 
-    def _blit(self):
+    def _blit(self, profile: bool = True):
+        """Redraw the animated artists over the cached background; ``profile=False``: the map's
+        axes only (a highlight changes nothing in the profile below)."""
         if self._bg is None:
             self.canvas.draw_idle()
+            return
+        if not profile:
+            self.canvas.restore_region(self._bg[0])
+            for a in (self.im, self.sel_im, self._line_artist):
+                if a is not None:
+                    self.ax.draw_artist(a)
+            self.canvas.blit(self.ax.bbox)
             return
         for bg in self._bg:
             self.canvas.restore_region(bg)
@@ -302,7 +311,7 @@ class MapView(QtWidgets.QWidget):
         else:
             self.info.setText(f"{n:,} points" if self.cloud is not None else "")
         self.sel_im.set_data(rgba.reshape(b, b, 4))
-        self._blit()
+        self._blit(profile=False)
 
     # -- profile cuts -------------------------------------------------------------------------------
     def cut(self, p0, p1, draw: bool = True, fast: bool = False):
@@ -332,8 +341,10 @@ class MapView(QtWidgets.QWidget):
         unit = label[label.rfind("(") + 1:-1] if label.endswith(")") else ""
         self.profile_info.setText(f"profile: {s.size:,} points, PV {np.ptp(v):.4g} {unit}".rstrip()
                                   if s.size else "profile: no points near the cut")
+        drawn = display.envelope_rows(s, v)  # dots: a level of detail with all points' envelope
+        ds, dv = (s, v) if drawn is None else (s[drawn], v[drawn])
         if fast and self._profile_artists:
-            self._profile_artists[0].set_data(s, v)
+            self._profile_artists[0].set_data(ds, dv)
             self._profile_artists[1].set_data(mean_s, mean_v)
             return self.profile
         if self._line_artist is not None:
@@ -344,7 +355,7 @@ class MapView(QtWidgets.QWidget):
         pax.clear()
         pax.set_xlabel("along the cut (mm)")
         pax.set_ylabel(label)
-        dots, = pax.plot(s, v, ".", ms=2, color="#999999", animated=True)
+        dots, = pax.plot(ds, dv, ".", ms=2, color="#999999", animated=True)
         mean, = pax.plot(mean_s, mean_v, color="#2c6fbb", lw=1.2, animated=True)
         self._profile_artists = [dots, mean]
         if s.size:

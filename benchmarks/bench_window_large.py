@@ -172,6 +172,7 @@ def _print_profile(prof, title):
 
     print(f"--- cProfile: {title}")
     pstats.Stats(prof).sort_stats("cumulative").print_stats(30)
+    pstats.Stats(prof).sort_stats("tottime").print_stats(15)
 
 
 if __name__ == "__main__":

@@ -183,3 +183,28 @@ def test_session_deletes_by_mask_over_either_cloud_and_keeps_bits_for_undo():
     assert np.array_equal(s.shown.index, np.flatnonzero(~first))
     with pytest.raises(Exception, match="selection holds 3 points"):
         s.delete(np.ones(3, dtype=bool))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_profile_dots_keep_every_interval_s_lowest_and_highest_point(seed):
+    """The profile's dots above the budget: per interval along the cut the minimum and the maximum
+    of all points (a one-point spike or dig among 10^5 stays drawn), within the budget."""
+    from pointspro.app import display
+
+    rng = np.random.default_rng(seed)
+    n = 100_000 + 1_000 * seed
+    s = np.sort(rng.uniform(0, 80, n))
+    v = 1e-4 * np.sin(s) + 2e-6 * rng.standard_normal(n)
+    spike, dig = rng.integers(0, n, 2)
+    v[spike], v[dig] = 5e-3, -5e-3
+    rows = display.envelope_rows(s, v, budget=4_000)
+    assert rows is not None and rows.size <= 4_000 and np.all(np.diff(rows) > 0)
+    assert spike in rows and dig in rows
+    nb = 2_000
+    j = np.minimum(((s - s[0]) * (nb / (s[-1] - s[0]))).astype(int), nb - 1)
+    for b in rng.integers(0, nb, 50):  # each interval's extremes are among the drawn rows
+        in_b = np.flatnonzero(j == b)
+        if in_b.size:
+            assert v[in_b].min() in v[rows[j[rows] == b]]
+            assert v[in_b].max() in v[rows[j[rows] == b]]
+    assert display.envelope_rows(s[:3_000], v[:3_000], budget=4_000) is None  # few: all drawn
