@@ -320,15 +320,33 @@ def csv_header(cloud: PointCloud) -> list[str]:
 
 def write_csv(cloud: PointCloud, path) -> None:
     """CSV with a header naming each column and its unit: x, y, z (mm), index, then the other
-    channels (csv_header); written atomically. Read back by read_cloud bit for bit."""
+    channels (csv_header); written atomically. Read back by read_cloud bit for bit.
+
+    Numbers are the shortest decimal that reads back to the same float64 (docs/formats.md):
+    Apache Arrow's CSV writer (double-conversion's ``ToShortest``, the digits Python's ``repr``
+    gives; an integral value without ".0", a small one without an exponent: ``0.00001``) formats
+    ~7× faster than ``repr`` per value (5.2 → 0.7 s for 10⁶ rows × 5 columns; issue 17). Columns
+    that are neither float nor integer (none of PointsPro's own) are formatted by ``repr``."""
     names = cloud.column_names
-    arrays = [cloud[n] for n in names]
-    chunk = 100_000  # formatted strings cost ~50 bytes a value: bound the memory, not the speed
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
-        f.write(",".join(csv_header(cloud)) + "\n")
-        for start in range(0, cloud.n, chunk):
-            cols = [_format_column(a[start:start + chunk]) for a in arrays]
-            f.writelines(",".join(row) + "\n" for row in zip(*cols))
+    arrays = [np.asarray(cloud[n]) for n in names]
+    header = ",".join(csv_header(cloud)) + "\n"
+    with atomic_path(path) as tmp:
+        if all(a.dtype.kind in "iuf" for a in arrays):
+            import pyarrow as pa
+            import pyarrow.csv as pacsv
+
+            table = pa.table([pa.array(a) for a in arrays], names=[f"c{i}" for i in range(len(arrays))])
+            with open(tmp, "wb") as f:
+                f.write(header.encode("utf-8"))
+                pacsv.write_csv(table, f, write_options=pacsv.WriteOptions(
+                    include_header=False, quoting_style="none", batch_size=65_536))
+            return
+        chunk = 100_000  # formatted strings cost ~50 bytes a value: bound the memory, not the speed
+        with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+            f.write(header)
+            for start in range(0, cloud.n, chunk):
+                cols = [_format_column(a[start:start + chunk]) for a in arrays]
+                f.writelines(",".join(row) + "\n" for row in zip(*cols))
 
 
 def write_ply_cloud(cloud: PointCloud, path) -> None:
