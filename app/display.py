@@ -263,7 +263,7 @@ def rectangle_class(bx0, bx1, by0, by1, x0, x1, y0, y1) -> np.ndarray:
     return out
 
 
-def polygon_class(bx0, bx1, by0, by1, poly: np.ndarray, res: int = 512) -> np.ndarray:
+def polygon_class(bx0, bx1, by0, by1, poly: np.ndarray, res: int = 256) -> np.ndarray:
     """Per box: 1 wholly inside the polygon (even-odd), 0 wholly outside, -1 to test point by point.
 
     The polygon is rasterised over its bounding box (``res`` pixels along the longer side): pixels

@@ -82,6 +82,7 @@ class View3D(QtWidgets.QWidget):
         self._shown_idx = None
         self._actor = None
         self._sel_actor = None
+        self.mesh = None  # the drawn points' PolyData (the level of detail)
         self._drag = None
         self._axes = False
         self._keep = False
@@ -98,7 +99,7 @@ class View3D(QtWidgets.QWidget):
         self.cloud, self.channel, self.mask, self.shown_mask = cloud, channel, None, keep
         if cloud is None:
             self.plotter.clear_actors()
-            self._actor = self._sel_actor = None
+            self._actor = self._sel_actor = self.mesh = None
             self._repaint()
             return
         self.n_input = max(int(n_input or cloud.n), cloud.n)
@@ -133,6 +134,17 @@ class View3D(QtWidgets.QWidget):
         poly = pv.PolyData((c.xyz[idx] - self.origin).astype(np.float32))
         poly[title] = vals.astype(np.float32)
         p = self.plotter
+        if keep and not reset_camera and self.mesh is not None and self._actor is not None:
+            # an edit (same input, channel, unit and colour limits): the drawn points change, the
+            # actor, its colour map and scalar bar do not — new points into the same mesh (~5 ms)
+            # instead of a new actor (~40 ms of pyvista's add_mesh at 200,000 points)
+            if self._sel_actor is not None:
+                p.remove_actor(self._sel_actor, render=False)
+                self._sel_actor = None
+            self.mesh.copy_from(poly)
+            self.mesh.set_active_scalars(title)
+            self._info_and_repaint(c, idx)
+            return
         p.suppress_rendering = True  # one render per update, not one per actor
         try:
             if self._actor is not None:
@@ -158,6 +170,9 @@ class View3D(QtWidgets.QWidget):
         finally:
             p.suppress_rendering = False
         self.mesh = poly
+        self._info_and_repaint(c, idx)
+
+    def _info_and_repaint(self, c, idx):
         n = c.n if self.shown_mask is None else int(np.count_nonzero(self.shown_mask))
         shown = f"{idx.size:,} of {n:,} points drawn" if idx.size < n else f"{n:,} points"
         self.info.setText(shown)

@@ -144,9 +144,17 @@ def test_select_delete_undo_redo_project_and_batch_replay(qtbot, tmp_path, run_c
     k = int(win.selection.sum())
     assert k > 0 and f"{k:,} point(s) selected" in win.sel_label.text()
     assert win.view3d._sel_actor is not None  # highlighted in 3D
+    actor, clim = win.view3d._actor, tuple(win.view3d._actor.mapper.scalar_range)
     win.delete_selection()
     assert win.session.shown.n == n0 - k and "manual_edit" in win.session.steps[-1]
     assert win.view3d.mesh.n_points == n0 - k and win.selection is None
+    # an edit updates the drawn points in place: the same actor and colour limits, the highlight
+    # gone, and no deleted point among those drawn
+    v3 = win.view3d
+    assert v3._actor is actor and tuple(v3._actor.mapper.scalar_range) == clim and v3._sel_actor is None
+    drawn = np.asarray(v3.mesh.points, dtype=np.float64) + v3.origin
+    shown = win.session.shown
+    assert np.allclose(np.sort(drawn[:, 0]), np.sort(shown.x), atol=1e-3)
     win.undo_action.trigger()
     assert win.session.shown.n == n0 and win.view3d.mesh.n_points == n0
     win.redo_action.trigger()
