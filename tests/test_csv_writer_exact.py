@@ -61,3 +61,15 @@ def test_the_shortest_decimal_is_written(tmp_path):
         m = s.lstrip("-").split("e")[0].replace(".", "").lstrip("0")
         return len(m.rstrip("0")) if "e" in s or "." in s else len(m.rstrip("0"))
     assert [digits(g) for g in got] == [digits(repr(float(x))) for x in v]
+
+
+def test_float32_and_small_integer_channels_keep_their_values(tmp_path):
+    """A float32 channel is written as the float64 it widens to; int32/uint8 as integers."""
+    rng = np.random.default_rng(9)
+    f32 = rng.normal(0, 1e-3, 500).astype(np.float32)
+    c = PointCloud.from_xyz(np.arange(500.0), np.zeros(500), np.zeros(500), u=f32,
+                            row=np.arange(500, dtype=np.int32), flag=(np.arange(500) % 3).astype(np.uint8))
+    write_csv(c, tmp_path / "c.csv")
+    back = read_cloud(tmp_path / "c.csv")
+    assert np.array_equal(back["u"], f32.astype(np.float64))
+    assert np.array_equal(back["row"], np.arange(500)) and np.array_equal(back["flag"], np.arange(500) % 3)
