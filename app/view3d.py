@@ -81,7 +81,8 @@ class View3D(QtWidgets.QWidget):
         self._lod = (None, None)  # (key, positions): the level of detail of the cloud
         self._shown_idx = None
         self._actor = None
-        self._sel_actor = None
+        self._sel_actor = None  # the highlight of the selection, when one is shown
+        self._sel_cache = None  # (actor, mesh) of the highlight, kept hidden between selections
         self.mesh = None  # the drawn points' PolyData (the level of detail)
         self._drag = None
         self._axes = False
@@ -99,7 +100,7 @@ class View3D(QtWidgets.QWidget):
         self.cloud, self.channel, self.mask, self.shown_mask = cloud, channel, None, keep
         if cloud is None:
             self.plotter.clear_actors()
-            self._actor = self._sel_actor = self.mesh = None
+            self._actor = self._sel_actor = self._sel_cache = self.mesh = None
             self._repaint()
             return
         self.n_input = max(int(n_input or cloud.n), cloud.n)
@@ -138,9 +139,7 @@ class View3D(QtWidgets.QWidget):
             # an edit (same input, channel, unit and colour limits): the drawn points change, the
             # actor, its colour map and scalar bar do not — new points into the same mesh (~5 ms)
             # instead of a new actor (~40 ms of pyvista's add_mesh at 200,000 points)
-            if self._sel_actor is not None:
-                p.remove_actor(self._sel_actor, render=False)
-                self._sel_actor = None
+            self._hide_selection()
             self.mesh.copy_from(poly)
             self.mesh.set_active_scalars(title)
             self._info_and_repaint(c, idx)
@@ -149,9 +148,9 @@ class View3D(QtWidgets.QWidget):
         try:
             if self._actor is not None:
                 p.remove_actor(self._actor, render=False)
-            if self._sel_actor is not None:
-                p.remove_actor(self._sel_actor, render=False)
-                self._sel_actor = None
+            if self._sel_cache is not None:  # a new colour actor: the highlight is added after it
+                p.remove_actor(self._sel_cache[0], render=False)
+            self._sel_actor = self._sel_cache = None
             p.remove_scalar_bar() if p.scalar_bars else None
             big = idx.size > 100_000  # spheres cost ~1 s a frame per 10⁶ points in software GL
             self._actor = p.add_mesh(poly, scalars=title, cmap="RdBu_r" if diverging else "viridis",
@@ -184,16 +183,27 @@ class View3D(QtWidgets.QWidget):
 
         self.mask = mask
         p = self.plotter
-        if self._sel_actor is not None:
-            p.remove_actor(self._sel_actor, render=False)
-            self._sel_actor = None
+        self._hide_selection()
         if self.cloud is not None and mask is not None and np.any(mask):
             idx = self._shown_idx[mask[self._shown_idx]]
             if idx.size:
                 poly = pv.PolyData((self.cloud.xyz[idx] - self.origin).astype(np.float32))
-                self._sel_actor = p.add_mesh(poly, color="#ffcc00", point_size=4, render=False,
-                                             reset_camera=False, pickable=False)
+                if self._sel_cache is None:
+                    actor = p.add_mesh(poly, color="#ffcc00", point_size=4, render=False,
+                                       reset_camera=False, pickable=False)
+                    self._sel_cache = (actor, poly)
+                else:  # the same actor with the new points: no new actor, no new shader
+                    self._sel_cache[1].copy_from(poly)
+                    self._sel_cache[0].SetVisibility(True)
+                self._sel_actor = self._sel_cache[0]
         self._repaint()
+
+    def _hide_selection(self):
+        """Hide the selection's highlight (kept for the next one: adding an actor costs ~20 ms of
+        pyvista and, the first time, a shader compiled by software GL)."""
+        if self._sel_actor is not None:
+            self._sel_actor.SetVisibility(False)
+            self._sel_actor = None
 
     def _repaint(self):
         """Schedule one repaint: the widget's paint renders the scene. (Calling render() as well

@@ -152,6 +152,12 @@ def test_select_delete_undo_redo_project_and_batch_replay(qtbot, tmp_path, run_c
     # gone, and no deleted point among those drawn
     v3 = win.view3d
     assert v3._actor is actor and tuple(v3._actor.mapper.scalar_range) == clim and v3._sel_actor is None
+    assert v3._sel_cache is None or not v3._sel_cache[0].GetVisibility()  # the highlight hidden
+    # another selection reuses the highlight's actor
+    sel = np.abs(win.session.shown.x - win.session.shown.x.mean()) < 100
+    win.set_selection(sel)
+    assert v3._sel_actor is v3._sel_cache[0] and v3._sel_actor.GetVisibility()
+    assert v3._sel_cache[1].n_points == int(sel.sum())
     drawn = np.asarray(v3.mesh.points, dtype=np.float64) + v3.origin
     shown = win.session.shown
     assert np.allclose(np.sort(drawn[:, 0]), np.sort(shown.x), atol=1e-3)
