@@ -33,6 +33,9 @@ class StepRecord:
     def file_name(self, artifact: str) -> str:
         return self.file_prefix + artifact
 
+    #: the step's StepResult.reuse (full-length arrays of this run; never written)
+    reuse: dict = field(default_factory=dict, repr=False, compare=False)
+
     def to_json(self) -> dict:
         return {"id": self.id, "title": self.title, "seconds": round(self.seconds, 6),
                 "points_in": self.points_in, "points_out": self.points_out, "report": self.report,
@@ -64,7 +67,8 @@ class PipelineResult:
     def summary(self) -> dict:
         """summarize() of input and output, computed once (PVr and slope RMS fit a map)."""
         if self._summary is None:
-            self._summary = summarize(self.input_cloud, self.cloud, self.surface)
+            self._summary = summarize(self.input_cloud, self.cloud, self.surface,
+                                      reuse=[rec.reuse for rec in self.steps])
         s = dict(self._summary)
         if self.uncertainty is not None:
             s["uncertainty"] = self.uncertainty.block()
@@ -73,11 +77,16 @@ class PipelineResult:
         return s
 
 
-def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None) -> dict:
+def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None, reuse=()) -> dict:
     """points in/out and the optician's metrics over the kept points: RMS, PV, PVr (µm) and slope
     RMS (µrad) — core.metrics.form — of the residual; for a height map with no residual and no
     nominal (or a flat), of the heights after piston and tilt removal, said in ``figures_of``.
-    PVr's 36-term fit uses the pupil of core.metrics.pupil (centre and radius reported)."""
+    PVr's 36-term fit uses the pupil of core.metrics.pupil (centre and radius reported).
+
+    ``reuse``: the steps' StepResult.reuse, in order. PVr's fit and the slope spline are taken from
+    a step instead of fitted again when that step fitted exactly them on exactly these data (see
+    ``_reusable``): the same numbers to rounding, the time of a whole Zernike fit and a whole
+    B-spline fit saved (a third of a 12.6 M-point map's run; issues 17, 26)."""
     from .metrics import form_metrics
     from .metrics.pupil import is_flat, pupil_of
 
@@ -102,9 +111,38 @@ def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None) -> dict
                   "figures_of": f"{s['figures_of']} of stylus profiles (no PVr or map slope on lines)"})
         return s
     pupil = pupil_of(x, y, surface)
-    s.update(form_metrics(x, y, v, pupil.radius, center=pupil.center))
+    pvr_parts, spline = _reusable(cloud_out, v, pupil, reuse) if s["figures_of"] == "residual" \
+        else (None, None)
+    s.update(form_metrics(x, y, v, pupil.radius, center=pupil.center, pvr_parts=pvr_parts,
+                          spline=spline))
     s["pupil"] = pupil.report()
     return s
+
+
+def _reusable(cloud_out: PointCloud, r: np.ndarray, pupil, reuse):
+    """(PVr's (fit PV, rest RMS) in mm, the slope spline) a step left for these very data, or None.
+
+    PVr: the zernike step fitted its input v over Fringe Z1…Z36 about the same centre and removed
+    some of those terms, r = v − removed. The span of Fringe Z1…Z36 (all n + |m| ≤ 10) is the same
+    for any normalisation radius about a centre (R_n^m(sρ) is a sum of R_k^m, k ≤ n), so the
+    summary's 36-term fit of r is the step's fit less the removed terms and its rest is the step's
+    fit residual e (orthogonal to the span): PVr = PV(r − e) + 3·RMS(e), both computed by the step.
+    Valid only while the points and the residual are the step's own arrays (identity: any later
+    step that moves, removes or changes them makes new arrays) and the centre is the summary's.
+
+    Slope spline: bspline_map's spline when it was fitted with fit_bspline's defaults (automatic
+    knots, default smoothing, the points' own box: no diameter) on these arrays."""
+    pvr_parts = spline = None
+    for entry in reuse:
+        p = entry.get("pvr")
+        if p is not None:
+            same = (p["xyz"] is cloud_out.xyz and p["residual"] is r
+                    and tuple(map(float, p["center"])) == tuple(map(float, pupil.center)))
+            pvr_parts = (p["fit_pv"], p["rest_rms"]) if same else None
+        b = entry.get("slope_spline")
+        if b is not None:
+            spline = b["spline"] if b["xyz"] is cloud_out.xyz and b["values"] is r else None
+    return pvr_parts, spline
 
 
 def _is_stylus_profile(cloud) -> bool:
@@ -208,7 +246,8 @@ def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None
                                 "StepResult — please report")
         new = out.cloud.with_provenance({"id": rs.id, "params": rs.params.model_dump(mode="json")})
         result.steps.append(StepRecord(rs.id, rs.step_cls.title, seconds, _one_form(out.report),
-                                       dict(out.artifacts), current.n, new.n))
+                                       dict(out.artifacts), current.n, new.n,
+                                       reuse=dict(getattr(out, "reuse", None) or {})))
         sub.update(1.0, f"{rs.step_cls.title}: done")
         current = new
     check_sanity(cloud, current)

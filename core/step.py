@@ -102,6 +102,10 @@ class StepResult:
     cloud: PointCloud
     report: dict = field(default_factory=dict)
     artifacts: dict[str, Artifact] = field(default_factory=dict)
+    #: fits later stages of the same run may take instead of fitting again (core.pipeline.summarize:
+    #: "pvr" from `zernike`, "slope_spline" from `bspline_map`), each with the arrays it was computed
+    #: from, so a consumer can check by identity that the data are still those; never written
+    reuse: dict = field(default_factory=dict)
 
 
 @dataclass

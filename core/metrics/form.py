@@ -61,14 +61,17 @@ def slope_rms_urad(x, y, r, spline=None) -> float | None:
 
 
 def form_metrics(x, y, r, radius: float | None = None, slopes: bool = True,
-                 center=(0.0, 0.0)) -> dict:
+                 center=(0.0, 0.0), pvr_parts=None, spline=None) -> dict:
     """PV, RMS, PVr (µm) and slope RMS (µrad) of residual r (mm) at points (x, y) (mm); PVr's fit
-    over the disk of ``radius`` about ``center``."""
+    over the disk of ``radius`` about ``center``. ``pvr_parts`` (PV of the 36-term fit, RMS of its
+    rest; mm) and ``spline`` (the residual's smoothing spline): already fitted on these data by a step
+    (core.pipeline._reusable), used instead of fitting again."""
     r = np.asarray(r, dtype=np.float64)
     if r.size == 0:
         return {"rms_um": None, "pv_um": None, "pvr_um": None, "slope_rms_urad": None}
     out = {"rms_um": float(np.sqrt(np.mean((r - r.mean()) ** 2)) * 1e3),
            "pv_um": float(np.ptp(r) * 1e3),
-           "pvr_um": pvr(x, y, r, radius, center) * 1e3}
-    out["slope_rms_urad"] = slope_rms_urad(x, y, r) if slopes else None
+           "pvr_um": (float(pvr_parts[0] + 3.0 * pvr_parts[1]) if pvr_parts is not None
+                      else pvr(x, y, r, radius, center)) * 1e3}
+    out["slope_rms_urad"] = slope_rms_urad(x, y, r, spline) if slopes else None
     return out

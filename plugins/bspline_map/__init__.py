@@ -66,6 +66,7 @@ class BSplineMapStep(Step):
     def run(self, cloud, params: BSplineMapParams, ctx: Context) -> StepResult:
         from pointspro.core.figures import grid_map_figure, png_artifact, profiles_figure, psd_figure
         from pointspro.core.maps import fit_bspline, grid_map
+        from pointspro.core.maps.bspline import DEFAULT_SMOOTHING
         from pointspro.core.maps.grid import nice_spacing
 
         channel = params.channel
@@ -148,7 +149,14 @@ class BSplineMapStep(Step):
         }
         if mesh_art is not None:
             arts[f"map_mesh.{params.mesh}"] = mesh_art
-        return StepResult(cloud.replace(), report, arts)
+        out = cloud.replace()
+        reuse = {}
+        if (diameter is None and params.knot_spacing is None and params.smoothing == DEFAULT_SMOOTHING
+                and channel == "residual"):
+            # fit_bspline's defaults on the cloud's own arrays: the summary's slope-RMS spline
+            # (core.pipeline._reusable), which need not be fitted again
+            reuse["slope_spline"] = {"spline": spline, "xyz": out.xyz, "values": out["residual"]}
+        return StepResult(out, report, arts, reuse)
 
     @classmethod
     def example_params(cls) -> dict:

@@ -19,6 +19,7 @@ from pydantic import field_validator
 
 from pointspro.core.errors import StepError
 from pointspro.core.metrics import zernike as zk
+from pointspro.core.metrics.form import PVR_TERMS
 from pointspro.core.metrics.pupil import pupil_of
 from pointspro.core.params.pupil import PupilCentreParams
 from pointspro.core.step import Context, Step, StepResult, param
@@ -91,13 +92,22 @@ class ZernikeStep(Step):
         ctx.progress.update(0.2, "fitting")
         coef, sd, resid, cond = zk.fit(x, y, v, R, pairs, params.normalization, c)
         fit_rms = float(np.sqrt(resid @ resid / len(resid)))
-        del resid  # one full-length column less while the removal is evaluated (issue 26)
+        # PVr's parts for the run's summary when these 36 Fringe terms are its fit (core.pipeline.
+        # _reusable): the summary then needs no second 36-term fit of the same residual
+        pvr_reusable = params.ordering == "fringe" and len(pairs) == PVR_TERMS and cloud.n > 2 * PVR_TERMS
+        if not pvr_reusable:
+            del resid  # one full-length column less while the removal is evaluated (issue 26)
         ctx.progress.check()
         gone = removed_pairs(params.remove, params.ordering, pairs)
         cols = [pairs.index(p) for p in gone]
         # only the removed terms are evaluated again (in chunks: never the N × p design matrix)
         after = zk.evaluate(x, y, coef[cols], R, gone, params.normalization, c)
         np.subtract(v, after, out=after)  # v − removed terms, in place
+        reuse = {}
+        if pvr_reusable:  # the kept terms' fit = after − resid; PV in chunks, no full-length temporary
+            reuse["pvr"] = {"xyz": cloud.xyz, "center": c, "fit_pv": _ptp_of_difference(after, resid),
+                            "rest_rms": float(np.sqrt(np.mean(resid ** 2)))}
+            del resid
         rms_before, rms_after = _std(v), _std(after)
         if gone and rms_after > 1.05 * rms_before:
             # Removing least-squares terms cannot raise the RMS unless the kept and the removed terms
@@ -142,11 +152,22 @@ class ZernikeStep(Step):
         ctx.log.info("%d terms fitted (condition %.3g), %d removed; RMS %.4g → %.4g µm", len(pairs), cond,
                      len(gone), rms_before * 1e3, rms_after * 1e3)
         out = cloud.replace(channels={"residual": after})
-        return StepResult(out, report, arts)
+        if reuse:
+            reuse["pvr"]["residual"] = out["residual"]
+        return StepResult(out, report, arts, reuse)
 
 
 #: points per chunk of the step's own full-length reductions
 _CHUNK = 1 << 18
+
+
+def _ptp_of_difference(a, b) -> float:
+    """max(a − b) − min(a − b), in chunks."""
+    lo, hi = np.inf, -np.inf
+    for s in range(0, len(a), _CHUNK):
+        d = a[s:s + _CHUNK] - b[s:s + _CHUNK]
+        lo, hi = min(lo, float(d.min())), max(hi, float(d.max()))
+    return hi - lo
 
 
 def _count_outside(x, y, c, r: float) -> int:
