@@ -202,6 +202,9 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file — no data rows")
     head, is_text = _sniff(path)
+    from .memory import check_stated
+
+    check_stated(path, head, is_text)  # too large for memory: said before reading (issue 26)
     if head.startswith((b"ply\n", b"ply\r\n")):
         from .ply import NotSimplePly, read_ply
 

@@ -97,3 +97,93 @@ def check_fits(path, npoints: int, *, where: str = "header", file_short: bool = 
         f"k-th pixel, k ≥ {max(math.ceil(math.sqrt(npoints / max(fit, 1))), 2)} along each axis), "
         "crop it to the aperture of interest, or run on a machine with more memory; "
         "--cloud-format ply (or npz) avoids cloud.csv's text. POINTSPRO_MEMORY_CHECK=0 skips this check")
+
+
+# -- the number of points a file holds, from its header (or its size), before reading it ----------------
+def stated_points(path, head: bytes, is_text: bool) -> tuple[int, str] | None:
+    """(points, where that number comes from) for the formats read_cloud knows, from what can be
+    had without reading the bulk: a header's counts (LAS/LAZ, E57, X3P's MatrixDimension, MetroPro's
+    phase-map size, an NPZ member's array header) or, for text and other binary maps, the file's
+    size (an estimate for text: bytes per row of the first rows; a lower bound for binary maps: at
+    most 16 bytes a pixel). None: unknown (nothing is refused). PLY checks its own header
+    (core.io.ply)."""
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+        if head.startswith(b"ply"):
+            return None
+        if head.startswith(b"LASF"):
+            return _las_points(head, p), "LAS header"
+        if head.startswith(b"ASTM-E57"):
+            n = _e57_points(p)
+            return (n, "E57 scan headers") if n is not None else None
+        if head.startswith(b"PK\x03\x04"):
+            return _zip_points(p)
+        if head[:4] in (b"\x88\x1b\x03\x6f", b"\x88\x1b\x03\x70", b"\x88\x1b\x03\x71"):  # MetroPro
+            w = int.from_bytes(head[68:70], "big")
+            h = int.from_bytes(head[70:72], "big")
+            return (w * h, "MetroPro header (phase-map size)") if w and h else None
+        if is_text:
+            lines = head.splitlines()[1:-1]  # the first (a header?) and the cut last one left out
+            rows = [ln for ln in lines if ln.strip() and not ln.lstrip()[:1] in (b"#", b"/", b";")]
+            if len(rows) < 5 or len(head) < 4096:
+                return None  # a small file: nothing to fear
+            per_row = sum(len(r) + 1 for r in rows) / len(rows)
+            return int(size / per_row), "size (at the first rows' bytes per row: an estimate)"
+        return size // 16, "size (at most 16 bytes a pixel: a lower bound)"
+    except Exception:  # a damaged header (bad zip, bad XML …): unknown here; its reader says what is wrong
+        return None
+
+
+def _las_points(head: bytes, path: Path) -> int:
+    legacy = int.from_bytes(head[107:111], "little")
+    major, minor = head[24], head[25]
+    if (major, minor) >= (1, 4) and len(head) >= 255:
+        return int.from_bytes(head[247:255], "little") or legacy
+    return legacy
+
+
+def _e57_points(path: Path) -> int | None:
+    try:
+        import pye57
+    except ImportError:
+        return None  # read_e57 names the missing extra
+    try:
+        e = pye57.E57(str(path))
+        return sum(int(e.get_header(i).point_count) for i in range(e.scan_count))
+    except Exception:  # a damaged file: its reader says what is wrong
+        return None
+
+
+def _zip_points(path: Path) -> tuple[int, str] | None:
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+        if "main.xml" in names:  # X3P: Record3/MatrixDimension
+            root = ET.fromstring(zf.read("main.xml"))
+            dims = next((el for el in root.iter() if el.tag.split("}")[-1] == "MatrixDimension"), None)
+            if dims is None:
+                return None
+            vals = {c.tag.split("}")[-1]: int(c.text or 1) for c in dims}
+            n = vals.get("SizeX", 1) * vals.get("SizeY", 1) * vals.get("SizeZ", 1)
+            return n, "X3P MatrixDimension"
+        npy = next((nm for nm in names if nm in ("x.npy", "xyz.npy")), None)
+        if npy is None:
+            return None
+        import numpy as np
+
+        with zf.open(npy) as f:
+            version = np.lib.format.read_magic(f)
+            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0)
+            shape, _, _ = read(f)
+        return int(shape[0]) if shape else 0, "NPZ array header"
+
+
+def check_stated(path, head: bytes, is_text: bool, *, available: int | None = None) -> None:
+    """check_fits with the number of points the file states (``stated_points``), when it states one."""
+    got = stated_points(path, head, is_text)
+    if got is not None:
+        check_fits(path, got[0], where=got[1], available=available)
