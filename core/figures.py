@@ -76,10 +76,12 @@ def robust_limits(v, symmetric=True):
     return (lo, hi) if hi > lo else (lo - 1e-12, hi + 1e-12)
 
 
-def binned_image(x, y, v, bins=None, ext=None):
+def binned_image(x, y, v, bins=None, ext=None, return_bins: bool = True):
     """Mean of v in square bins: the image of a scattered map (fast for millions of points). By
     default ~1.2 √N bins across (60…400), so sparse patterns still read as a surface. Returns
-    (image bins×bins with NaN where empty, extent (x0, x1, y0, y1), flat bin of each point)."""
+    (image bins×bins with NaN where empty, extent (x0, x1, y0, y1), flat bin of each point — None
+    with ``return_bins=False``). Counted in chunks of 2²⁰ points: no full-length temporaries
+    (12.6 M points 1.4 → ~0.3 s; issue 26)."""
     x, y, v = (np.asarray(a, dtype=np.float64) for a in (x, y, v))
     if bins is None:
         bins = int(np.clip(1.2 * np.sqrt(len(x)), 60, 400))
@@ -88,18 +90,28 @@ def binned_image(x, y, v, bins=None, ext=None):
         cx, cy = (0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())) if len(x) else (0.0, 0.0)
         ext = (cx - span / 2, cx + span / 2, cy - span / 2, cy + span / 2)
     span = ext[1] - ext[0]
-    ix = np.clip(((x - ext[0]) / span * bins).astype(np.intp), 0, bins - 1)
-    iy = np.clip(((y - ext[2]) / span * bins).astype(np.intp), 0, bins - 1)
-    k = iy * bins + ix
-    n = np.bincount(k, minlength=bins * bins)
-    s = np.bincount(k, weights=v, minlength=bins * bins)
+    nb = bins * bins
+    n = np.zeros(nb, dtype=np.int64)
+    s = np.zeros(nb)
+    k_all = np.empty(len(x), dtype=np.intp) if return_bins else None
+    step = 1 << 20
+    for a in range(0, len(x), step):
+        c = slice(a, a + step)
+        ix = np.clip(((x[c] - ext[0]) / span * bins).astype(np.intp), 0, bins - 1)
+        k = np.clip(((y[c] - ext[2]) / span * bins).astype(np.intp), 0, bins - 1)
+        k *= bins
+        k += ix
+        n += np.bincount(k, minlength=nb)
+        s += np.bincount(k, weights=v[c], minlength=nb)
+        if k_all is not None:
+            k_all[c] = k
     with np.errstate(invalid="ignore", divide="ignore"):
         img = np.where(n > 0, s / n, np.nan).reshape(bins, bins)
-    return img, ext, k
+    return img, ext, k_all
 
 
 def _binned(x, y, v, bins=None):
-    img, ext, _ = binned_image(x, y, v, bins)
+    img, ext, _ = binned_image(x, y, v, bins, return_bins=False)
     return img, ext
 
 
@@ -142,14 +154,15 @@ def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None)
     x2, y2 when the point sets differ."""
     fig = _figure(11, 4.6)
     ax1, ax2 = fig.subplots(1, 2)
-    b = np.asarray(before_mm) * 1e3
-    a = np.asarray(after_mm) * 1e3
-    b = b - b.mean()
-    a = a - a.mean()
-    img, ext = _binned(x, y, b)
-    _map_axes(fig, ax1, img, ext, "µm", f"before {what}: RMS {np.std(b):.4g} µm")
-    img, ext = _binned(x if x2 is None else x2, y if y2 is None else y2, a)
-    _map_axes(fig, ax2, img, ext, "µm", f"after {what}: RMS {np.std(a):.4g} µm")
+    # binned in mm, then about the mean and in µm: the bins' means are linear in the values, so no
+    # full-length µm copies are made (12.6 M points)
+    for ax, px, py, vals, when in ((ax1, x, y, before_mm, "before"),
+                                   (ax2, x if x2 is None else x2, y if y2 is None else y2, after_mm, "after")):
+        vals = np.asarray(vals, dtype=np.float64)
+        mean = float(vals.mean())
+        img, ext = _binned(px, py, vals)
+        img = (img - mean) * 1e3
+        _map_axes(fig, ax, img, ext, "µm", f"{when} {what}: RMS {np.std(vals) * 1e3:.4g} µm")
     return fig
 
 

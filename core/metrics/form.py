@@ -53,8 +53,7 @@ def slope_rms_urad(x, y, r, spline=None) -> float | None:
         s = spline if spline is not None else fit_bspline(x, y, r)
     except ValueError:
         return None
-    gx = s(x, y, dx=1)
-    gy = s(x, y, dy=1)
+    gx, gy = s.gradient(x, y) if hasattr(s, "gradient") else (s(x, y, dx=1), s(x, y, dy=1))
     gx -= gx.mean()
     gy -= gy.mean()
     return float(np.sqrt(np.mean(gx * gx + gy * gy)) * 1e6)
