@@ -308,6 +308,18 @@ def _format_column(a: np.ndarray) -> list[str]:
     return list(map(repr, a.tolist()))  # shortest string that reads back bit-exact
 
 
+def write_number_columns(f, arrays, delimiter: str = ",") -> None:
+    """Rows of the given float/integer columns to the binary file ``f``, each number the shortest
+    decimal that reads back to the same float64 (Arrow's CSV writer; see write_csv)."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    table = pa.Table.from_arrays([_arrow_column(pa, np.asarray(a)) for a in arrays],
+                                 names=[f"c{i}" for i in range(len(arrays))])
+    pacsv.write_csv(table, f, write_options=pacsv.WriteOptions(
+        include_header=False, quoting_style="none", batch_size=65_536, delimiter=delimiter))
+
+
 def _arrow_column(pa, a: np.ndarray):
     """``a`` as an Arrow array over the same memory (float64 or int64/uint64; float32 widened first, so
     the file holds the float64 value read back). Built from buffers: ``pa.array`` imports pandas
@@ -348,15 +360,9 @@ def write_csv(cloud: PointCloud, path) -> None:
     header = ",".join(csv_header(cloud)) + "\n"
     with atomic_path(path) as tmp:
         if all(a.dtype.kind in "iuf" for a in arrays):
-            import pyarrow as pa
-            import pyarrow.csv as pacsv
-
-            table = pa.Table.from_arrays([_arrow_column(pa, a) for a in arrays],
-                                         names=[f"c{i}" for i in range(len(arrays))])
             with open(tmp, "wb") as f:
                 f.write(header.encode("utf-8"))
-                pacsv.write_csv(table, f, write_options=pacsv.WriteOptions(
-                    include_header=False, quoting_style="none", batch_size=65_536))
+                write_number_columns(f, arrays)
             return
         chunk = 100_000  # formatted strings cost ~50 bytes a value: bound the memory, not the speed
         with open(tmp, "w", encoding="utf-8", newline="\n") as f:

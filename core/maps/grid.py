@@ -45,13 +45,12 @@ class MapGrid:
     def write_csv(self, path: Path) -> None:
         """x, y, z (mm) of the valid nodes, shortest round-trip decimals; the header states the unit
         (``x [mm],y [mm],z [mm]``), so read_cloud reads the file back bit for bit."""
+        from pointspro.core.io.formats import write_number_columns
+
         x, y, z = self.nodes()
-        with open(path, "w", encoding="utf-8", newline="\n") as f:
-            f.write(CSV_HEADER)
-            for start in range(0, len(x), 100_000):
-                sl = slice(start, start + 100_000)
-                f.writelines(f"{a!r},{b!r},{c!r}\n" for a, b, c in
-                             zip(x[sl].tolist(), y[sl].tolist(), z[sl].tolist()))
+        with open(path, "wb") as f:
+            f.write(CSV_HEADER.encode("utf-8"))
+            write_number_columns(f, (x, y, z))
 
     def write_ascii_matrix(self, path: Path, unit: str = "mm") -> None:
         scale = {"mm": 1.0, "um": 1e3, "nm": 1e6}[unit]
