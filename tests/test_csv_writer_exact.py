@@ -73,3 +73,18 @@ def test_float32_and_small_integer_channels_keep_their_values(tmp_path):
     back = read_cloud(tmp_path / "c.csv")
     assert np.array_equal(back["u"], f32.astype(np.float64))
     assert np.array_equal(back["row"], np.arange(500)) and np.array_equal(back["flag"], np.arange(500) % 3)
+
+
+def test_map_csv_reads_back_bit_for_bit(tmp_path):
+    from pointspro.core.maps.grid import MapGrid
+
+    rng = np.random.default_rng(4)
+    xs, ys = 0.37 * np.arange(31) - 5.0, 0.37 * np.arange(23) + 1.1
+    z = rng.normal(0, 1e-4, (23, 31))
+    z[rng.random(z.shape) < 0.1] = np.nan  # unmapped nodes are not written
+    g = MapGrid(xs, ys, z, 0.37)
+    g.write_csv(tmp_path / "map.csv")
+    back = read_cloud(tmp_path / "map.csv")
+    x, y, zz = g.nodes()
+    assert np.array_equal(back.x, x) and np.array_equal(back.y, y) and np.array_equal(back.z, zz)
+    assert (tmp_path / "map.csv").read_text(encoding="utf-8").startswith("x [mm],y [mm],z [mm]\n")
