@@ -89,10 +89,14 @@ class MapView(QtWidgets.QWidget):
         self._line_artist = None
         self._profile_artists = []
         self._press = None
+        self._bg = None
+        # connected before the selectors: the lasso's own draw_event handler (useblit) draws every
+        # animated artist of the axes — our map image and highlight — into the buffer after its
+        # background is taken, and a handler called after it copied a "background" holding the map
+        # as it was: after a deletion the hole and the old highlight never showed until a full redraw
+        self.canvas.mpl_connect("draw_event", self._on_draw)
         self._rect = RectangleSelector(self.ax, self._on_rect, useblit=False, interactive=False)
         self._lasso = LassoSelector(self.ax, self._on_lasso)
-        self._bg = None
-        self.canvas.mpl_connect("draw_event", self._on_draw)
         self.canvas.mpl_connect("button_press_event", self._on_press)
         self.canvas.mpl_connect("button_release_event", self._on_release)
         self._mode_changed(self.mode.currentText())
@@ -280,10 +284,8 @@ class MapView(QtWidgets.QWidget):
         for bg in self._bg:
             self.canvas.restore_region(bg)
         self._draw_animated()
-        # one repaint of the rectangle holding both axes (two cost two paint events' fixed part)
-        from matplotlib.transforms import Bbox
-
-        self.canvas.blit(Bbox.union([self.ax.bbox, self.pax.bbox]))
+        self.canvas.blit(self.ax.bbox)
+        self.canvas.blit(self.pax.bbox)
 
     def save_png(self, path, dpi=150):
         """The map as shown (the animated images are drawn too)."""

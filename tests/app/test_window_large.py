@@ -208,3 +208,37 @@ def test_profile_dots_keep_every_interval_s_lowest_and_highest_point(seed):
             assert v[in_b].min() in v[rows[j[rows] == b]]
             assert v[in_b].max() in v[rows[j[rows] == b]]
     assert display.envelope_rows(s[:3_000], v[:3_000], budget=4_000) is None  # few: all drawn
+
+
+def test_an_edit_shows_on_the_map_without_a_full_redraw(qtbot):
+    """The map's fast redraw restores a background taken at the last full draw: it must not hold
+    the map image itself (the lasso selector draws the axes' animated artists in its own draw_event
+    handler), or a deletion's hole and an old highlight stay on screen until something redraws."""
+    from pointspro.app.mapview import MapView
+    from pointspro.core import PointCloud
+
+    rng = np.random.default_rng(0)
+    n = 200_000
+    x, y = rng.uniform(-50, 50, n), rng.uniform(-50, 50, n)
+    cloud = PointCloud.from_xyz(x, y, 1e-4 * (x * x + y * y) / 2500)
+    m = MapView()
+    qtbot.addWidget(m)
+    m.resize(700, 900)
+    m.show()
+    m.set_cloud(cloud, "z", new_input=True)
+    m.canvas.draw()  # a full draw: the selectors' handlers run too
+    hole = np.hypot(x - 5, y - 8) < 15
+
+    def white(px, py, r=6):
+        """The fraction of white pixels in a (2r+1)² patch of the canvas around data point (px, py)."""
+        buf = np.asarray(m.canvas.buffer_rgba())
+        dx, dy = m.ax.transData.transform((px, py))
+        row, col = int(buf.shape[0] - dy), int(dx)
+        patch = buf[row - r:row + r + 1, col - r:col + r + 1, :3]
+        return float(np.mean(np.all(patch == 255, axis=-1)))
+
+    assert white(5, 8) < 0.8 and white(-35, -30) < 0.8  # the map is drawn there (some bins empty)
+    m.highlight(hole)
+    m.set_cloud(cloud, "z", keep=~hole, keep_limits=True)  # the deletion: a blit, not a full draw
+    assert white(5, 8) == 1.0  # the axes' background shows through the emptied bins
+    assert white(-35, -30) < 0.8  # the rest still drawn
