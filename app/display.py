@@ -17,9 +17,10 @@ DEVIATION_CHANNELS = ("residual", "probe_residual", "distance", "gap", "correcti
 MAGNITUDE_CHANNELS = ("omega", "u", "uncertainty", "u_z", "sigma")
 
 #: points drawn in the 3D view at most (level of detail). Software OpenGL (llvmpipe, the CI's and
-#: many remote desktops') draws ~2 M points/s, so 200,000 keep a frame near 0.1 s; the 2D map, the
-#: selection and every computation always use all points.
-DEFAULT_3D_BUDGET = 200_000
+#: many remote desktops') draws ~3 M points/s, so 150,000 keep a frame near 0.05 s — an edit redraws
+#: the 3D view twice (the highlight, then the deletion), within the 0.5 s a lasso + delete may take
+#: at 12.6 M points (issue 26); the 2D map, the selection and every computation use all points.
+DEFAULT_3D_BUDGET = 150_000
 
 
 def channel_order(cloud) -> list[str]:

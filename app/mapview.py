@@ -284,8 +284,10 @@ class MapView(QtWidgets.QWidget):
         for bg in self._bg:
             self.canvas.restore_region(bg)
         self._draw_animated()
-        self.canvas.blit(self.ax.bbox)
-        self.canvas.blit(self.pax.bbox)
+        # one repaint of the rectangle holding both axes (two cost two paint events' fixed part)
+        from matplotlib.transforms import Bbox
+
+        self.canvas.blit(Bbox.union([self.ax.bbox, self.pax.bbox]))
 
     def save_png(self, path, dpi=150):
         """The map as shown (the animated images are drawn too)."""
