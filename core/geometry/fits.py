@@ -62,11 +62,15 @@ class FitResult:
 
 
 def _covariance(jac: np.ndarray, residuals: np.ndarray, npar: int):
+    return _covariance_normal(jac.T @ jac, residuals, npar)
+
+
+def _covariance_normal(a: np.ndarray, residuals: np.ndarray, npar: int):
+    """(s² (JᵀJ)⁻¹, cond of the column-scaled J) from the normal matrix a = JᵀJ (p × p)."""
     n = len(residuals)
     dof = n - npar
     s2 = float(residuals @ residuals) / dof if dof > 0 else np.nan
     # the normal matrix of the column-scaled Jacobian: p × p, whatever the number of points
-    a = jac.T @ jac
     scale = np.sqrt(np.diag(a)).copy()
     scale[scale == 0] = 1.0
     a_s = a / np.outer(scale, scale)

@@ -10,6 +10,13 @@ Analytic Jacobian. With u = q − t (rows), ∂p/∂α = u · (dRx Ry), ∂p/∂
 then ∂r/∂θ = g · ∂p/∂θ with g = (−f_x, −f_y, 1) for the vertical residual and g = n̂(foot) for the
 normal one (the foot point is stationary: envelope theorem). Design parameters (vertex radius, conic,
 A_n) enter as ∂r/∂c = −∂f/∂c (vertical) or −n_z ∂f/∂c (normal).
+
+Memory (issue 26): the vertical fit never holds its N × p Jacobian. The model and its Jacobian are
+evaluated over blocks of ``CHUNK`` points, each block adding its JᵀJ and Jᵀr to the p × p normal
+equations (``normal_equations``, solved by ``levenberg_marquardt_normal``); only the residual is kept
+at full length (the current and the trial parameters' residuals: two columns, 16 bytes a point,
+besides the part-frame points and the residual the step returns). The normal residual (probe_radius)
+evaluates the whole cloud at once, its foot-point solve being warm-started from the last one.
 """
 from __future__ import annotations
 
@@ -19,7 +26,7 @@ import numpy as np
 
 from ..errors import DomainError, StepError
 from ..surfaces import EvenAsphere, NominalSurface, SurfaceOfRevolution
-from .lsq import levenberg_marquardt
+from .lsq import levenberg_marquardt, levenberg_marquardt_normal
 from .pose import Pose, rot_x, rot_y
 
 POSE_DOF = ("alpha", "beta", "dx", "dy", "dz")
@@ -28,6 +35,8 @@ DEG = np.pi / 180.0
 # its parameters by that much: the report warns and names the pairs correlated beyond 0.999.
 ILL_POSED_CONDITION = 1e3
 DEGENERATE_CORRELATION = 0.999
+#: points per block of the vertical fit's model and Jacobian (2¹⁶: ~15 columns of 0.5 MB, in cache)
+CHUNK = 1 << 16
 
 
 def dof_names_valid(names) -> list[str]:
@@ -89,7 +98,7 @@ class PosedSurfaceFit:
                  offset: float = 0.0, max_iter: int = 100, check=None):
         self.surface0 = surface
         self.q = np.asarray(q, dtype=np.float64)
-        self._qT = np.ascontiguousarray(self.q.T)  # (3, N): coordinates as contiguous rows
+        self._qT_full = None  # (3, N) contiguous rows, made only for a whole-cloud evaluation (model)
         self.free = dof_names_valid(free)
         self.design_free = [n for n in self.free if n not in POSE_DOF]
         if self.design_free and not isinstance(surface, EvenAsphere):
@@ -131,24 +140,59 @@ class PosedSurfaceFit:
         return vals, surf
 
     # -- the model ----------------------------------------------------------------------------------
-    def _part_coords(self, vals):
-        """Part-frame coordinates as three arrays, p = Rᵀ (q − t), and the pieces the Jacobian reuses."""
-        a, b = vals["alpha"] * DEG, vals["beta"] * DEG
-        R = rot_x(a) @ rot_y(b)
-        u = self._qT - np.array([[vals["dx"]], [vals["dy"]], [vals["dz"]]])  # (3, N)
-        p = R.T @ u  # one BLAS call on (3, N) rows: contiguous x, y, z arrays
+    @property
+    def _qT(self) -> np.ndarray:
+        if self._qT_full is None:
+            self._qT_full = np.ascontiguousarray(self.q.T)
+        return self._qT_full
+
+    @staticmethod
+    def _rotation(vals):
+        return rot_x(vals["alpha"] * DEG) @ rot_y(vals["beta"] * DEG)
+
+    def _part_coords(self, vals, qT=None):
+        """Part-frame coordinates as three arrays, p = Rᵀ (q − t), and the pieces the Jacobian reuses
+        (of the points ``qT``, (3, m) — default all)."""
+        R = self._rotation(vals)
+        t = np.array([[vals["dx"]], [vals["dy"]], [vals["dz"]]])
+        u = np.subtract(self._qT if qT is None else qT, t, order="C")  # (3, m) contiguous rows
+        p = R.T @ u  # one BLAS call on (3, m) rows: contiguous x, y, z arrays
         return R, (u[0], u[1], u[2]), (p[0], p[1], p[2])
 
     def part_points(self, vals) -> np.ndarray:
-        _, _, p = self._part_coords(vals)
-        return np.column_stack(p)
+        """(N, 3) points in the part frame, p = Rᵀ (q − t), computed by blocks (no (3, N) temporaries)."""
+        R = self._rotation(vals)
+        t = np.array([vals["dx"], vals["dy"], vals["dz"]])
+        out = np.empty((len(self.q), 3))
+        for s in range(0, len(self.q), CHUNK):
+            np.matmul(self.q[s:s + CHUNK] - t, R, out=out[s:s + CHUNK])  # rows: (q − t)ᵀ R = (Rᵀ(q − t))ᵀ
+        return out
+
+    def normal_equations(self, x):
+        """(r, JᵀJ, Jᵀr) of the vertical residual at x, the model and its Jacobian evaluated over blocks
+        of CHUNK points: the only full-length array made is r."""
+        vals, surf = self._unpack(x)
+        n, k = len(self.q), len(self.free)
+        r = np.empty(n)
+        A = np.zeros((k, k))
+        g = np.zeros(k)
+        for s in range(0, n, CHUNK):
+            rc, Jc = self._evaluate(x, vals, surf, self.q[s:s + CHUNK].T, True)
+            r[s:s + len(rc)] = rc
+            A += Jc.T @ Jc
+            g += Jc.T @ rc
+        return r, A, g
 
     def model(self, x, want_jac: bool):
-        """Residuals and Jacobian. With w = R g (g rotated to the measuring frame):
+        """Residuals and Jacobian (N × p) over all points. With w = R g (g rotated to the measuring frame):
             ∂r/∂t = −w,   ∂r/∂α = −(u × w)_x,   ∂r/∂β = −(p × g)_y      (angles per radian)
         from ∂Rᵀ/∂α = Rᵀ Kxᵀ and ∂Rᵀ/∂β = Kyᵀ Rᵀ (K the generators of Rx, Ry: dRx = Rx Kx)."""
         vals, surf = self._unpack(x)
-        R, (ux, uy, uz), (px, py, pz) = self._part_coords(vals)
+        return self._evaluate(x, vals, surf, None, want_jac)
+
+    def _evaluate(self, x, vals, surf, qT, want_jac: bool):
+        """model() of the points qT ((3, m); None: all). The normal residual takes all points only."""
+        R, (ux, uy, uz), (px, py, pz) = self._part_coords(vals, qT)
         if self.residual == "vertical":
             r2 = px * px + py * py
             G = np.empty((3, len(px)))  # g = (−f_x, −f_y, 1), as rows for the BLAS call below
@@ -217,7 +261,7 @@ class PosedSurfaceFit:
         n, k = len(self.q), len(self.free)
         if n <= k:
             raise StepError(f"{n} points for {k} parameters: need more points than parameters")
-        cov3 = np.cov(self._qT)  # 3 × 3, one BLAS pass over the points
+        cov3 = _covariance3(self.q)  # 3 × 3, by blocks
         ev = np.linalg.eigvalsh(cov3[:2, :2])  # spreads² of the footprint in x, y
         w3, v3 = np.linalg.eigh(cov3)
         # a profile: narrower in x, y than 1/1000 of its length, or (a tilted profile bows sideways by
@@ -243,7 +287,11 @@ class PosedSurfaceFit:
         for name in self.free:
             x0.append(start[name] if name in POSE_DOF else self._design_value(self.surface0, name))
         try:
-            res = levenberg_marquardt(self.model, np.array(x0), max_iter=self.max_iter, check=self.check)
+            if self.residual == "vertical":  # JᵀJ, Jᵀr accumulated by blocks: no N × p Jacobian held
+                res = levenberg_marquardt_normal(self.normal_equations, np.array(x0), max_iter=self.max_iter,
+                                                 check=self.check)
+            else:
+                res = levenberg_marquardt(self.model, np.array(x0), max_iter=self.max_iter, check=self.check)
         except DomainError as e:
             raise StepError(f"at the starting pose: {e}") from None
         vals, surf = self._unpack(res.x)
@@ -288,3 +336,15 @@ class PosedSurfaceFit:
             shift = self._shift
         return PosedFitResult(pose, surf, list(self.free), values, unc, corr, float(cond), res.residuals,
                               res.iterations, res.converged, self.part_points(vals), warnings, shift)
+
+
+def _covariance3(q: np.ndarray) -> np.ndarray:
+    """np.cov of the (N, 3) points' coordinates (ddof 1) by blocks: the mean, then the centred sums of
+    products, without the (3, N) centred copy np.cov makes."""
+    n = len(q)
+    mean = q.sum(axis=0) / n
+    c = np.zeros((3, 3))
+    for s in range(0, n, CHUNK):
+        d = q[s:s + CHUNK] - mean
+        c += d.T @ d
+    return c / max(n - 1, 1)

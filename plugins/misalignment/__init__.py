@@ -96,8 +96,11 @@ def _before_after(surface, measured, part, residual):
     from pointspro.core.errors import DomainError
     from pointspro.core.figures import before_after, scattered_map
 
-    try:
-        before = measured[:, 2] - surface.sag(measured[:, 0], measured[:, 1])
+    try:  # by blocks: the sag's temporaries stay block-sized (issue 26)
+        before = np.empty(len(measured))
+        for s in range(0, len(measured), 1 << 16):
+            m = measured[s:s + (1 << 16)]
+            np.subtract(m[:, 2], surface.sag(m[:, 0], m[:, 1]), out=before[s:s + len(m)])
     except DomainError:
         return scattered_map(part[:, 0], part[:, 1], residual, "residual after removing the pose")
     return before_after(measured[:, 0], measured[:, 1], before, residual, what="pose removal",
