@@ -23,7 +23,8 @@ from ..errors import InputError
 #: peak bytes a run holds per point of the input (see module doc). Measured (peak RSS, interpreter
 #: included): 96 B/point for zernike 36 + bspline_map at 12.6M points with cloud.x3p, 188 B/point
 #: with cloud.csv before the spline's evaluation was chunked; 200 leaves room for steps that hold a
-#: few more columns (misalignment's Jacobian, knn_denoise's neighbour tree)
+#: few more columns (tracemalloc peak above the input: knn_denoise 75 B/point, misalignment 41 —
+#: 33 of them its output — since its Jacobian is accumulated by blocks; bspline_map a fixed ~200 MB)
 BYTES_PER_POINT = 200
 #: the interpreter, numpy/scipy/matplotlib and the steps' fixed working sets (the 150² spline system)
 BASE_BYTES = 400 * 2**20
