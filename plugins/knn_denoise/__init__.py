@@ -1,4 +1,6 @@
-"""`knn_denoise`: find spikes and low points in a residual map (paper 002 §5) and remove them.
+"""`knn_denoise`: find spikes, digs and low points in a residual map and remove them.
+
+Two detectors: `method: robust` (the default, described below) and the one of paper 002 §5:
 
 Works on the `residual` channel when present (after `misalignment`), otherwise on z. The paper's
 noise measure ω (omega.py) compares each point with the mean of the interpolated residual over the
@@ -14,12 +16,15 @@ the threshold whose ω is at least 0.8 of the largest ω within 2a of them (the 
 whose windows it lifted; all of a cluster of low points together), then ω is computed again without
 them, until no point is above the threshold. On a clean measurement nothing exceeds it.
 
-`method: robust` (issue 16; robust.py; ~1.5 s of one core for 10⁶ points) judges each point
-against the leave-one-out, iteratively trimmed local quadratic of its 2a × 2a window, in robust σ
-(global and local), after a coarse pass for digs, with an absolute `floor` and a check that the neighbouring windows' fits agree
-at the point (model error at a kink is not an outlier); digs and scratches are grown from their
-flagged points. It finds spikes of 6σ and digs the paper's ω misses (issue 16: F1 0.867 → ≥ 0.99 on
-the issue's mixture). `method: paper` (the default) is the paper's ω with its rounds as before.
+`method: robust` (the default since issue 16; robust.py; ~1.5 s of one core for 10⁶ points) judges
+each point against the leave-one-out, iteratively trimmed local quadratic of its 2a × 2a window, in
+robust σ (global and local), after a coarse pass for digs, with an absolute `floor`; a candidate is
+kept as form when the neighbouring windows' fits disagree at it by about its deviation or when some
+window that holds it predicts it within the trim (model error at a crest, a cone tip or a turned-down
+edge is not an outlier: noise-free form error loses nothing); digs and scratches are grown from their
+flagged points. It finds spikes of 6σ and digs the paper's ω misses (issue 16: F1 0.867 → 0.99 on the
+issue's mixture). `method: paper` is the paper's ω with its rounds, as before (the default until
+issue 16; on the example measurement both remove the same five points).
 
 `method: knn_mean` (classic KNN mean distance) and `method: statistical` (open3d's
 `remove_statistical_outlier`) are there to compare with.
@@ -45,7 +50,7 @@ DOMINANCE = 0.8
 
 class KnnDenoiseParams(Params):
     method: Literal["robust", "paper", "knn_mean", "statistical", "hampel"] = param(
-        "paper", help="robust: leave-one-out trimmed local quadratic in robust σ (issue 16); paper: ω "
+        "robust", help="robust: leave-one-out trimmed local quadratic in robust σ (issue 16); paper: ω "
                        "of paper 002 (z-distance to the interpolated window); knn_mean: classic KNN mean "
                        "distance; statistical: open3d's statistical outlier removal; hampel: median ± "
                        "threshold_sigma MAD of the nearest neighbours")
