@@ -443,9 +443,10 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
         for mask in (flagged, growable):
             cand = np.flatnonzero(mask & sel)
             spread = _disagreement(wn, b, lv, cand)
+            mask[cand[np.abs(z[cand]) <= AGREE * spread]] = False
+            cand = np.flatnonzero(mask & sel)
             best = _best_window_z(wn, b, lv, cand, d)
-            form = (np.abs(z[cand]) <= AGREE * spread) | (best <= np.maximum(TRIM * sig[cand], floor))
-            mask[cand[form]] = False
+            mask[cand[best <= np.maximum(TRIM * sig[cand], floor)]] = False
     grown = 0
     if flagged.any():
         grown = _grow(x, y, z, growable, flagged)
