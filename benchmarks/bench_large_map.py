@@ -32,7 +32,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from bench_input import bandwidth_bytes_per_s, stage_table, workload_seconds  # noqa: E402
+from bench_input import bandwidth_bytes_per_s, stage_table, total_seconds, workload_seconds  # noqa: E402
 
 RECIPE = """pointspro: 1
 steps:
@@ -130,7 +130,7 @@ def main():
                 print("\n| stage | seconds |\n|---|---:|")
                 for stage, s in rows:
                     print(f"| {stage} | {s:.3f} |")
-                print(f"| total in process | {sum(s for _, s in rows):.3f} |")
+                print(f"| total in process | {total_seconds(rows):.3f} |")
             data.unlink()
     print(f"\nfixed workload {w:.3f} s\n\n| valid points | wall | × workload | peak RSS | bytes/point | "
           "µs/point | outputs |\n|---:|---:|---:|---:|---:|---:|---|")

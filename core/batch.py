@@ -23,9 +23,10 @@ from typing import Callable
 
 from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
-from .io.background import BackgroundWrite
+from .io.background import BackgroundWrite, share_out
 from .io.formats import write_ply_cloud
 from .io.npz import write_npz_cloud
+from .parallel import thread_count
 from .pipeline import run_pipeline
 from .progress import CancelToken, Progress
 from .recipe import Recipe
@@ -149,16 +150,15 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
         timings[cloud_name + (" (started in a forked process)" if csv.forked else "")] = \
             time.perf_counter() - t1
         try:
-            for name, art in result.artifacts.items():
-                if name not in skipped:
-                    timed(name, lambda: write_artifact(tmp, name, art))
+            tasks = [(name, functools.partial(write_artifact, tmp, name, art))
+                     for name, art in result.artifacts.items() if name not in skipped]
             if has_map and SUMMARY_FIGURE not in skipped:
-                from .figures import save_png, scattered_map
-
-                c = result.cloud
-                timed("form_error.png", lambda: save_png(scattered_map(
-                    c.x, c.y, c["residual"], title="Form error (residual) after all steps"),
-                    tmp / SUMMARY_FIGURE))
+                tasks.append((SUMMARY_FIGURE, functools.partial(_summary_figure, result.cloud, tmp / SUMMARY_FIGURE)))
+            # the figures (and the steps' other files) shared between this process and forked ones
+            # where cores are free (core/io/background.py share_out); in list order otherwise
+            workers = thread_count() if fork_csv else 1
+            for name, s in share_out(tasks, workers=workers, fork=fork_csv).items():
+                timings[name] = timings.get(name, 0.0) + s
             timed("report.json", lambda: (tmp / "report.json").write_text(dumps(report),
                                                                            encoding="utf-8"))
             timed("report.html", lambda: (tmp / "report.html").write_text(render_html(report, tmp),
@@ -168,6 +168,13 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
         finally:
             csv.cancel()  # only if still running: an error above; the folder is then removed
     return report
+
+
+def _summary_figure(cloud, path: Path) -> None:
+    from .figures import save_png, scattered_map
+
+    save_png(scattered_map(cloud.x, cloud.y, cloud["residual"],
+                           title="Form error (residual) after all steps"), path)
 
 
 def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,

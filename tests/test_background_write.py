@@ -68,3 +68,84 @@ def test_inline_when_threads_are_running(tmp_path):
     finally:
         stop.set()
         t.join()
+
+
+# --- share_out: one input's figures drawn by this process and forked ones (issue 17) ----------------
+
+def _write_pid(path, pause=0.0):
+    import time
+
+    time.sleep(pause)
+    path.write_text(str(os.getpid()))
+
+
+def test_share_out_spreads_the_tasks_over_processes_and_returns_their_seconds(tmp_path, forking):
+    from functools import partial
+
+    tasks = [(f"f{k}.txt", partial(_write_pid, tmp_path / f"f{k}.txt", 0.15)) for k in range(6)]
+    seconds = background.share_out(tasks, workers=3)
+    assert sorted(seconds) == sorted(name for name, _ in tasks)
+    assert all(0.1 < s < 5 for s in seconds.values())
+    pids = {(tmp_path / name).read_text() for name, _ in tasks}
+    assert str(os.getpid()) in pids and len(pids) >= 2  # the parent drew some, a child the others
+    with pytest.raises(ChildProcessError):  # every child reaped
+        os.waitpid(-1, os.WNOHANG)
+
+
+def test_share_out_inline_runs_in_order_in_this_process(tmp_path):
+    from functools import partial
+
+    order = []
+    tasks = [(f"g{k}", partial(order.append, k)) for k in range(5)]
+    assert sorted(background.share_out(tasks, workers=4, fork=False)) == [f"g{k}" for k in range(5)]
+    assert order == list(range(5))
+
+
+def _boom():
+    raise ValueError("no such colour map")
+
+
+def test_share_out_error_names_the_task_whoever_ran_it(tmp_path, forking):
+    """A failing figure: raised as it is when this process drew it, as an OSError naming it when a
+    child did; the other tasks still finish and no child is left behind."""
+    from functools import partial
+
+    for _ in range(3):
+        tasks = [("ok1.txt", partial(_write_pid, tmp_path / "ok1.txt", 0.05)), ("bad.png", _boom),
+                 ("ok2.txt", partial(_write_pid, tmp_path / "ok2.txt", 0.05))]
+        with pytest.raises((OSError, ValueError), match="no such colour map") as err:
+            background.share_out(tasks, workers=2)
+        if err.type is OSError:
+            assert "writing bad.png failed: ValueError" in str(err.value)
+        with pytest.raises(ChildProcessError):
+            os.waitpid(-1, os.WNOHANG)
+
+
+def test_batch_outputs_are_the_same_bytes_with_figures_shared_out(tmp_path, monkeypatch, forking):
+    """write_outputs with the figures spread over forked processes writes the same files, byte for
+    byte, as drawing them one after the other here (report.json/html carry time stamps)."""
+    import hashlib
+    from pathlib import Path
+
+    from pointspro.core import batch
+    from pointspro.core.maps.grid import read_x3p_map
+    from pointspro.core.pipeline import run_pipeline
+    from pointspro.core.recipe import load_recipe
+
+    root = Path(__file__).resolve().parents[1] / "resources" / "example"
+    rec = load_recipe(root / "recipe.yaml")
+    cloud = read_cloud(root / "asphere_cmm.csv")
+    result = run_pipeline(cloud, rec)
+    digests, maps = [], []
+    for k, fork in enumerate((True, False)):
+        monkeypatch.setattr(batch, "thread_count", lambda: 3)
+        timings = {}
+        batch.write_outputs(tmp_path / f"o{k}", "asphere_cmm.csv", rec, result, fork_csv=fork, timings=timings)
+        files = sorted(p for p in (tmp_path / f"o{k}").iterdir() if not p.name.startswith("report."))
+        assert any(p.suffix == ".png" for p in files) and all(f"{p.name}" in timings or p.name.startswith("cloud.")
+                                                             for p in files)
+        # an X3P file holds its creation time: compared by the map it reads back
+        digests.append({p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in files if p.suffix != ".x3p"})
+        maps.append(read_x3p_map(tmp_path / f"o{k}" / "map.x3p"))
+    assert digests[0] == digests[1]
+    assert np.array_equal(maps[0].z, maps[1].z, equal_nan=True) and np.array_equal(maps[0].xs, maps[1].xs)

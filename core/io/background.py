@@ -88,3 +88,107 @@ def _can_fork() -> bool:
     from ..parallel import thread_count
 
     return hasattr(os, "fork") and threading.active_count() == 1 and thread_count() > 1
+
+
+def share_out(tasks, *, workers: int, fork: bool = True) -> dict[str, float]:
+    """Run ``tasks`` — (name, fn) pairs, each writing its own file — on this process and up to
+    ``workers − 1`` forked children (the figures of one input: issue 17). Returns the seconds each
+    task took, by name.
+
+    A queue without a lock: the task numbers are written into a pipe before forking, and every
+    process reads the next one (a one-byte read of a pipe is atomic) until the pipe is empty — a
+    long figure does not hold the others up, whoever is free takes the next. A child sends back its
+    tasks' seconds, or the first error's one line, and leaves with ``os._exit``. An error in a child
+    is raised here as an OSError naming the task (after the other processes have finished); an error
+    here stops the children first. The tasks run in list order when nothing is forked (``fork`` False,
+    one core, threads running), with the same files as a result."""
+    import json
+    import time
+
+    tasks = list(tasks)
+    workers = max(1, min(int(workers), len(tasks)))
+    seconds: dict[str, float] = {}
+    if workers == 1 or len(tasks) > 255 or not (fork and _can_fork()):
+        for name, fn in tasks:
+            t0 = time.perf_counter()
+            fn()
+            seconds[name] = time.perf_counter() - t0
+        return seconds
+
+    queue_r, queue_w = os.pipe()
+    os.write(queue_w, bytes(range(len(tasks))))     # one byte a task (≤ 255, else inline above)
+    os.close(queue_w)
+
+    def drain(report, in_child):
+        while (b := os.read(queue_r, 1)):
+            name, fn = tasks[b[0]]
+            t0 = time.perf_counter()
+            try:
+                fn()
+            except BaseException as e:  # noqa: BLE001 — a child names the task; here it is raised as is
+                if in_child:
+                    raise _TaskError(name, e) from e
+                raise
+            report[name] = time.perf_counter() - t0
+
+    children = []
+    try:
+        for _ in range(workers - 1):
+            r, w = os.pipe()
+            pid = os.fork()
+            if pid == 0:  # a child: its share of the queue; its seconds or its error back; never return
+                code, mine = 0, {}
+                try:
+                    os.close(r)
+                    drain(mine, True)
+                    msg = json.dumps(mine)
+                except BaseException as e:  # noqa: BLE001
+                    code = 1
+                    msg = str(e)
+                try:
+                    os.write(w, msg.encode("utf-8", "replace")[:60000])
+                finally:
+                    os._exit(code)
+            os.close(w)
+            children.append((pid, r))
+        drain(seconds, False)
+    except BaseException:
+        for pid, r in children:
+            _kill(pid, r)
+        os.close(queue_r)
+        raise
+    os.close(queue_r)
+    failed = None
+    for pid, r in children:
+        msg = b""
+        try:
+            while chunk := os.read(r, 65536):
+                msg += chunk
+        finally:
+            os.close(r)
+            _, status = os.waitpid(pid, 0)
+        text = msg.decode("utf-8", "replace")
+        if os.waitstatus_to_exitcode(status) == 0:
+            seconds.update(json.loads(text or "{}"))
+        elif failed is None:
+            failed = text or f"a figure process ended with {os.waitstatus_to_exitcode(status)}"
+    if failed is not None:
+        raise OSError(failed)
+    return seconds
+
+
+class _TaskError(Exception):
+    def __init__(self, name, error):
+        super().__init__(f"writing {name} failed: {type(error).__name__}: {error}")
+        self.name = name
+
+
+def _kill(pid, fd) -> None:
+    import signal
+
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    os.close(fd)
+    os.waitpid(pid, 0)
