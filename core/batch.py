@@ -157,6 +157,10 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
             # the figures (and the steps' other files) shared between this process and forked ones
             # where cores are free (core/io/background.py share_out); in list order otherwise
             workers = thread_count() if fork_csv else 1
+            if workers > 1 and len(tasks) > 1:
+                from .figures import preload
+
+                timed("matplotlib loaded before the figure processes fork", preload)
             for name, s in share_out(tasks, workers=workers, fork=fork_csv).items():
                 timings[name] = timings.get(name, 0.0) + s
             timed("report.json", lambda: (tmp / "report.json").write_text(dumps(report),

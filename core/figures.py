@@ -25,6 +25,19 @@ def _figure(w=6.4, h=4.8):
     return fig
 
 
+def preload() -> None:
+    """Import matplotlib's figure and Agg canvas and draw one small figure (fonts, colour maps): a
+    process about to fork figure workers pays this once for all of them (~1 s of imports each
+    otherwise; core/batch.py)."""
+    import io
+
+    fig = _figure(2.0, 2.0)
+    ax = fig.add_subplot()
+    fig.colorbar(ax.imshow([[0.0, 1.0]], cmap=DIVERGING), ax=ax, label="µm")
+    ax.set_title("x")
+    save_png(fig, io.BytesIO())
+
+
 def save_png(fig, path: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
