@@ -213,3 +213,25 @@ def test_periodogram_in_numpy_equals_scipy(n):
     f, p = periodogram_hann(x, fs=2.5)
     f0, p0 = periodogram(x, fs=2.5, window="hann", detrend=False, scaling="density", axis=-1)
     assert np.allclose(f, f0, rtol=1e-15, atol=0) and np.allclose(p, p0, rtol=1e-12, atol=0)
+
+
+def test_bilinear_profile_equals_scipys_regular_grid_interpolator_bit_for_bit():
+    """profile()'s numpy interpolation (no scipy.interpolate import, issue 17) gives the values of
+    RegularGridInterpolator(linear, NaN outside) to the last bit: random grids with NaN nodes, lines
+    at random angles through and beyond them, points on the last row and column."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    from pointspro.core.metrics.profiles import bilinear
+
+    rng = np.random.default_rng(1)
+    for trial in range(60):
+        nx, ny = rng.integers(2, 60, 2)
+        h = rng.uniform(0.1, 7)
+        xs, ys = rng.uniform(-300, 0) + h * np.arange(nx), rng.uniform(-300, 0) + h * np.arange(ny)
+        z = rng.normal(0, 1e-3, (ny, nx))
+        z[rng.random((ny, nx)) < 0.2] = np.nan
+        s, t = np.arange(-400, 400, h * rng.uniform(0.3, 1.5)), rng.uniform(0, np.pi)
+        px, py = rng.uniform(-50, 50) + s * np.cos(t), rng.uniform(-50, 50) + s * np.sin(t)
+        px, py = np.concatenate([px, xs, [xs[-1]]]), np.concatenate([py, np.full(nx, ys[0]), [ys[-1]]])
+        ref = RegularGridInterpolator((ys, xs), z, bounds_error=False, fill_value=np.nan)(np.column_stack([py, px]))
+        assert np.array_equal(bilinear(ys, xs, z, py, px), ref, equal_nan=True), trial

@@ -60,8 +60,19 @@ class MapGrid:
                     f"spacing {float(self.spacing)!r} mm\n"
                     f"# row i is y = y0 + i*spacing (lowest y first), column j is x = x0 + j*spacing\n"
                     f"# heights in {unit}; NaN = not measured\n")
-            for row in self.z * scale:
-                f.write(" ".join("NaN" if not np.isfinite(v) else repr(float(v)) for v in row) + "\n")
+            f.flush()
+            # the numbers by Arrow's shortest round-trip formatting (core.io.formats.write_number_columns:
+            # ~10× faster than repr per value, issue 17), one column of the table per map column;
+            # a node without a value reads "NaN" as the header says (Arrow writes "nan")
+            import io
+
+            from pointspro.core.io.formats import write_number_columns
+
+            z = self.z * scale
+            z[~np.isfinite(z)] = np.nan
+            buf = io.BytesIO()
+            write_number_columns(buf, [np.ascontiguousarray(z[:, j]) for j in range(z.shape[1])], delimiter=" ")
+            f.buffer.write(buf.getvalue().replace(b"nan", b"NaN"))
 
     def write_x3p(self, path: Path, revision: str = "2000") -> None:
         """ISO 25178-72 areal file: row r of the matrix is y index r, column c is x index c; the

@@ -20,20 +20,36 @@ import numpy as np
 
 def profile(grid, angle_deg: float = 0.0, through=(0.0, 0.0)):
     """(s, z): signed distance along the line (mm) and map value (mm) at steps of one spacing."""
-    from scipy.interpolate import RegularGridInterpolator
-
     half = 0.5 * float(np.hypot(np.ptp(grid.xs), np.ptp(grid.ys))) + grid.spacing
     s = np.arange(-half, half + 1e-9, grid.spacing)
     t = np.deg2rad(angle_deg)
     px = through[0] + s * np.cos(t)
     py = through[1] + s * np.sin(t)
-    f = RegularGridInterpolator((grid.ys, grid.xs), grid.z, bounds_error=False, fill_value=np.nan)
-    z = f(np.column_stack([py, px]))
+    z = bilinear(grid.ys, grid.xs, grid.z, py, px)
     keep = np.isfinite(z)
     if not keep.any():
         return s[:0], z[:0]
     i0, i1 = np.argmax(keep), len(keep) - np.argmax(keep[::-1])
     return s[i0:i1], z[i0:i1]
+
+
+def bilinear(ys, xs, z, py, px) -> np.ndarray:
+    """z (ny × nx on the ascending axes ys, xs) bilinearly interpolated at the points (py, px), NaN
+    outside the grid or next to a NaN node — scipy's RegularGridInterpolator((ys, xs), z, "linear",
+    bounds_error=False, fill_value=NaN) to the last bit (same cell search, same expression; tested),
+    without importing scipy.interpolate (0.15–0.25 s of a batch's start; issue 17)."""
+    ys, xs = np.asarray(ys, dtype=np.float64), np.asarray(xs, dtype=np.float64)
+    px, py = np.asarray(px, dtype=np.float64), np.asarray(py, dtype=np.float64)
+    out = np.full(px.shape, np.nan)
+    inside = (px >= xs[0]) & (px <= xs[-1]) & (py >= ys[0]) & (py <= ys[-1])
+    qx, qy = px[inside], py[inside]
+    i = np.clip(np.searchsorted(ys, qy, "right") - 1, 0, len(ys) - 2)   # ys[i] ≤ y < ys[i + 1]
+    j = np.clip(np.searchsorted(xs, qx, "right") - 1, 0, len(xs) - 2)
+    ty = (qy - ys[i]) / (ys[i + 1] - ys[i])
+    tx = (qx - xs[j]) / (xs[j + 1] - xs[j])
+    out[inside] = (z[i, j] * (1 - ty) * (1 - tx) + z[i, j + 1] * (1 - ty) * tx
+                   + z[i + 1, j] * ty * (1 - tx) + z[i + 1, j + 1] * ty * tx)
+    return out
 
 
 def radial_profile(grid, center=(0.0, 0.0)):

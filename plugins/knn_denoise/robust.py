@@ -56,7 +56,6 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import erfc
 
 TRIM = 3.0             # |z| ≥ TRIM σ: not used in the next round's planes; also the growth threshold
 TRUNCATED_VAR = 0.9733  # variance of a unit normal truncated at ±3
@@ -486,4 +485,6 @@ def _grow(x, y, z, cand, flagged) -> int:
 
 def claimed_rate(threshold_sigma: float) -> float:
     """Two-sided normal tail beyond threshold_sigma: the false-positive rate on Gaussian noise."""
-    return float(erfc(threshold_sigma / np.sqrt(2.0)))
+    from math import erfc, sqrt
+
+    return erfc(threshold_sigma / sqrt(2.0))
