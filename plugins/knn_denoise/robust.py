@@ -52,7 +52,6 @@ the per-point and per-cell work runs in slices on up to THREADS threads.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,7 +68,8 @@ AGREE = 1.25
 H_MAX = 1.0            # a window judges a point when its leverage there is at most this
 CHUNK = 1 << 15        # points per slice of the per-point work (a slice's arrays stay in cache)
 CELL_CHUNK = 1 << 13   # cells per slice of the per-cell solves
-THREADS = min(8, os.cpu_count() or 1)
+THREADS = 8              # at most; and never more than this process's budget (core.parallel.thread_count:
+                         # 1 in a batch pool's worker, whose N processes already fill the N cores)
 
 
 @dataclass
@@ -308,7 +308,9 @@ def _in_chunks(fn, n, size=None):
     and arithmetic release the GIL); each slice writes its own part of an output or returns it."""
     size = size or CHUNK
     slices = [slice(lo, min(lo + size, n)) for lo in range(0, n, size)]
-    threads = min(THREADS, len(slices))
+    from pointspro.core.parallel import thread_count
+
+    threads = min(THREADS, thread_count(), len(slices))
     if threads <= 1:
         return [fn(sl) for sl in slices]
     from concurrent.futures import ThreadPoolExecutor
