@@ -439,7 +439,8 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
     zz = np.where(fin, z, 0.0)
     # candidates for growing a dig: beyond TRIM σ (and the floor)
     growable = fin & ~flagged & (np.abs(zz) > np.maximum(TRIM * sig, floor))
-    # a candidate some other window holding it predicts within its threshold is form, not an outlier
+    # form, not outlier: where the windows holding a candidate disagree by its size, or one of them
+    # predicts it within TRIM σ (module doc, "Form, not outlier")
     for wn, b, lv, sel in ((win, beta, live, ~sparse), (coarse, betac, livec, sparse)):
         for mask in (flagged, growable):
             cand = np.flatnonzero(mask & sel)
