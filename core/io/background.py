@@ -73,14 +73,7 @@ class BackgroundWrite:
         """Stop the child (the caller failed meanwhile and removes the folder)."""
         if self.pid is None:
             return
-        import signal
-
-        try:
-            os.kill(self.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        os.close(self._read)
-        os.waitpid(self.pid, 0)
+        _kill(self.pid, self._read)
         self.pid = None
 
 
@@ -171,7 +164,7 @@ def share_out(tasks, *, workers: int, fork: bool = True) -> dict[str, float]:
         if os.waitstatus_to_exitcode(status) == 0:
             seconds.update(json.loads(text or "{}"))
         elif failed is None:
-            failed = text or f"a figure process ended with {os.waitstatus_to_exitcode(status)}"
+            failed = text or f"a writer process ended with {os.waitstatus_to_exitcode(status)}"
     if failed is not None:
         raise OSError(failed)
     return seconds
@@ -184,6 +177,7 @@ class _TaskError(Exception):
 
 
 def _kill(pid, fd) -> None:
+    """Stop the child ``pid`` (SIGKILL), close its pipe ``fd`` and reap it."""
     import signal
 
     try:
