@@ -58,3 +58,19 @@ def test_every_plugin_package_is_in_the_independence_contract():
     packages = {f"pointspro.plugins.{p.name}" for p in (ROOT / "plugins").iterdir()
                 if (p / "__init__.py").is_file()}
     assert set(c["modules"]) == packages
+
+
+def test_every_package_folder_is_in_the_wheel():
+    """`pip install .` builds a wheel from pyproject's explicit package list; an editable install (the
+    README's) finds every folder anyway, so a forgotten one broke only a real install — as
+    core.profiles, core.tolerance and core.uncertainty did (a batch on a clean machine failed at
+    probe_radius with ModuleNotFoundError)."""
+    import tomllib
+
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    listed = set(cfg["tool"]["setuptools"]["packages"])
+    folders = {"pointspro." + ".".join(p.parent.relative_to(ROOT).parts)
+               for top in ("core", "plugins", "app") for p in (ROOT / top).rglob("__init__.py")
+               if "__pycache__" not in p.parts}
+    assert folders - listed == set(), "missing from [tool.setuptools] packages"
+    assert listed - folders == set(), "listed but not a package folder"
