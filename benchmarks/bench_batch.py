@@ -10,6 +10,7 @@ hard-linked under `--inputs` names (the same bytes: the page cache serves them a
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -47,7 +48,17 @@ def run(args, files, out, extra, env=None) -> float:
     dt = time.perf_counter() - t0
     if res.returncode != 0:
         raise SystemExit(res.stderr)
-    return dt
+    per_input = sorted(e["seconds"] for e in json.loads((out / "summary.json").read_text())["inputs"])
+    return Run(dt, per_input)
+
+
+class Run(float):
+    """A run's wall seconds, with each input's own seconds (summary.json) beside them."""
+
+    def __new__(cls, wall: float, per_input: list[float]):
+        r = super().__new__(cls, wall)
+        r.per_input = per_input
+        return r
 
 
 def main():
@@ -56,6 +67,8 @@ def main():
     ap.add_argument("--points", type=int, default=50_000)
     ap.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
     ap.add_argument("--no-dask", action="store_true", help="skip the Dask LocalCluster run")
+    ap.add_argument("--no-shared", action="store_true",
+                    help="skip the one-worker run that shares its figures out on the free cores")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="pointspro-batch-"))
     first = tmp / "in" / "m000.csv"
@@ -70,19 +83,26 @@ def main():
     # the baseline on one core: a lone batch process otherwise draws an input's figures on the free
     # cores too (core/io/background.py share_out), which is not the scaling asked about
     t1 = run(args, files, tmp / "w1", ["--workers", "1"], {"OMP_NUM_THREADS": "1"})
-    t1s = run(args, files, tmp / "w1s", ["--workers", "1"])
+    t1s = None if args.no_shared else run(args, files, tmp / "w1s", ["--workers", "1"])
     tn = run(args, files, tmp / "wn", ["--workers", str(args.workers)])
     td = None if args.no_dask else run(args, files, tmp / "dask",
                                        ["--scheduler", "local", "--workers", str(args.workers)])
     print(f"{args.inputs} inputs of {n_pts:,} points, example recipe, {args.workers} workers\n")
     print("| run | seconds | inputs/s | speed-up | efficiency |\n|---|---:|---:|---:|---:|")
-    rows = [("--workers 1, one core (OMP_NUM_THREADS=1)", t1, 1),
-            ("--workers 1, its figures shared out on the free cores", t1s, 1),
-            (f"--workers {args.workers}", tn, args.workers)]
+    rows = [("--workers 1, one core (OMP_NUM_THREADS=1)", t1, 1)]
+    if t1s is not None:
+        rows.append(("--workers 1, its figures shared out on the free cores", t1s, 1))
+    rows.append((f"--workers {args.workers}", tn, args.workers))
     if td is not None:
         rows.append((f"--scheduler local (LocalCluster, {args.workers} processes)", td, args.workers))
     for label, t, w in rows:  # efficiency: speed-up per worker (1 = perfect scaling)
         print(f"| {label} | {t:.1f} | {args.inputs / t:.2f} | {t1 / t:.2f}× | {t1 / t / w:.0%} |")
+    # where the wall time goes beyond the inputs' own: the ideal is the inputs' seconds spread evenly
+    print("\n| run | an input's seconds: min / median / max | sum / workers | wall − that |\n|---|---|---:|---:|")
+    for label, t, w in rows:
+        p = t.per_input
+        even = sum(p) / w
+        print(f"| {label} | {p[0]:.2f} / {p[len(p) // 2]:.2f} / {p[-1]:.2f} | {even:.1f} | {t - even:.1f} |")
     if td is not None:
         print(f"\nDask overhead per input against the process pool: {(td - tn) / args.inputs * 1e3:+.0f} ms "
               f"(cluster start-up included)")

@@ -242,13 +242,36 @@ def _guard(fn, debug: bool) -> int:
 
 
 def cmd_batch(args) -> int:
+    _check_batch_args(args)
+    recipe_path = Path(args.files[0])
+    # the pool first: its workers import what the inputs need while this process reads the recipe
+    # and checks the inputs (core/executors.py WARM_MODULES); stopped on any error below
+    pool = _early_pool(args, recipe_path)
+    try:
+        return _batch(args, recipe_path, pool)
+    finally:
+        if pool is not None:
+            pool.terminate()
+            pool.join()
+
+
+def _early_pool(args, recipe_path: Path):
+    """The process pool of a batch that will surely use one (several inputs and workers, no
+    --scheduler, not --check-only), started before anything is read; else None."""
+    from . import executors
+
+    n = min(args.workers or _cores(), len(args.files) - 1)
+    if args.scheduler or args.check_only or n < 2:
+        return None
+    return executors.start_pool(n, recipe_path, tuple(args.overrides), args.figures)
+
+
+def _batch(args, recipe_path: Path, pool) -> int:
     import time
 
     from .batch import check_output_folder, load_batch_recipe, output_stems
     from .summary import entry, table, write_summary
 
-    _check_batch_args(args)
-    recipe_path = Path(args.files[0])
     recipe = load_batch_recipe(recipe_path, tuple(args.overrides))  # --set applied, then validated
     inputs = [Path(f) for f in args.files[1:]]
     allowed = _allowed_dirs(recipe_path, inputs, args.allow_path)
@@ -267,7 +290,8 @@ def cmd_batch(args) -> int:
     try:
         results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "auto")
         # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
-        runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed, session)
+        runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed, session,
+                                pool)
         if session is not None:  # the cluster's workers, as the pre-flight found them
             workers = session.workers or workers
         progress = None
@@ -471,9 +495,9 @@ def _reporter(results: dict, args, progress=None):
 
 
 def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, workers: int,
-                   allowed: list[Path], session=None):
-    """The executor: Dask with --scheduler, a process pool for several jobs and workers, else this
-    process (with a progress bar unless --quiet)."""
+                   allowed: list[Path], session=None, pool=None):
+    """The executor: Dask with --scheduler, a process pool for several jobs and workers (``pool``
+    when started already), else this process (with a progress bar unless --quiet)."""
     from . import executors
 
     # plain values for the workers: the cloud format, the --set texts (each worker applies them to
@@ -485,7 +509,7 @@ def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, wo
                                   ship=args.ship)
     if min(workers, len(jobs)) > 1:
         return executors.run_processes(recipe_path, jobs, out, min(workers, len(jobs)), allowed,
-                                       args.figures, options)
+                                       args.figures, options, pool=pool)
     from .terminal import TerminalProgress
 
     factory = None if args.quiet else (

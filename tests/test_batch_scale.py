@@ -159,3 +159,43 @@ def test_kill_in_the_middle_then_resume(tmp_path, sig, workers):
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["counts"].get("skipped") == len(done) and s["counts"].get("ok") == len(files) - len(done)
     assert all((out / f.stem / "report.json").is_file() for f in files)
+
+
+def _warm_state():  # in a pool worker: what its start-up left imported and cached
+    from pointspro.core.batch import worker_recipe
+
+    return ("scipy.spatial" in sys.modules, "matplotlib.backends.backend_agg" in sys.modules,
+            worker_recipe.cache_info().currsize)
+
+
+def test_pool_workers_start_warm():
+    """A worker imports what every input needs and reads the recipe as it starts, before its first
+    input (issue 17: on 16 cores the first input of each worker took 5.3 s against 4.2 s)."""
+    from pointspro.core.executors import start_pool
+
+    pool = start_pool(1, RECIPE, (), "all")
+    try:
+        assert pool.apply(_warm_state) == (True, True, 1)
+    finally:
+        pool.terminate()
+        pool.join()
+    pool = start_pool(1, RECIPE, (), "none")  # no figures: matplotlib is not loaded
+    try:
+        assert pool.apply(_warm_state) == (True, False, 1)
+    finally:
+        pool.terminate()
+        pool.join()
+
+
+def test_a_bad_recipe_stops_the_early_pool(tmp_path):
+    """The pool starts before the recipe is read; a bad recipe is still the one line naming the key,
+    exit 2, nothing written (the workers are terminated on the way out)."""
+    bad = write(tmp_path / "bad.yaml", RECIPE.read_text(encoding="utf-8").replace("radius: 4.0", "radius: -4.0"))
+    files = _inputs(tmp_path, 3)
+    res = subprocess.run([sys.executable, "-m", "pointspro.core.cli", "--batch", str(bad), *map(str, files),
+                          "--out", str(tmp_path / "o"), "--workers", "3"],
+                         capture_output=True, text=True, encoding="utf-8", timeout=120)
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "radius" in lines[0] and "Traceback" not in res.stderr
+    assert not (tmp_path / "o").exists()

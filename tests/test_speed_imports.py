@@ -29,3 +29,16 @@ def test_lazy_imports_still_work():
     assert np.allclose(fit.params["radius"], 5.0, atol=1e-9)
     s, s1, s2 = qcon_series([1.0, 0.5], np.linspace(0.0, 1.0, 5))
     assert np.all(np.isfinite(s)) and s[0] != s[-1]
+
+
+def test_reading_a_recipe_imports_no_scipy():
+    """The batch's own process reads and checks the recipe while its pool's workers import scipy
+    (core/executors.py WARM_MODULES): the steps import scipy where they use it."""
+    code = ("import sys; from pathlib import Path; from pointspro.core.batch import load_batch_recipe; "
+            "r = load_batch_recipe(Path(sys.argv[1])); r.build_surface(); "
+            "print(sorted(m for m in sys.modules if m == 'scipy' or m.startswith('scipy.')))")
+    from .conftest import EXAMPLE
+
+    out = subprocess.run([sys.executable, "-c", code, str(EXAMPLE / "recipe.yaml")], capture_output=True,
+                         text=True, check=True, encoding="utf-8")
+    assert out.stdout.strip() == "[]"

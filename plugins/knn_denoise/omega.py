@@ -24,7 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+
+# scipy is imported where it is used: a batch's own process validates the recipe without it (issue 17)
 
 CUBIC_MAX_POINTS = 150_000
 
@@ -85,6 +86,8 @@ def _lattice(x, y, max_fill: float = 4.0):
 
 
 def _lattice_grid(x, y, d, lat, x0, y0, nx, ny, h):
+    from scipy import ndimage
+
     lx0, ly0, px, py, i, j = lat
     L = np.full((j.max() + 1, i.max() + 1), np.nan)
     L[j, i] = d
@@ -104,6 +107,8 @@ def _lattice_grid(x, y, d, lat, x0, y0, nx, ny, h):
 
 
 def _binned_grid(x, y, d, x0, y0, nx, ny, h):
+    from scipy import ndimage
+
     ix = np.clip(np.rint((x - x0) / h).astype(np.int64), 0, nx - 1)
     iy = np.clip(np.rint((y - y0) / h).astype(np.int64), 0, ny - 1)
     cell = iy * nx + ix
@@ -183,6 +188,8 @@ class OmegaGrid:
 
     def field(self) -> OmegaField:
         """ω of the kept points (in the order of np.flatnonzero(keep))."""
+        from scipy import ndimage
+
         grid = self.grid
         valid = np.isfinite(grid)
         num = ndimage.uniform_filter(np.where(valid, grid, 0.0), self.size, mode="constant")

@@ -9,10 +9,13 @@ Euclidean distances — which is why the paper measures z-distances to an interp
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+# scipy is imported where it is used: a batch's own process validates the recipe without it (issue 17)
 
 
 def knn_mean_distance(x, y, d, k: int) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
     pts = np.column_stack([x, y, d])
     dist, _ = cKDTree(pts).query(pts, k=k + 1)
     return dist[:, 1:].mean(axis=1)
@@ -32,6 +35,8 @@ def statistical_open3d(x, y, d, k: int, std_ratio: float) -> np.ndarray:
 def hampel(x, y, d, k: int = 25, n_sigma: float = 8.0) -> np.ndarray:
     """Boolean mask of the points a Hampel filter flags: |D − median of its k nearest neighbours'
     D| > n_sigma · 1.4826 · MAD of those neighbours' D (the point itself not among them)."""
+    from scipy.spatial import cKDTree
+
     pts = np.column_stack([x, y])
     _, idx = cKDTree(pts).query(pts, k=k + 1, workers=-1)
     nb = np.asarray(d)[idx[:, 1:]]
