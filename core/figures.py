@@ -1,15 +1,18 @@
 """The figures of reports and of the window: matplotlib's object API (no pyplot, no global state).
 
 Each function returns a ``matplotlib.figure.Figure``; ``save_png`` renders it with the Agg canvas
-(batch, reports) and the window embeds the same Figure in a Qt canvas. Form errors are shown in µm
-on a diverging colour map centred on zero, limits at the 0.5 / 99.5 percentiles so one spike does
-not wash the map out (the colour bar says when values are clipped).
+(batch, reports) and the window embeds the same Figure in a Qt canvas. Form errors are shown on a
+diverging colour map centred on zero, limits at the 0.5 / 99.5 percentiles so one spike does not
+wash the map out (the colour bar says when values are clipped), in the unit their size asks for
+(``length_axis``: a 50 nm map reads in nm, a 2 µm one in µm — as the window does, app/display.py).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+
+from .units import format_length
 
 DIVERGING = "RdBu_r"
 
@@ -33,7 +36,7 @@ def preload() -> None:
 
     fig = _figure(2.0, 2.0)
     ax = fig.add_subplot()
-    fig.colorbar(ax.imshow([[0.0, 1.0]], cmap=DIVERGING), ax=ax, label="µm")
+    fig.colorbar(ax.imshow([[0.0, 1.0]], cmap=DIVERGING), ax=ax, label="nm")
     ax.set_title("x")
     save_png(fig, io.BytesIO())
 
@@ -128,7 +131,12 @@ def _binned(x, y, v, bins=None):
     return img, ext
 
 
-def _map_axes(fig, ax, img, ext, label, title, symmetric=True, cmap=DIVERGING):
+def _map_axes(fig, ax, img_mm, ext, quantity, title, symmetric=True, cmap=DIVERGING):
+    """A map of lengths (``img_mm``, mm) with its colour bar labelled "quantity (unit)" in the unit
+    their size asks for (``length_axis``)."""
+    scale, unit = length_axis(img_mm)
+    img = np.asarray(img_mm, dtype=np.float64) * scale
+    label = f"{quantity} ({unit})" if quantity else unit
     lo, hi = robust_limits(img, symmetric)
     im = ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,
                    interpolation="nearest")
@@ -145,11 +153,11 @@ def _map_axes(fig, ax, img, ext, label, title, symmetric=True, cmap=DIVERGING):
 
 
 def scattered_map(x, y, r_mm, title="Form error"):
-    """Residual (mm) at scattered points, binned, in µm."""
+    """Residual (mm) at scattered points, binned, in the unit its size asks for."""
     fig = _figure()
     ax = fig.add_subplot()
-    img, ext = _binned(x, y, np.asarray(r_mm) * 1e3)
-    _map_axes(fig, ax, img, ext, "µm", title)
+    img, ext = _binned(x, y, np.asarray(r_mm))
+    _map_axes(fig, ax, img, ext, "", title)
     return fig
 
 
@@ -158,24 +166,24 @@ def grid_map_figure(grid, title="Form-error map"):
     ax = fig.add_subplot()
     h = grid.spacing / 2
     ext = (grid.xs[0] - h, grid.xs[-1] + h, grid.ys[0] - h, grid.ys[-1] + h)
-    _map_axes(fig, ax, grid.z * 1e3, ext, "µm", title)
+    _map_axes(fig, ax, grid.z, ext, "", title)
     return fig
 
 
 def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None):
-    """Two maps side by side on their own scales (µm, each about its mean: piston is not shown);
-    x2, y2 when the point sets differ."""
+    """Two maps side by side on their own scales (each about its mean: piston is not shown, each in
+    the unit its size asks for); x2, y2 when the point sets differ."""
     fig = _figure(11, 4.6)
     ax1, ax2 = fig.subplots(1, 2)
-    # binned in mm, then about the mean and in µm: the bins' means are linear in the values, so no
-    # full-length µm copies are made (12.6 M points)
+    # binned in mm, then about the mean: the bins' means are linear in the values, so no full-length
+    # copies are made (12.6 M points)
     for ax, px, py, vals, when in ((ax1, x, y, before_mm, "before"),
                                    (ax2, x if x2 is None else x2, y if y2 is None else y2, after_mm, "after")):
         vals = np.asarray(vals, dtype=np.float64)
         mean = float(vals.mean())
         img, ext = _binned(px, py, vals)
-        img = (img - mean) * 1e3
-        _map_axes(fig, ax, img, ext, "µm", f"{when} {what}: RMS {np.std(vals) * 1e3:.4g} µm")
+        img = img - mean
+        _map_axes(fig, ax, img, ext, "", f"{when} {what}: RMS {format_length(np.std(vals), 4)}")
     return fig
 
 
@@ -196,18 +204,19 @@ def profiles_figure(grid, angles=(0.0, 90.0), center=(0.0, 0.0)):
 
     fig = _figure(11, 4.2)
     ax1, ax2 = fig.subplots(1, 2)
+    scale, unit = length_axis(grid.z)  # the map's unit: both panels and map.png read alike
     for a in angles:
         s, z = profile(grid, a, center)
-        ax1.plot(s, z * 1e3, lw=1, label=f"{a:g}°")
+        ax1.plot(s, z * scale, lw=1, label=f"{a:g}°")
     ax1.set_xlabel("position along the cut (mm)")
-    ax1.set_ylabel("form error (µm)")
+    ax1.set_ylabel(f"form error ({unit})")
     ax1.legend(fontsize=8)
     ax1.set_title("profiles through the centre", fontsize=10)
     r, m, sd = radial_profile(grid, center)
-    ax2.plot(r, m * 1e3, color="#2c6fbb", lw=1)
-    ax2.fill_between(r, (m - sd) * 1e3, (m + sd) * 1e3, color="#2c6fbb", alpha=0.2, lw=0)
+    ax2.plot(r, m * scale, color="#2c6fbb", lw=1)
+    ax2.fill_between(r, (m - sd) * scale, (m + sd) * scale, color="#2c6fbb", alpha=0.2, lw=0)
     ax2.set_xlabel("radius (mm)")
-    ax2.set_ylabel("form error (µm)")
+    ax2.set_ylabel(f"form error ({unit})")
     ax2.set_title("radial profile: ring mean ± std", fontsize=10)
     return fig
 
@@ -244,12 +253,12 @@ def psd_figure(grid):
 
 
 def omega_map(x, y, omega_mm, removed_mask, title="ω after denoising"):
-    """ω (µm) at the kept points and the removed points marked."""
+    """ω at the kept points (in the unit its size asks for) and the removed points marked."""
     fig = _figure()
     ax = fig.add_subplot()
     keep = ~np.asarray(removed_mask, bool)
-    img, ext = _binned(np.asarray(x)[keep], np.asarray(y)[keep], np.asarray(omega_mm)[keep] * 1e3)
-    _map_axes(fig, ax, img, ext, "ω (µm)", title, symmetric=False, cmap="viridis")
+    img, ext = _binned(np.asarray(x)[keep], np.asarray(y)[keep], np.asarray(omega_mm)[keep])
+    _map_axes(fig, ax, img, ext, "ω", title, symmetric=False, cmap="viridis")
     if (~keep).any():
         ax.plot(np.asarray(x)[~keep], np.asarray(y)[~keep], "x", color="red", ms=6,
                 label=f"removed ({int((~keep).sum())})")
@@ -257,11 +266,20 @@ def omega_map(x, y, omega_mm, removed_mask, title="ω after denoising"):
     return fig
 
 
-def _length_axis(values_mm):
-    """(scale, unit) to show lengths of this size: nm below 1 µm, else µm."""
+def length_axis(values_mm) -> tuple[float, str]:
+    """(factor mm → shown unit, unit) for lengths of this size: the unit of their robust magnitude
+    (largest |value| within the 0.5 / 99.5 % percentiles, so one spike does not decide it) — nm
+    below 1 µm, µm below 1 mm, mm above (core.units.length_unit)."""
+    from .units import length_unit
+
     v = np.asarray(values_mm, dtype=np.float64)
-    big = float(np.max(np.abs(v))) if v.size else 0.0
-    return (1e6, "nm") if big < 1e-3 else (1e3, "µm")
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return 1e3, "µm"
+    lo, hi = np.percentile(v, [0.5, 99.5]) if v.size > 200 else (v.min(), v.max())
+    big = max(abs(float(lo)), abs(float(hi))) or float(np.max(np.abs(v)))
+    unit = "µm" if big == 0 else length_unit(big)[1]
+    return {"nm": (1e6, "nm"), "µm": (1e3, "µm")}.get(unit, (1.0, "mm"))
 
 
 def stylus_profile_figure(items, title="Form error along the profile"):
@@ -269,7 +287,7 @@ def stylus_profile_figure(items, title="Form error along the profile"):
     dicts with label, u (mm, part frame), residual (mm), slope (rad)."""
     fig = _figure(11, 4.2)
     ax1, ax2 = fig.subplots(1, 2)
-    scale, unit = _length_axis(np.concatenate([np.asarray(it["residual"]) for it in items]))
+    scale, unit = length_axis(np.concatenate([np.asarray(it["residual"]) for it in items]))
     for it in items:
         o = np.argsort(it["u"])
         u = np.asarray(it["u"])[o]

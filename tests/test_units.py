@@ -30,3 +30,32 @@ def test_display_unit_follows_the_spread_and_is_kept_when_asked():
     v, title, u, _ = channel_display(c, "residual", unit="µm")
     assert u == "µm" and title == "residual (µm)"
     np.testing.assert_allclose(v, c["residual"] * 1e3)
+
+
+def _colour_bar_label(fig):
+    return [ax.get_ylabel() for ax in fig.axes if ax.get_label() == "<colorbar>"]
+
+
+def test_report_figures_read_in_the_unit_of_their_size():
+    """map.png, profiles.png and the binned maps label nm for a 50 nm form error and µm for a 2 µm
+    one (issue 17's note: profiles.png read "0.02 µm" on a real 50 nm interferogram); a single spike
+    does not decide the unit; the values drawn are the map's, scaled exactly."""
+    from pointspro.core.figures import grid_map_figure, length_axis, profiles_figure, scattered_map
+    from pointspro.core.maps.grid import MapGrid
+
+    xs = ys = np.linspace(-10.0, 10.0, 81)
+    X, Y = np.meshgrid(xs, ys)
+    for amp, unit, scale in [(5e-5, "nm", 1e6), (2e-3, "µm", 1e3), (3.0, "mm", 1.0)]:
+        z = amp * np.sin(X / 3.0) * np.cos(Y / 4.0)
+        grid = MapGrid(xs, ys, z, 0.25)
+        assert length_axis(z) == (scale, unit)
+        fig = grid_map_figure(grid)
+        assert _colour_bar_label(fig) == [unit]
+        img = fig.axes[0].get_images()[0].get_array()
+        np.testing.assert_allclose(np.asarray(img), z * scale, rtol=1e-15)
+        prof = profiles_figure(grid)
+        assert [ax.get_ylabel() for ax in prof.axes] == [f"form error ({unit})"] * 2
+        assert _colour_bar_label(scattered_map(X.ravel(), Y.ravel(), z.ravel())) == [unit]
+    spiky = 5e-5 * np.sin(X / 3.0)
+    spiky[40, 40] = 2e-3  # one 2 µm spike in a 50 nm map
+    assert length_axis(spiky) == (1e6, "nm")

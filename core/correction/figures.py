@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..figures import _figure, _map_axes
+from ..figures import _figure, _map_axes, length_axis
+from ..units import format_length
 
 
 def _thin(xs, ys, Z, most=400):
@@ -21,28 +22,29 @@ def correction_figure(cor, rep):
     fig = _figure(11, 4.6)
     ax1, ax2 = fig.subplots(1, 2)
     xs, ys, dz = _thin(cor.xs, cor.ys, cor.dz)
-    _map_axes(fig, ax1, dz * 1e3, _ext(xs, ys), "µm",
-              f"correction dz (add to program): PV {rep['correction_pv_um']:.4g} µm")
+    _map_axes(fig, ax1, dz, _ext(xs, ys), "dz",
+              f"correction dz (add to program): PV {format_length(rep['correction_pv_um'] * 1e-3, 4)}")
     th = np.linspace(0, 2 * np.pi, 200)
     for a in (ax1, ax2):
         a.plot(cor.center[0] + cor.radius * np.cos(th), cor.center[1] + cor.radius * np.sin(th),
                "k--", lw=0.6)
     xs, ys, p = _thin(cor.xs, cor.ys, cor.predicted)
-    _map_axes(fig, ax2, p * 1e3, _ext(xs, ys), "µm",
-              f"predicted after: RMS {rep['predicted_rms_um']:.3g} µm "
-              f"(before {rep['error_rms_um']:.3g})")
+    _map_axes(fig, ax2, p, _ext(xs, ys), "",
+              f"predicted after: RMS {format_length(rep['predicted_rms_um'] * 1e-3)} "
+              f"(before {format_length(rep['error_rms_um'] * 1e-3)})")
     return fig
 
 
 def radial_figure(r, dz, radius, fit=None, fit_label=""):
     fig = _figure(6.4, 4.2)
     ax = fig.add_subplot()
-    ax.plot(r, dz * 1e3, "-", color="#2c6fbb", label="azimuthal mean of dz")
+    scale, unit = length_axis(dz)
+    ax.plot(r, dz * scale, "-", color="#2c6fbb", label="azimuthal mean of dz")
     if fit is not None:
-        ax.plot(r, fit * 1e3, ":", color="#c0392b", label=fit_label)
+        ax.plot(r, fit * scale, ":", color="#c0392b", label=fit_label)
     ax.axvline(radius, color="k", lw=0.6, ls="--", label="clear aperture")
     ax.set_xlabel("r (mm)")
-    ax.set_ylabel("dz (µm, add to program)")
+    ax.set_ylabel(f"dz ({unit}, add to program)")
     ax.legend(fontsize=8)
     ax.set_title("radial correction (turning program)", fontsize=10)
     return fig
