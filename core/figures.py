@@ -28,11 +28,31 @@ def _figure(w=6.4, h=4.8):
     return fig
 
 
+def _skip_property_docstrings() -> None:
+    """matplotlib writes a table of every settable property into the docstring of each Artist
+    subclass's ``set`` as the class is defined (``matplotlib.artist.kwdoc``): 0.3–0.4 s of its
+    0.8–0.9 s import here, for text only ``help()`` shows. A batch process draws figures and never
+    reads them, so ``preload`` has kwdoc return an empty table before the artist classes are defined
+    (issue 17). Signatures, behaviour and the drawn pixels are unchanged (tests/test_speed_figures.py
+    compares the PNG bytes with and without); the window and notebooks import matplotlib untouched."""
+    import sys
+
+    if "matplotlib.figure" in sys.modules:  # the classes exist already: nothing to save
+        return
+    import matplotlib.artist as artist
+
+    if callable(getattr(artist, "kwdoc", None)):
+        artist.kwdoc = lambda _artist: ""
+
+
 def preload() -> None:
     """Import matplotlib's figure and Agg canvas and draw one small figure (fonts, colour maps): a
     process about to fork figure workers pays this once for all of them (~1 s of imports each
-    otherwise; core/batch.py)."""
+    otherwise; core/batch.py), a pool worker as it starts. Only batch processes call it: it skips
+    matplotlib's property docstrings (``_skip_property_docstrings``)."""
     import io
+
+    _skip_property_docstrings()
 
     fig = _figure(2.0, 2.0)
     ax = fig.add_subplot()
