@@ -68,6 +68,7 @@ class BSplineMapStep(Step):
         from pointspro.core.maps import fit_bspline, grid_map
         from pointspro.core.maps.bspline import DEFAULT_SMOOTHING
         from pointspro.core.maps.grid import nice_spacing
+        from pointspro.core.units import format_length
 
         channel = params.channel
         if channel == "auto":
@@ -140,8 +141,8 @@ class BSplineMapStep(Step):
             "map.x3p": lambda p: grid.write_x3p(p, params.x3p_revision),
             "map.asc": lambda p: grid.write_ascii_matrix(p, unit),
             "map.png": png_artifact(grid_map_figure, grid,
-                                    title=f"{channel} map: RMS {report['map_rms_um']:.4g} µm, "
-                                          f"PV {report['map_pv_um']:.4g} µm"),
+                                    title=f"{channel} map: RMS {format_length(report['map_rms_um'] * 1e-3, 4)}, "
+                                          f"PV {format_length(report['map_pv_um'] * 1e-3, 4)}"),
             "profiles.png": png_artifact(profiles_figure, grid, tuple(params.profile_angles), center),
             "profiles.csv": lambda p: _write_profiles(p, grid, params.profile_angles, center),
             "psd.png": png_artifact(psd_figure, grid),

@@ -42,16 +42,19 @@ class DynamicParams(Params):
 def _figure(t, z_raw, z, x, y, fs):
     from pointspro.core.dynamics.vibration import psd_space, psd_time
     from pointspro.core.figures import _figure as new
+    from pointspro.core.figures import length_axis
+    from pointspro.core.units import format_length
 
     fig = new(11, 4.2)
     ax1, ax2 = fig.subplots(1, 2)
     n = len(t)
     w = slice(n // 2, min(n // 2 + int(5 * fs), n))
-    e = (z_raw - z) * 1e3
-    ax1.plot(t[w], e[w], lw=1)
+    e_mm = z_raw - z
+    scale, unit = length_axis(e_mm[w])  # 004's dynamic errors are tens of nm: nm then
+    ax1.plot(t[w], e_mm[w] * scale, lw=1)
     ax1.set_xlabel("time (s)")
-    ax1.set_ylabel("dynamic error z_raw − z (µm)")
-    ax1.set_title(f"removed: RMS {np.std(e):.3g} µm, PV {np.ptp(e):.3g} µm", fontsize=10)
+    ax1.set_ylabel(f"dynamic error z_raw − z ({unit})")
+    ax1.set_title(f"removed: RMS {format_length(np.std(e_mm))}, PV {format_length(np.ptp(e_mm))}", fontsize=10)
     f, p = psd_time(z - np.polyval(np.polyfit(t, z, 1), t), fs)
     ax2.loglog(f[1:], p[1:] * 1e6, lw=1, label="z in time (µm²/Hz)")
     ax2.set_xlabel("frequency (Hz)")

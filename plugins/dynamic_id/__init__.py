@@ -26,6 +26,7 @@ class DynamicIdParams(Params):
 def fit_figure(model, t, xd, ref):
     """Reference against the model's Gm·xd around the largest step, and the frequency response."""
     from pointspro.core.figures import _figure
+    from pointspro.core.units import format_length
 
     fig = _figure(11, 4.2)
     fig.subplots_adjust(right=0.92, wspace=0.3)  # room for the phase axis on the right
@@ -40,7 +41,7 @@ def fit_figure(model, t, xd, ref):
     ax1.set_xlabel("time from the step (ms)")
     ax1.set_ylabel("displacement (µm)")
     ax1.legend(fontsize=8)
-    ax1.set_title(f"fit RMS {model.fit_rms * 1e3:.3g} µm", fontsize=10)
+    ax1.set_title(f"fit RMS {format_length(model.fit_rms)}", fontsize=10)
     f = np.logspace(-1, np.log10(model.fs / 2 * 0.999), 400)
     h = model.response(f)
     ax2.semilogx(f, 20 * np.log10(np.abs(h)), color="#2c6fbb")

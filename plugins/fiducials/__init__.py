@@ -112,6 +112,7 @@ class FiducialsStep(Step):
         from pointspro.core.calibration.fiducials import count_study, fit_affine, monte_carlo
         from pointspro.core.figures import png_artifact
         from pointspro.core.io.text import read_table
+        from pointspro.core.units import format_length
         if "fiducial" not in cloud.channels:
             raise StepError("the cloud has no 'fiducial' channel (ball id of each probe point)")
         ctx.progress.check()
@@ -182,7 +183,8 @@ class FiducialsStep(Step):
             "gp_loo_rms_um": loo, "warnings": warnings,
         }
         arts = {"volumetric_model.json": model_text, "volumetric_grid.csv": grid_csv,
-                "fiducial_errors.png": png_artifact(arrows_figure, meas, e, f"Ev RMS {report['ev_rms_um']:.3g} µm"),
+                "fiducial_errors.png": png_artifact(arrows_figure, meas, e,
+                                                   f"Ev RMS {format_length(report['ev_rms_um'] * 1e-3)}"),
                 "volumetric_field.png": png_artifact(field_figure, G, pred, std, report["fiducial_count_study"],
                                                      params.grid)}
         return StepResult(cloud.replace(), report, arts)
