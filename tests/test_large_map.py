@@ -287,3 +287,20 @@ def test_spline_evaluation_holds_only_its_result():
         finally:
             tracemalloc.stop()
     assert (peaks[1] - peaks[0]) / 400_000 < 16, [p / 1e6 for p in peaks]
+
+
+@pytest.mark.parametrize("order", ["random", "rows"])
+def test_threaded_spline_moments_are_bit_identical(order, monkeypatch):
+    """Chunks computed by several threads and added in chunk order: the same bits as one thread, so a
+    map does not depend on how many cores the process had (a batch's --workers)."""
+    monkeypatch.setattr(bs, "CHUNK", 700)
+    rng = np.random.default_rng(11)
+    n = 9_999
+    x, y = rng.uniform(-5, 5, n), rng.uniform(-4, 4, n)
+    if order == "rows":
+        k = np.lexsort((x, np.round(y, 1)))
+        x, y = x[k], y[k]
+    z = np.sin(x) * np.cos(y) + 0.01 * rng.standard_normal(n)
+    one = bs._cell_moments(x, y, z, None, -5.0, -4.0, 1.0, 10, 8, threads=1)
+    for threads in (2, 3, 8):
+        assert np.array_equal(bs._cell_moments(x, y, z, None, -5.0, -4.0, 1.0, 10, 8, threads=threads), one)
