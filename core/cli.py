@@ -246,7 +246,7 @@ def cmd_batch(args) -> int:
     recipe_path = Path(args.files[0])
     # the pool first: its workers import what the inputs need while this process reads the recipe
     # and checks the inputs (core/executors.py WARM_MODULES); stopped on any error below
-    pool = _early_pool(args, recipe_path)
+    pool = _early_pool(args)
     try:
         return _batch(args, recipe_path, pool)
     finally:
@@ -255,7 +255,7 @@ def cmd_batch(args) -> int:
             pool.join()
 
 
-def _early_pool(args, recipe_path: Path):
+def _early_pool(args):
     """The process pool of a batch that will surely use one (several inputs and workers, no
     --scheduler, not --check-only), started before anything is read; else None."""
     from . import executors
@@ -263,7 +263,7 @@ def _early_pool(args, recipe_path: Path):
     n = min(args.workers or _cores(), len(args.files) - 1)
     if args.scheduler or args.check_only or n < 2:
         return None
-    return executors.start_pool(n, recipe_path, tuple(args.overrides), args.figures)
+    return executors.start_pool(n, args.figures)
 
 
 def _batch(args, recipe_path: Path, pool) -> int:

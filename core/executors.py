@@ -12,7 +12,7 @@ import signal
 from pathlib import Path
 from typing import Iterator
 
-from .batch import InputOutcome, failed_outcome, process_input, process_job, worker_recipe
+from .batch import InputOutcome, failed_outcome, process_input, process_job
 from .parallel import single_threaded_blas
 
 
@@ -59,16 +59,17 @@ def _strings(dirs) -> list[str] | None:
 # a worker imports them as it starts, while the batch's own process reads the recipe and checks the
 # inputs (core/cli.py starts the pool first). Measured on 16 cores, 48 inputs of 50,000 points: the
 # first input of each worker took 5.3 s against 4.2 s for the others (benchmarks/README.md).
-WARM_MODULES = ("scipy.spatial", "scipy.linalg", "scipy.sparse", "scipy.ndimage", "pyarrow.csv")
+WARM_MODULES = ("scipy.spatial", "scipy.linalg", "scipy.sparse", "scipy.ndimage", "pyarrow.csv",
+                "pointspro.core.recipe", "pointspro.core.pipeline")
 
 
-def _start_worker(recipe_path: str | None, overrides: tuple, figures: str) -> None:
+def _start_worker(figures: str) -> None:
     """A pool worker's start: Ctrl-C is left to the parent (which stops the workers); the libraries
-    every input needs are imported, matplotlib loaded unless no figures are drawn, and the recipe read
-    into this worker's cache (``batch.worker_recipe``). A failure here is not reported: the first
-    input meets the same error and reports it, naming the input."""
+    every input needs are imported and matplotlib loaded unless no figures are drawn. The recipe is
+    not read here: the batch's process checks first which files it may name (``--allow-path``), and
+    a worker reads it with its first input (``batch.worker_recipe``). A failed import is not
+    reported here: the first input meets the same error and reports it, naming the input."""
     import importlib
-    import os
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
@@ -78,9 +79,6 @@ def _start_worker(recipe_path: str | None, overrides: tuple, figures: str) -> No
             from .figures import preload
 
             preload()
-        if recipe_path is not None:
-            st = os.stat(recipe_path)
-            worker_recipe(recipe_path, st.st_mtime_ns, st.st_size, tuple(overrides))
     except Exception:  # noqa: BLE001,S110 — reported by the input that meets it (above)
         pass
 
@@ -95,7 +93,7 @@ SINGLE_THREADED = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "
                                      "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
 
 
-def start_pool(workers: int, recipe_path: Path | None = None, overrides=(), figures: str = "all"):
+def start_pool(workers: int, figures: str = "all"):
     """A pool of ``workers`` spawned processes (no inherited threads or locks), each with one BLAS
     thread, starting to import what the inputs need at once (``_start_worker``). The caller
     terminates it (``run_processes`` does when it is done with it)."""
@@ -105,9 +103,8 @@ def start_pool(workers: int, recipe_path: Path | None = None, overrides=(), figu
     saved = {k: os.environ.get(k) for k in SINGLE_THREADED}
     os.environ.update(SINGLE_THREADED)  # the spawned workers copy the environment as they start
     try:
-        return multiprocessing.get_context("spawn").Pool(
-            workers, initializer=_start_worker,
-            initargs=(None if recipe_path is None else str(recipe_path), tuple(overrides), figures))
+        return multiprocessing.get_context("spawn").Pool(workers, initializer=_start_worker,
+                                                         initargs=(figures,))
     finally:
         for k, v in saved.items():
             if v is None:
@@ -125,7 +122,7 @@ def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
     level)."""
     options = options or {}
     if pool is None:
-        pool = start_pool(workers, recipe_path, tuple(options.get("overrides") or ()), figures)
+        pool = start_pool(workers, figures)
     try:
         allowed = _strings(allowed_dirs)
         args = [(str(recipe_path), str(p), str(out_dir), s, allowed, figures, options)
