@@ -74,16 +74,22 @@ def _dense_spline_system(x, y, z, w, h, x0, y0, nx, ny):
     return B.T @ (w[:, None] * B), B.T @ (w * z)
 
 
+def _box_points(rng, n, order):
+    """n points in the 10 × 8 mm box with a smooth height and 1 % noise, in random order or sorted
+    into rows (y-major, as a map is read)."""
+    x, y = rng.uniform(-5, 5, n), rng.uniform(-4, 4, n)
+    if order == "rows":
+        k = np.lexsort((x, np.round(y, 1)))
+        x, y = x[k], y[k]
+    return x, y, np.sin(x) * np.cos(y) + 0.01 * rng.standard_normal(n)
+
+
 @pytest.mark.parametrize("seed,order", [(0, "random"), (1, "rows"), (2, "random")])
 def test_chunked_spline_moments_equal_the_dense_normal_equations(seed, order, monkeypatch):
     monkeypatch.setattr(bs, "CHUNK", 1000)  # many chunks, partial last one
     rng = np.random.default_rng(seed)
     n = 5_321
-    x, y = rng.uniform(-5, 5, n), rng.uniform(-4, 4, n)
-    if order == "rows":
-        k = np.lexsort((x, np.round(y, 1)))
-        x, y = x[k], y[k]
-    z = np.sin(x) * np.cos(y) + 0.01 * rng.standard_normal(n)
+    x, y, z = _box_points(rng, n, order)
     w = rng.uniform(0.5, 2.0, n)
     h, nx, ny = 1.0, 10, 8
     x0, y0 = -5.0, -4.0
@@ -294,13 +300,7 @@ def test_threaded_spline_moments_are_bit_identical(order, monkeypatch):
     """Chunks computed by several threads and added in chunk order: the same bits as one thread, so a
     map does not depend on how many cores the process had (a batch's --workers)."""
     monkeypatch.setattr(bs, "CHUNK", 700)
-    rng = np.random.default_rng(11)
-    n = 9_999
-    x, y = rng.uniform(-5, 5, n), rng.uniform(-4, 4, n)
-    if order == "rows":
-        k = np.lexsort((x, np.round(y, 1)))
-        x, y = x[k], y[k]
-    z = np.sin(x) * np.cos(y) + 0.01 * rng.standard_normal(n)
+    x, y, z = _box_points(np.random.default_rng(11), 9_999, order)
     one = bs._cell_moments(x, y, z, None, -5.0, -4.0, 1.0, 10, 8, threads=1)
     for threads in (2, 3, 8):
         assert np.array_equal(bs._cell_moments(x, y, z, None, -5.0, -4.0, 1.0, 10, 8, threads=threads), one)
