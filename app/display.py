@@ -11,6 +11,8 @@ import threading
 
 import numpy as np
 
+from pointspro.core.units import display_unit  # noqa: F401  (the views' unit rule; tests import it here)
+
 # Signed deviations (mm): shown in µm on a diverging map centred on zero.
 DEVIATION_CHANNELS = ("residual", "probe_residual", "distance", "gap", "correction", "form_error")
 # Non-negative deviations and uncertainties (mm): shown in µm on a sequential map.
@@ -31,28 +33,9 @@ def channel_order(cloud) -> list[str]:
         + ["x", "y"]
 
 
-#: points the display unit is chosen from at most (every k-th point of the channel)
-UNIT_SAMPLE = 200_000
-
 #: units a length channel can be shown in (mm in the cloud): the one its spread asks for
+#: (``display_unit``, core.units: the report's figures choose by the same rule)
 _DISPLAY_UNITS = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
-
-
-def display_unit(v_mm) -> str:
-    """The unit a length channel's values (mm) read best in: that of its robust spread (0.5–99.5 %),
-    so a 44 nm PV reads "43.9 nm", not "4.39e-05 mm" (core.units; mm above 1 mm)."""
-    from pointspro.core.units import length_unit
-
-    v = np.asarray(v_mm, dtype=np.float64)
-    if v.size > 2 * UNIT_SAMPLE:  # a fixed, evenly spread sample: the same unit in both views
-        v = v[:: v.size // UNIT_SAMPLE]
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return "mm"
-    lo, hi = np.percentile(v, [0.5, 99.5]) if v.size > 200 else (v.min(), v.max())
-    span = float(hi - lo) or float(np.max(np.abs(v)))
-    unit = length_unit(span)[1]
-    return unit if unit in _DISPLAY_UNITS else ("mm" if unit == "m" else "nm")
 
 
 def channel_display(cloud, name: str, unit: str | None = None, rows=None):

@@ -4,7 +4,7 @@ Each function returns a ``matplotlib.figure.Figure``; ``save_png`` renders it wi
 (batch, reports) and the window embeds the same Figure in a Qt canvas. Form errors are shown on a
 diverging colour map centred on zero, limits at the 0.5 / 99.5 percentiles so one spike does not
 wash the map out (the colour bar says when values are clipped), in the unit their size asks for
-(``length_axis``: a 50 nm map reads in nm, a 2 µm one in µm — as the window does, app/display.py).
+(``length_axis``: a 50 nm map reads in nm, a 2 µm one in µm — by the window's rule, core.units).
 """
 from __future__ import annotations
 
@@ -287,18 +287,11 @@ def omega_map(x, y, omega_mm, removed_mask, title="ω after denoising"):
 
 
 def length_axis(values_mm) -> tuple[float, str]:
-    """(factor mm → shown unit, unit) for lengths of this size: the unit of their robust magnitude
-    (largest |value| within the 0.5 / 99.5 % percentiles, so one spike does not decide it) — nm
-    below 1 µm, µm below 1 mm, mm above (core.units.length_unit)."""
-    from .units import length_unit
+    """(factor mm → shown unit, unit) for lengths of this size: ``core.units.display_unit`` (the
+    unit of their robust spread: nm below 1 µm, µm below 1 mm, mm above), the window's rule too."""
+    from .units import display_unit
 
-    v = np.asarray(values_mm, dtype=np.float64)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return 1e3, "µm"
-    lo, hi = np.percentile(v, [0.5, 99.5]) if v.size > 200 else (v.min(), v.max())
-    big = max(abs(float(lo)), abs(float(hi))) or float(np.max(np.abs(v)))
-    unit = "µm" if big == 0 else length_unit(big)[1]
+    unit = display_unit(values_mm)
     return {"nm": (1e6, "nm"), "µm": (1e3, "µm")}.get(unit, (1.0, "mm"))
 
 
