@@ -61,6 +61,10 @@ def test_headerless_extra_columns_and_index_column(tmp_path):
     ("7\n8\n", r"m.csv, line 1: 1 column\(s\); need at least x, y, z"),
     ("x [furlong],y,z\n1,2,3\n", r"unknown unit \[furlong\] for x"),
     ("x,y,z,x\n1,2,3,4\n", r"duplicate column name"),
+    # a header naming the axes over a different number of values: never read without it
+    ("x,y,z\n1,2\n", r"m.csv, line 1: the header names 3 columns \(x, y, z\) but line 2 holds 2 value"),
+    ("y,x,z\n1,2,3,4\n5,6,7,8\n", r"line 1: the header names 3 columns \(y, x, z\) but line 2 holds 4"),
+    ("# run 7\nX;Y;Z;I\n1;2;3\n", r"line 2: the header names 4 columns \(X, Y, Z, I\) but line 3 holds 3"),
 ])
 def test_bad_text_inputs_name_the_place(tmp_path, text, pattern):
     with pytest.raises(InputError, match=pattern):
@@ -182,3 +186,9 @@ def test_cloud_is_immutable_and_index_survives_selection():
 def test_damaged_first_data_line_is_not_taken_for_a_header(tmp_path):
     with pytest.raises(InputError, match=r"m.csv, line 2, column 2: '2x' is not a number"):
         read_cloud(write(tmp_path / "m.csv", "# export\n1,2x,3\n4,5,6\n7,8,9\n"))
+
+
+def test_a_title_line_is_not_taken_for_a_short_header(tmp_path):
+    """A title with commas above headerless data names no axes: the data read as x, y, z."""
+    c = read_cloud(write(tmp_path / "t.csv", "Part 7, run 3\n1,2,3\n4,5,6\n"))
+    assert np.array_equal(c.xyz, [[1, 2, 3], [4, 5, 6]])

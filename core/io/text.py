@@ -289,6 +289,14 @@ def _find_header(path, lines: "_LazyLines", i: int, lay: _Layout, quote: bool = 
         return i, htoks
     if len(_split(hline, None)) == lay.ncols and lay.delim is None:
         return i, _split(hline, None)
+    # A header that names the axes but not as many columns as the data holds: read without it,
+    # "y,x,z" over four columns would silently become x, y, z, col4, and "x,y,z" over a short first
+    # row a stylus profile. A title line ("Part 7, run 3") names no axes and stays a title.
+    named = {_AXIS_ALIASES.get(n, n) for n, _, _ in map(_header_name, htoks)}
+    if len(htoks) >= 2 and not any(numeric) and {"x", "z"} <= named:
+        names = f" ({', '.join(t.strip() for t in htoks)})" if quote else ""
+        raise InputError(f"{path}, line {i + 1}: the header names {len(htoks)} columns{names} but "
+                         f"line {lay.first_data + 1} holds {lay.ncols} value(s)")
     return None
 
 
