@@ -8,6 +8,7 @@ recipe travels as data: core/cluster.py).
 """
 from __future__ import annotations
 
+import functools
 import signal
 from pathlib import Path
 from typing import Iterator
@@ -83,8 +84,23 @@ def _start_worker(figures: str) -> None:
         pass
 
 
-def _job(args):
-    return process_job(*args)
+def _lost_input(out_dir: Path, task: tuple, reason: str) -> InputOutcome:
+    """The outcome of an input whose worker process ended while processing it (``reason``: how,
+    workerpool.death_reason): failed, with what it left in the output folder removed; the batch goes
+    on with the other inputs on a fresh worker."""
+    import re
+
+    from .batch import remove_leftovers
+
+    path, stem = task[1], task[3]
+    # its own temporary folders only (core/io/atomic.py names them .<stem>.<8 hex>.partial|.old):
+    # another worker may be writing ".<stem>.b.<hex>.partial" of an input named <stem>.b meanwhile
+    mine = re.compile(rf"\.{re.escape(stem)}\.[0-9a-f]{{8}}\.(partial|old)")
+    remove_leftovers(sorted(p for p in Path(out_dir).glob(".*") if mine.fullmatch(p.name)))
+    hint = " (out of memory? the system stops the largest process when memory runs out)" \
+        if "SIGKILL" in reason else ""
+    return InputOutcome(path, False, f"{path}: its worker process {reason}{hint}; nothing was "
+                                     "written for it, the other inputs went on")
 
 
 # One BLAS/OpenMP thread per worker process: with N processes each starting N spinning BLAS threads
@@ -95,22 +111,12 @@ SINGLE_THREADED = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "
 
 def start_pool(workers: int, figures: str = "all"):
     """A pool of ``workers`` spawned processes (no inherited threads or locks), each with one BLAS
-    thread, starting to import what the inputs need at once (``_start_worker``). The caller
+    thread, starting to import what the inputs need at once (``_start_worker``). A worker that dies
+    (out of memory, a crash) fails the input it held and is replaced (core/workerpool.py). The caller
     terminates it (``run_processes`` does when it is done with it)."""
-    import multiprocessing
-    import os
+    from .workerpool import WorkerPool
 
-    saved = {k: os.environ.get(k) for k in SINGLE_THREADED}
-    os.environ.update(SINGLE_THREADED)  # the spawned workers copy the environment as they start
-    try:
-        return multiprocessing.get_context("spawn").Pool(workers, initializer=_start_worker,
-                                                         initargs=(figures,))
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+    return WorkerPool(workers, _start_worker, (figures,), env=SINGLE_THREADED)
 
 
 def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
@@ -127,9 +133,9 @@ def run_processes(recipe_path: Path, jobs, out_dir: Path, workers: int,
         allowed = _strings(allowed_dirs)
         args = [(str(recipe_path), str(p), str(out_dir), s, allowed, figures, options)
                 for p, s in largest_first(jobs)]
-        # one input per task (chunksize 1): inputs differ in size, and the largest go first so the
-        # last round is short and no worker idles while one finishes a big map
-        yield from pool.imap_unordered(_job, args, chunksize=1)
+        # one input per task: inputs differ in size, and the largest go first so the last round is
+        # short and no worker idles while one finishes a big map
+        yield from pool.map_unordered(process_job, args, functools.partial(_lost_input, Path(out_dir)))
         pool.close()
     finally:
         pool.terminate()

@@ -188,6 +188,45 @@ def test_pool_workers_start_warm():
         pool.join()
 
 
+def _tenfold_or_die(i):  # in a pool worker: task 1 kills its own process, as the OOM killer would
+    if i == 1:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return 10 * i
+
+
+def test_a_worker_killed_mid_task_fails_that_task_alone():
+    """multiprocessing.Pool lost the task of a worker the kernel killed and the batch waited for it
+    forever; the batch's pool reports that task as lost (with the signal), replaces the worker and
+    finishes the others."""
+    from pointspro.core.workerpool import WorkerPool
+
+    pool = WorkerPool(2)
+    try:
+        got = list(pool.map_unordered(_tenfold_or_die, [(i,) for i in range(5)],
+                                      lambda task, why: ("lost", task, why)))
+        assert sorted(g for g in got if not isinstance(g, tuple)) == [0, 20, 30, 40]
+        assert [g for g in got if isinstance(g, tuple)] == [("lost", (1,), "was killed by SIGKILL")]
+        assert pool.apply(_tenfold_or_die, 7) == 70  # the replacement works
+        with pytest.raises(RuntimeError, match="the worker process was killed by SIGKILL"):
+            pool.apply(_tenfold_or_die, 1)
+    finally:
+        pool.terminate()
+        pool.join()
+
+
+def test_a_lost_input_is_one_failed_line_and_leaves_nothing(tmp_path):
+    """The outcome of an input whose worker died: one line naming it and the signal; its temporary
+    folders are removed, not those of another input whose name starts the same."""
+    from pointspro.core.executors import _lost_input
+
+    (tmp_path / ".part.0a1b2c3d.partial").mkdir()
+    (tmp_path / ".part.b.0a1b2c3d.partial").mkdir()  # input part.b.csv, still being written
+    oc = _lost_input(tmp_path, ("r.yaml", "in/part.csv", str(tmp_path), "part", None, "all", {}),
+                     "was killed by SIGKILL")
+    assert not oc.ok and oc.error.startswith("in/part.csv: its worker process was killed by SIGKILL (out of memory?")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".part.b.0a1b2c3d.partial"]
+
+
 def test_a_bad_recipe_stops_the_early_pool(tmp_path):
     """The pool starts before the recipe is read; a bad recipe is still the one line naming the key,
     exit 2, nothing written (the workers are terminated on the way out)."""
