@@ -76,6 +76,54 @@ def output_stems(inputs: list[Path]) -> list[str]:
     return stems
 
 
+#: the files a batch writes at the top of its output folder, beside the inputs' folders
+BATCH_FILES = ("summary.json",)
+
+
+def check_output_targets(out: Path, inputs: list[Path], stems: list[str]) -> None:
+    """Refuse, before anything is written, a batch whose outputs would destroy what is not its own:
+    an input's folder ``out/<stem>`` replaces a folder as a whole, so it must not hold an input, be
+    a file, or be a folder that is not a PointsPro output (no report.json; an empty one is fine);
+    no input may be named like the batch's own files (``summary.json``) or be one of them, and an
+    existing summary.json must be a batch's. Measured before this check: an input o/part/part.csv
+    with --out o was deleted with its folder, an input o/summary.json overwritten by the summary, a
+    folder o/<stem> of the user's notes replaced — all with exit status 0."""
+    import json
+
+    out_r = out.resolve()
+    ins = [p.resolve() for p in inputs]
+    for name in BATCH_FILES:
+        target = out_r / name
+        for p, pr in zip(inputs, ins):
+            if pr == target:
+                raise RecipeError(f"{p}: is the batch's own {out / name}, which the batch writes; "
+                                  "copy the input elsewhere or choose another --out")
+        if target.exists():
+            try:
+                ours = target.is_file() and "inputs" in json.loads(target.read_text(encoding="utf-8"))
+            except (OSError, ValueError, TypeError):
+                ours = False
+            if not ours:
+                raise RecipeError(f"{out / name}: exists and is not a PointsPro batch summary; the batch "
+                                  "would replace it — move it or choose another --out")
+    for p, stem in zip(inputs, stems):
+        if stem in BATCH_FILES:
+            raise RecipeError(f"{p}: its output folder would be the batch's own {out / stem}; rename "
+                              "the input")
+        target = out_r / stem
+        for q, qr in zip(inputs, ins):
+            if qr == target or target in qr.parents:
+                raise RecipeError(f"{q}: lies in {out / stem}, the output folder of {p}, which the batch "
+                                  "replaces as a whole; copy the input elsewhere or choose another --out")
+        if target.is_symlink() or (target.exists() and not target.is_dir()):
+            raise RecipeError(f"{out / stem}: exists and is not a folder; the batch would put the output "
+                              f"of {p} there — move it or choose another --out")
+        if target.is_dir() and not (target / "report.json").is_file() and any(target.iterdir()):
+            raise RecipeError(f"{out / stem}: exists and is not a PointsPro output folder (no report.json); "
+                              f"the batch would replace it with the output of {p} — move it or choose "
+                              "another --out")
+
+
 def write_artifact(folder: Path, name: str, art) -> None:
     target = folder / name
     if Path(name).name != name:

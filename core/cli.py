@@ -269,7 +269,7 @@ def _early_pool(args):
 def _batch(args, recipe_path: Path, pool) -> int:
     import time
 
-    from .batch import check_output_folder, load_batch_recipe, output_stems
+    from .batch import check_output_folder, check_output_targets, load_batch_recipe, output_stems
     from .summary import entry, table, write_summary
 
     recipe = load_batch_recipe(recipe_path, tuple(args.overrides))  # --set applied, then validated
@@ -278,8 +278,9 @@ def _batch(args, recipe_path: Path, pool) -> int:
     _check_recipe_files(recipe, allowed)  # before any file the recipe names is read
     surface = recipe.build_surface()  # a missing mesh file is a recipe error: fail before any input
     out = Path(args.out)
-    check_output_folder(out)
     stems = output_stems(inputs)
+    check_output_targets(out, inputs, stems)  # before the folder is made: a refusal leaves nothing
+    check_output_folder(out)
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
     t0 = time.perf_counter()
     workers = args.workers or _cores()

@@ -147,6 +147,56 @@ def test_duplicate_output_stems_rejected(run_cli, tmp_path):
     assert code == 2 and "would both write m/" in err
 
 
+def _snapshot(root: Path) -> dict:
+    return {str(p.relative_to(root)): (p.read_bytes() if p.is_file() else None) for p in sorted(root.rglob("*"))}
+
+
+@pytest.mark.parametrize("case", ["input_in_its_own_folder", "input_is_summary", "stem_is_summary",
+                                  "user_folder", "user_file", "user_summary"])
+def test_outputs_never_destroy_what_is_not_theirs(run_cli, tmp_path, case):
+    """Before this check each of these ran with exit 0 and deleted or overwrote the user's file;
+    now one line names the path, exit 2, and nothing in the tree changes (no output folder made)."""
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps: []\n")
+    data = "x,y,z\n1,2,3\n4,5,6\n7,8,10\n"
+    out = tmp_path / "o"
+    if case == "input_in_its_own_folder":
+        (out / "part").mkdir(parents=True)
+        inp, want = write(out / "part" / "part.csv", data), "lies in"
+    elif case == "input_is_summary":
+        out.mkdir()
+        inp, want = write(out / "summary.json", data), "is the batch's own"
+    elif case == "stem_is_summary":
+        inp, want = write(tmp_path / "summary.json.csv", data), "would be the batch's own"
+    else:
+        inp = write(tmp_path / "part.csv", data)
+        out.mkdir()
+        if case == "user_folder":
+            (out / "part").mkdir()
+            write(out / "part" / "notes.txt", "precious")
+            want = "is not a PointsPro output folder"
+        elif case == "user_file":
+            write(out / "part", "precious")
+            want = "exists and is not a folder"
+        else:
+            write(out / "summary.json", "precious")
+            want = "is not a PointsPro batch summary"
+    before = _snapshot(tmp_path)
+    code, _, err = run_cli("--batch", recipe, inp, "--out", out)
+    assert code == 2 and want in err and len(err.strip().splitlines()) == 1, err
+    assert _snapshot(tmp_path) == before
+
+
+def test_a_second_run_into_the_same_folder_still_replaces_its_outputs(run_cli, tmp_path):
+    """The check lets a batch replace its own folders and summary (and an empty folder)."""
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps: []\n")
+    inp = write(tmp_path / "part.csv", "x,y,z\n1,2,3\n4,5,6\n7,8,10\n")
+    (tmp_path / "o" / "other").mkdir(parents=True)
+    for _ in range(2):
+        code, _, err = run_cli("--batch", recipe, inp, write(tmp_path / "other.csv", "1 2 3\n4 5 6\n7 8 10\n"),
+                               "--out", tmp_path / "o")
+        assert code == 0, err
+
+
 def test_rerun_replaces_a_complete_folder_atomically(run_cli, tmp_path):
     good, _, recipe = _two_inputs(tmp_path)
     assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
