@@ -277,6 +277,7 @@ def _batch(args, recipe_path: Path, pool) -> int:
     allowed = _allowed_dirs(recipe_path, inputs, args.allow_path)
     _check_recipe_files(recipe, allowed)  # before any file the recipe names is read
     surface = recipe.build_surface()  # a missing mesh file is a recipe error: fail before any input
+    _check_surface_needed(recipe, recipe_path, surface)
     out = Path(args.out)
     stems = output_stems(inputs)
     check_output_targets(out, inputs, stems)  # before the folder is made: a refusal leaves nothing
@@ -362,6 +363,21 @@ def _cluster_session(args, recipe_path: Path, recipe, inputs: list[Path], out: P
         session.close()
         raise
     return session
+
+
+def _check_surface_needed(recipe, recipe_path: Path, surface) -> None:
+    """A step that works against the nominal (``needs_surface``: probe_radius, misalignment) in a
+    recipe without `surface:` is the recipe's error, said once before any input (and by
+    --check-only), not each input's failure."""
+    from .errors import RecipeError
+
+    if surface is not None:
+        return
+    for i, rs in enumerate(recipe.steps, 1):
+        if rs.enabled and getattr(rs.step_cls, "needs_surface", False):
+            where = f"{recipe_path}, line {rs.line}" if rs.line else str(recipe_path)
+            raise RecipeError(f"{where}: step {i} '{rs.id}' needs the recipe's nominal `surface:` "
+                              "(the design the part is measured against)")
 
 
 def _check_only(args, recipe, inputs: list[Path], out: Path, session) -> int:

@@ -298,3 +298,13 @@ def test_figures_option_skips_pictures_and_says_which(run_cli, tmp_path, mode):
     assert rep["summary"] == json.loads((full / "report.json").read_text(encoding="utf-8"))["summary"]
     assert _sha(part / "cloud.csv") == _sha(full / "cloud.csv")
     assert "not drawn" in (part / "report.html").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("extra", [(), ("--check-only",)])
+def test_a_step_needing_the_nominal_without_surface_is_the_recipes_error(run_cli, tmp_path, extra):
+    """Was: --check-only said "ready", the run failed every input with the step's message."""
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - manual_edit: {}\n  - misalignment: {}\n")
+    inp = write(tmp_path / "part.csv", "x,y,z\n1,2,3\n4,5,6\n7,8,10\n")
+    code, _, err = run_cli("--batch", recipe, inp, "--out", tmp_path / "o", *extra)
+    assert code == 2 and "r.yaml, line 4: step 2 'misalignment' needs the recipe's nominal `surface:`" in err
+    assert not (tmp_path / "o").exists()

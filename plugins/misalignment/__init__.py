@@ -53,6 +53,7 @@ class MisalignmentStep(Step):
     title = "Misalignment (5 DOF)"
     summary = "Fit and remove tilt and decenter; residual = z − sag in the part frame."
     Params = MisalignmentParams
+    needs_surface = True  # the batch refuses a recipe without `surface:` before any input
 
     def run(self, cloud, params: MisalignmentParams, ctx: Context) -> StepResult:
         ctx.progress.check()

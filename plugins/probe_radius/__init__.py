@@ -81,6 +81,7 @@ class ProbeRadiusStep(Step):
     title = "Probe-radius compensation"
     summary = "Probe-ball centres → contact points by the exact offset-surface fit."
     Params = ProbeRadiusParams
+    needs_surface = True  # the batch refuses a recipe without `surface:` before any input
 
     @classmethod
     def example_params(cls) -> dict:
