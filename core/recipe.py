@@ -27,7 +27,7 @@ from pydantic import ValidationError
 from .errors import RecipeError
 from .registry import Registry
 from .surfaces import parse_surface_spec
-from .yamlio import LineDict, dump_yaml, load_yaml
+from .yamlio import LineDict, dump_yaml, load_yaml, yaml_word
 
 RECIPE_VERSION = 1
 TOP_KEYS = ("pointspro", "surface", "input", "inputs", "steps", "uncertainty", "tolerance")
@@ -37,19 +37,50 @@ def format_validation_error(e: ValidationError, prefix: str = "") -> str:
     """One line naming each offending key: "key 'diameter': Input should be greater than 0 (got -5)"."""
     parts = []
     for err in e.errors():
-        loc = ".".join(str(x) for x in err["loc"] if not str(x).startswith("function-"))
+        names = [str(x) for x in err["loc"] if not str(x).startswith("function-")]
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
         elif err["type"] == "missing":
             msg = "required key is missing"
         got = err.get("input")
-        text = repr(got)
+        text = yaml_word(got) if isinstance(got, bool) else repr(got)  # true, as the recipe says
         text = text if len(text) <= 80 else text[:79] + "…"
         shown = "" if err["type"] in ("extra_forbidden", "missing") or isinstance(got, dict) \
             else f" (got {text})"
+        if "keys" in (err.get("ctx") or {}) and "detail" in err["ctx"]:
+            # core.yamlio.bool_as_number (and the like): the keys down to the value join the key
+            # named ('pose.dz'); the message names the item and the value itself
+            names += err["ctx"]["keys"]
+            msg, shown = err["ctx"]["detail"], ""
+        loc = ".".join(names)
         parts.append(f"key '{loc}': {msg}{shown}" if loc else f"{msg}{shown}")
     return prefix + "; ".join(parts)
+
+
+def error_keys(err: dict) -> list:
+    """The keys down to the value a pydantic error is about: its location, with the keys within the
+    value that core.yamlio.bool_as_number names (['pose', 'dz'])."""
+    names = [x for x in err["loc"] if not str(x).startswith("function-")]
+    ctx = err.get("ctx") or {}
+    if "keys" in ctx and "detail" in ctx:
+        names += list(ctx["keys"])
+    return names
+
+
+def key_line(mapping, names) -> int | None:
+    """The line of the deepest of ``names`` (keys within keys) found in a mapping read from YAML
+    (core.yamlio.LineDict); None when the first is not found (or the mapping has no lines)."""
+    line, node = None, mapping
+    for name in names:
+        lines = getattr(node, "key_lines", None) if isinstance(node, dict) else None
+        if not lines:
+            break
+        key = name if name in lines else next((k for k in lines if str(k) == str(name)), None)
+        if key is None:
+            break
+        line, node = lines[key], node.get(key)
+    return line
 
 
 @dataclass(frozen=True)
@@ -204,7 +235,12 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
         try:
             parse_surface_spec(surface)
         except ValidationError as e:
-            raise RecipeError(format_validation_error(e, f"{at('surface')}: surface: ")) from None
+            # the line of the offending key, when the surface is written over several lines
+            names = error_keys(e.errors()[0])
+            names = names[1:] if names[:1] == [surface.get("type")] else names  # the union's tag
+            ln = key_line(surface, names)
+            loc = f"{where}, line {ln}" if ln else at("surface")
+            raise RecipeError(format_validation_error(e, f"{loc}: surface: ")) from None
 
     reader_options = _parse_input_block(data, at, where)
 
@@ -307,9 +343,7 @@ def _parse_step(entry, i: int, steps_at: str, where: str, registry: Registry) ->
         params = cls.Params.model_validate(raw)
     except ValidationError as e:
         # name the line of the first offending key when we know it
-        bad = e.errors()[0]["loc"][:1]
-        kl = getattr(entry[step_id] if isinstance(entry, dict) else None, "key_lines", {})
-        ln = kl.get(bad[0]) if bad else None
+        ln = key_line(entry[step_id] if isinstance(entry, dict) else None, error_keys(e.errors()[0]))
         loc2 = f"{where}, line {ln}" if ln else loc
         raise RecipeError(format_validation_error(e, f"{loc2}: step {i} '{step_id}': ")) from None
     except (ValueError, TypeError) as e:

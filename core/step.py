@@ -36,13 +36,24 @@ class Params(BaseModel):
     @classmethod
     def _booleans_are_true_or_false(cls, v, info):
         """A yes/no field takes true or false only: after YAML 1.2 (core/yamlio.py) `repair: yes` is
-        the word "yes", which pydantic's lax mode would still take as True."""
+        the word "yes", which pydantic's lax mode would still take as True. And true or false is
+        never a number: pydantic's lax mode takes `radius: true` as 1.0, `side: true` as 1 and
+        `remove: [520, true]` as [520, 1] (core.yamlio.bool_as_number refuses them, naming the
+        item)."""
         f = cls.model_fields.get(info.field_name)
-        if f is not None and f.annotation in (bool, bool | None) and isinstance(v, str):
+        if f is None:
+            return v
+        if f.annotation in (bool, bool | None) and isinstance(v, str):
             from pydantic_core import PydanticCustomError
 
             raise PydanticCustomError("bool_word", "Input should be true or false (yes, no, on and off "
                                       "are words in YAML 1.2)")
+        if isinstance(v, (bool, list, tuple, dict)):
+            from .yamlio import bool_as_number
+
+            error = bool_as_number(f.annotation, v)
+            if error is not None:
+                raise error
         return v
 
     @classmethod

@@ -21,8 +21,14 @@ Writing: :func:`dump_yaml` quotes a string that *either* YAML 1.1 or 1.2 would r
 """
 from __future__ import annotations
 
+import collections.abc as abc
+import enum
+import itertools
 import math
+import numbers
 import re
+import types
+import typing
 from pathlib import Path
 from typing import Any, Hashable
 
@@ -211,3 +217,142 @@ def dump_yaml(data, fast: bool = False, **kwargs) -> str:
     """YAML text of plain data (dicts, lists, str, int, float, bool, None) that :func:`load_yaml`
     reads back equal; ``fast`` uses libyaml's emitter; other keywords as yaml.dump's."""
     return yaml.dump(data, Dumper=CDumper if fast else Dumper, **kwargs)
+
+
+# -- true and false are not numbers ------------------------------------------------------------------------
+# YAML's true/false load as Python's True/False, which are the integers 1 and 0 to Python and to
+# pydantic's lax mode: `radius: true` would run with radius 1.0 and `side: true` with side 1. The
+# models that read recipes (core.step.Params, core.surfaces.spec) refuse them wherever the declared type
+# wants a number — a plain, Optional or Union number, a Literal of numbers, a list, tuple or mapping of
+# numbers, a field of a nested model — through :func:`bool_as_number`.
+
+_TAKES_BOOL = object()  # the annotation takes true/false as a yes/no (bool, Any, Literal[True])
+
+
+def yaml_word(value) -> str:
+    """``value`` as a recipe writes it where that differs from Python: true, false, null; lists of
+    them too (``[520, true]``); anything else as ``repr``."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if value is None:
+        return "null"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(yaml_word(v) for v in value) + "]"
+    return repr(value)
+
+
+def _bool_path(ann, value):
+    """_TAKES_BOOL where ``ann`` takes ``value``'s true/false as such; the path (a list of ("item", i),
+    ("in", key) or ("key", key) steps) to a true/false that ``ann`` would take as a number; None when
+    neither (no true/false in it, or one pydantic refuses by itself, as a string field does)."""
+    if ann is typing.Any or ann is object:
+        return _TAKES_BOOL
+    origin, args = typing.get_origin(ann), typing.get_args(ann)
+    if origin is typing.Annotated:
+        return _bool_path(args[0], value)
+    if origin is typing.Union or origin is types.UnionType:
+        found = None
+        for a in args:
+            r = _bool_path(a, value)
+            if r is _TAKES_BOOL:
+                return r
+            found = r if found is None else found
+        return found
+    if isinstance(value, bool):
+        if ann is bool:
+            return _TAKES_BOOL
+        if origin is typing.Literal:
+            if any(isinstance(a, bool) for a in args):
+                return _TAKES_BOOL
+            return [] if any(isinstance(a, numbers.Number) for a in args) else None
+        if isinstance(ann, type) and issubclass(ann, enum.Enum):
+            numeric = any(isinstance(m.value, numbers.Number) and not isinstance(m.value, bool)
+                          for m in ann)
+            return [] if numeric else None
+        if isinstance(ann, type) and issubclass(ann, numbers.Number):
+            return []  # int, float, Decimal, Fraction, complex, numpy's numbers
+        return None
+    if isinstance(value, (list, tuple)) and origin in (list, tuple, set, frozenset, abc.Sequence,
+                                                       abc.MutableSequence, abc.Set, abc.Iterable,
+                                                       abc.Collection):
+        if origin is tuple and args and not (len(args) == 2 and args[1] is Ellipsis):
+            anns = list(args)  # tuple[float, float]: one type per place (extra items: pydantic's)
+        else:
+            anns = [args[0] if args else typing.Any] * len(value)
+        for i, (a, v) in enumerate(zip(anns, value)):
+            r = _bool_path(a, v)
+            if isinstance(r, list):
+                return [("item", i), *r]
+        return None
+    if isinstance(value, dict):
+        if origin in (dict, abc.Mapping, abc.MutableMapping):
+            key_ann, value_ann = args if len(args) == 2 else (typing.Any, typing.Any)
+            for k, v in value.items():
+                if isinstance(_bool_path(key_ann, k), list):
+                    return [("key", k)]
+                r = _bool_path(value_ann, v)
+                if isinstance(r, list):
+                    return [("in", k), *r]
+            return None
+        fields = getattr(ann, "model_fields", None) if isinstance(ann, type) else None
+        if isinstance(fields, dict):  # a nested pydantic model: its fields by name
+            for k, v in value.items():
+                f = fields.get(k)
+                r = _bool_path(f.annotation, v) if f is not None else None
+                if isinstance(r, list):
+                    return [("in", k), *r]
+        return None
+    return None
+
+
+def _holds_bool(value) -> bool:
+    """Whether true or false is anywhere in ``value`` (its lists, tuples, mappings' keys and values),
+    level by level at C speed: a list of 10⁵ index pairs is looked through in milliseconds."""
+    level = [value]
+    while level:
+        items = level[0] if len(level) == 1 and isinstance(level[0], (list, tuple)) else list(
+            itertools.chain.from_iterable(
+                itertools.chain(c.keys(), c.values()) if isinstance(c, dict) else c for c in level))
+        kinds = set(map(type, items))
+        if bool in kinds:
+            return True
+        if not any(issubclass(t, (list, tuple, dict)) for t in kinds):
+            return False
+        level = [x for x in items if isinstance(x, (list, tuple, dict))]
+    return False
+
+
+def bool_as_number(annotation, value, name: str | None = None):
+    """A pydantic error (type ``bool_not_number``) when ``value`` holds a true/false where
+    ``annotation`` wants a number; None otherwise. Its message names the place within the value
+    ("item 2 should be a number (got true)", "key 'dz' should be a number (got false)"); its context
+    has ``keys`` (the mapping keys leading to it, which core.recipe.format_validation_error adds to
+    the key it names: 'pose.dz') and ``detail`` (the message without them). ``name``: the field the
+    value is of, when the error is raised for the whole model (a model validator)."""
+    if not _holds_bool([value]):
+        return None
+    path = _bool_path(annotation, value)
+    if not isinstance(path, list):
+        return None
+    from pydantic_core import PydanticCustomError
+
+    got = value
+    for kind, k in path:
+        got = got[k] if kind != "key" else k
+    path = path if name is None else [("in", name), *path]
+    keys = []
+    for kind, k in path:
+        if kind != "in":
+            break
+        keys.append(k)
+
+    def words(steps) -> str:  # "item 2 ", "item 3's item 4 ", "item 1's key 'x' ", "key true "
+        out = [f"item {k + 1}" if kind == "item" else
+               f"key {yaml_word(k)}" if kind == "key" else f"key {k!r}" for kind, k in steps]
+        return "'s ".join(out) + " " if out else ""
+
+    # a mapping's key that is true/false: "key true should be a number", the value is the key
+    tail = "should be a number" + ("" if path and path[-1][0] == "key" else f" (got {yaml_word(got)})")
+    return PydanticCustomError("bool_not_number", "{where}" + tail,
+                               {"where": words(path), "keys": [str(k) for k in keys],
+                                "detail": words(path[len(keys):]) + tail})

@@ -164,3 +164,155 @@ def test_terminal_progress_tty_and_plain():
     t(1.0, "done")
     t.done()
     assert "\r" in tty.getvalue() and "#" * 30 in tty.getvalue() and tty.getvalue().endswith("\n")
+
+
+# --- true and false are not numbers; one coefficient is written once -----------------------------------
+# YAML's true/false load as Python's True/False, the integers 1 and 0 to pydantic's lax mode: without a
+# check `radius: true` ran with radius 1.0 and `side: true` with side 1.
+
+def _steps(*entries: str) -> str:
+    return "pointspro: 1\nsteps:\n" + "".join(f"  - {e}\n" for e in entries)
+
+
+@pytest.mark.parametrize("entry, pattern", [
+    # float
+    ("probe_radius: {radius: true}",
+     r"r.yaml, line 3: step 1 'probe_radius': key 'radius': should be a number \(got true\)$"),
+    # Optional[float]
+    ("aperture: {diameter: false}", r"line 3: step 1 'aperture': key 'diameter': should be a number "
+                                    r"\(got false\)$"),
+    # int
+    ("probe_radius: {radius: 4, neighbours: true}", r"key 'neighbours': should be a number \(got true\)$"),
+    # Literal[1, -1]
+    ("probe_radius: {radius: 4, side: true}", r"key 'side': should be a number \(got true\)$"),
+    # Union[Literal['auto'], int]
+    ("knn_denoise: {remove: true}", r"key 'remove': should be a number \(got true\)$"),
+    # list[int], list[float], list[str | int]
+    ("manual_edit: {remove: [520, true]}",
+     r"step 1 'manual_edit': key 'remove': item 2 should be a number \(got true\)$"),
+    ("bspline_map: {profile_angles: [0, 45, false]}", r"key 'profile_angles': item 3 should be a number "
+                                                      r"\(got false\)$"),
+    ("zernike: {remove: [piston, true]}", r"key 'remove': item 2 should be a number \(got true\)$"),
+    # list[tuple[int, int]], list[list[float]], tuple[float, float] | None
+    ("manual_edit: {remove_ranges: [[1, 5], [7, true]]}",
+     r"key 'remove_ranges': item 2's item 2 should be a number \(got true\)$"),
+    ("transform: {matrix: [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, true], [0, 0, 0, 1]]}",
+     r"key 'matrix': item 3's item 4 should be a number \(got true\)$"),
+    ("zernike: {centre: [1, false]}", r"key 'centre': item 2 should be a number \(got false\)$"),
+    # a field of a nested model
+    ("transform: {pose: {dz: true}}", r"step 1 'transform': key 'pose.dz': should be a number \(got true\)$"),
+    ("probe_radius: {radius: 4, initial: {alpha_deg: false}}",
+     r"key 'initial.alpha_deg': should be a number \(got false\)$"),
+])
+def test_true_and_false_are_not_numbers_in_step_parameters(tmp_path, entry, pattern):
+    with pytest.raises(RecipeError, match=pattern):
+        load_recipe(write(tmp_path / "r.yaml", _steps(entry)))
+
+
+def test_true_and_false_still_fill_yes_no_parameters_and_other_fields_say_their_own(tmp_path):
+    r = load_recipe(write(tmp_path / "r.yaml", _steps(
+        "bspline_map: {extrapolate: true}", "register: {repair: false}",
+        "manual_edit: {remove: [520, 3640]}", "probe_radius: {radius: 4, side: -1}",
+        "knn_denoise: {remove: auto}", "zernike: {remove: [piston, 4]}")))
+    p = [s.params for s in r.steps]
+    assert p[0].extrapolate is True and p[1].repair is False
+    assert p[2].remove == [520, 3640] and p[3].radius == 4.0 and p[3].side == -1
+    assert p[4].remove == "auto" and p[5].remove == ["piston", 4]
+    # a yes/no word is still refused as such; a text field says it wants text (true, as written)
+    with pytest.raises(RecipeError, match=r"key 'extrapolate': Input should be true or false"):
+        load_recipe(write(tmp_path / "r2.yaml", _steps("bspline_map: {extrapolate: yes}")))
+    with pytest.raises(RecipeError, match=r"key 'note': Input should be a valid string \(got true\)$"):
+        load_recipe(write(tmp_path / "r3.yaml", _steps("manual_edit: {note: true}")))
+
+
+def test_true_is_not_a_number_through_the_python_api_and_the_step_editor():
+    from pointspro.core.recipe import make_step
+
+    with pytest.raises(RecipeError, match=r"step 1 'probe_radius': key 'side': should be a number "
+                                          r"\(got true\)$"):
+        make_step("probe_radius", {"radius": 4, "side": True})
+    r = parse_recipe({"pointspro": 1, "steps": [{"aperture": {"diameter": 10}}]})
+    with pytest.raises(RecipeError, match=r"key 'diameter': should be a number \(got true\)$"):
+        r.with_params(0, {"diameter": True})
+
+
+SURFACE = "pointspro: 1\nsurface: {surface}\nsteps: []\n"
+
+
+@pytest.mark.parametrize("surface, pattern", [
+    ("{type: even_asphere, c: true, k: -0.98}", r"key 'even_asphere.c': should be a number \(got true\)$"),
+    ("{type: even_asphere, c: 3.3e-4, k: false}",
+     r"r.yaml, line 2: surface: key 'even_asphere.k': should be a number \(got false\)$"),
+    ("{type: even_asphere, c: 3.3e-4, aperture: true}",
+     r"key 'even_asphere.aperture': should be a number \(got true\)$"),
+    ("{type: even_asphere, c: 3.3e-4, A: {4: 7.0e-13, 6: true}}",
+     r"key 'even_asphere.A.6': should be a number \(got true\)$"),
+    ("{type: even_asphere, c: 3.3e-4, A: {true: 7.0e-13}}", r"key 'even_asphere.A': key true should be a "
+                                                             r"number$"),
+    ("{type: qcon, R: 500, norm_radius: 50, a: [1e-4, true]}",
+     r"key 'qcon.a': item 2 should be a number \(got true\)$"),
+    ("{type: xy_polynomial, norm_radius: true, terms: {x2y0: 1e-3}}",
+     r"key 'xy_polynomial.norm_radius': should be a number \(got true\)$"),
+    ("{type: mesh, path: part.stl, repair: yes}", r"key 'mesh.repair': Input should be true or false"),
+])
+def test_true_and_false_are_not_numbers_in_the_surface(tmp_path, surface, pattern):
+    with pytest.raises(RecipeError, match=pattern):
+        load_recipe(write(tmp_path / "r.yaml", SURFACE.format(surface=surface)))
+
+
+@pytest.mark.parametrize("surface, pattern", [
+    # YAML's own duplicate-key check sees "4" and 4 as two keys; the model reads both as A_4
+    ('{type: even_asphere, c: 3.3e-4, k: -0.98, A: {"4": 7.0e-13, 4: 1.0e-19}}',
+     r"r.yaml, line 2: surface: key 'even_asphere.A': duplicate coefficient 4 \(written as '4' and 4\)$"),
+    ('{type: even_asphere, c: 3.3e-4, A: {6: 1.0e-19, "04": 7.0e-13, 4: 1.0e-19}}',
+     r"duplicate coefficient 4 \(written as '04' and 4\)$"),
+    ('{type: xy_polynomial, terms: {x2y0: 1e-3, x02y0: 2e-3}}',
+     r"key 'xy_polynomial.terms': duplicate term x2y0 \(written as 'x2y0' and 'x02y0'\)$"),
+    # the unquoted spellings: YAML's own check (04, 4.0 and +4 are all the number 4)
+    ("{type: even_asphere, c: 3.3e-4, A: {04: 7.0e-13, 4: 1.0e-19}}", r"r.yaml, line 2: duplicate key 4$"),
+    ("{type: even_asphere, c: 3.3e-4, A: {4.0: 7.0e-13, 4: 1.0e-19}}", r"r.yaml, line 2: duplicate key 4$"),
+])
+def test_a_coefficient_written_twice_is_refused(tmp_path, surface, pattern):
+    with pytest.raises(RecipeError, match=pattern):
+        load_recipe(write(tmp_path / "r.yaml", SURFACE.format(surface=surface)))
+
+
+def test_surface_errors_name_the_line_of_the_key(tmp_path):
+    text = ("pointspro: 1\nsurface:\n  type: even_asphere\n  c: 3.3e-4\n  A:\n"
+            '    "4": 7.0e-13\n    6: 1.0e-19\n    4: 1.0e-19\nsteps: []\n')
+    with pytest.raises(RecipeError, match=r"r.yaml, line 5: surface: key 'even_asphere.A': duplicate "
+                                          r"coefficient 4 \(written as '4' and 4 on lines 6 and 8\)$"):
+        load_recipe(write(tmp_path / "r.yaml", text))
+    text = "pointspro: 1\nsurface:\n  type: even_asphere\n  c: 3.3e-4\n  A:\n    4: 7.0e-13\n    6: true\n"
+    with pytest.raises(RecipeError, match=r"r2.yaml, line 7: surface: key 'even_asphere.A.6': should be"):
+        load_recipe(write(tmp_path / "r2.yaml", text))
+    # a quoted power alone is still the power; the example's surface is unchanged
+    ok = load_recipe(write(tmp_path / "r3.yaml", SURFACE.format(
+        surface='{type: even_asphere, c: 3.3e-4, A: {"4": 7.0e-13, 6: 1.0e-19}}')))
+    assert ok.build_surface().A == {4: 7.0e-13, 6: 1.0e-19}
+
+
+@pytest.mark.parametrize("edit, override, says", [
+    (("radius: 4.0, side: +1", "radius: true, side: +1"), None,
+     "line 9: step 2 'probe_radius': key 'radius': should be a number (got true)"),
+    (("radius: 4.0, side: +1", "radius: 4.0, side: true"), None,
+     "line 9: step 2 'probe_radius': key 'side': should be a number (got true)"),
+    (("remove: [520, 3640]", "remove: [520, true]"), None,
+     "line 7: step 1 'manual_edit': key 'remove': item 2 should be a number (got true)"),
+    (("A: {4: 7.0e-13, 6: 1.0e-19}", 'A: {"4": 7.0e-13, 4: 1.0e-19}'), None,
+     "line 4: surface: key 'even_asphere.A': duplicate coefficient 4 (written as '4' and 4)"),
+    (None, "probe_radius.radius=true", "key 'radius': should be a number (got true) "
+                                       "(with --set probe_radius.radius=true)"),
+    (None, "surface.aperture=true", "key 'even_asphere.aperture': should be a number (got true)"),
+])
+def test_batch_refuses_true_as_a_number_in_one_line_exit_2(run_cli, tmp_path, edit, override, says):
+    text = (EXAMPLE / "recipe.yaml").read_text(encoding="utf-8")
+    if edit:
+        assert edit[0] in text
+        text = text.replace(edit[0], edit[1])
+    recipe = write(tmp_path / "recipe.yaml", text)
+    code, out, err = run_cli("--batch", recipe, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o",
+                             "--figures", "none", *(["--set", override] if override else []))
+    assert code == 2, err
+    assert says in err and str(recipe) in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "o" / "asphere_cmm").exists()

@@ -15,19 +15,80 @@ from pathlib import Path
 from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, field_validator, model_validator
+from pydantic_core import PydanticCustomError, ValidationError
 
+from ..yamlio import bool_as_number, yaml_word
 from .base import NominalSurface
 from .even_asphere import EvenAsphere
 from .forbes import QBfsAsphere, QConAsphere
 from .mesh import MeshSurface
 from .xy_polynomial import XYPolynomial
 
-_TERM = re.compile(r"^x(\d+)y(\d+)$")
+_TERM = re.compile(r"x([0-9]+)y([0-9]+)")  # fullmatch: "x2y0\n" and "x２y0" are not terms
+_INT = TypeAdapter(int)
 
 
 class _Spec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     aperture: float | None = Field(None, gt=0, description="clear-aperture diameter (mm)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _true_is_not_a_number(cls, data):
+        """`c: true`, `aperture: true`, `A: {4: true}`, `a: [1e-4, false]` are refused: pydantic's lax
+        mode would take true as 1 and false as 0 (core.yamlio.bool_as_number); and, as a step's
+        parameters do (core.step.Params), `repair: yes`, a word in YAML 1.2 that pydantic would take
+        as true. A model validator: a field's before-validator may not touch the union's
+        discriminator `type`."""
+        if isinstance(data, dict):
+            for name, v in data.items():
+                f = cls.model_fields.get(name) if isinstance(name, str) else None
+                if f is not None and f.annotation in (bool, bool | None) and isinstance(v, str):
+                    why = (f"Input should be true or false (yes, no, on and off are words in YAML "
+                           f"1.2) (got {v!r})")
+                    raise PydanticCustomError("bool_word", "key {name}: {detail}",
+                                              {"name": repr(name), "keys": [name], "detail": why})
+                if f is not None and isinstance(v, (bool, list, tuple, dict)):
+                    error = bool_as_number(f.annotation, v, name)
+                    if error is not None:
+                        raise error
+        return data
+
+
+def _one_key_each(keys, normal, what: str, lines: dict | None = None, shown=str) -> None:
+    """Refuse two keys of a coefficient mapping that mean the same coefficient once normalised (YAML
+    sees "4" and 4, or x2y0 and x02y0, as different keys; the model would keep the last silently).
+    ``normal``: a key → its normal form, None when it has none (the model's own check says why);
+    ``lines``: the keys' lines (a LineDict's key_lines); ``shown``: the normal form as written."""
+    seen: dict = {}
+    for key in keys:
+        n = normal(key)
+        if n is None:
+            continue
+        if n in seen:
+            first = seen[n]
+            where = ""
+            if lines and lines.get(first) and lines.get(key) and lines[first] != lines[key]:
+                where = f" on lines {lines[first]} and {lines[key]}"
+            raise PydanticCustomError(
+                "duplicate_coefficient", "duplicate {what} {n} (written as {a} and {b}{where})",
+                {"what": what, "n": shown(n), "a": yaml_word(first), "b": yaml_word(key), "where": where})
+        seen[n] = key
+
+
+def _power(key) -> int | None:
+    """The power n of an A_n key as the model reads it (4, "4", 4.0 → 4); None: not a power."""
+    if isinstance(key, bool):
+        return None
+    try:
+        return _INT.validate_python(key)
+    except ValidationError:
+        return None
+
+
+def _term(key) -> tuple[int, int] | None:
+    m = _TERM.fullmatch(key) if isinstance(key, str) else None
+    return (int(m[1]), int(m[2])) if m else None
 
 
 class _CurvatureSpec(_Spec):
@@ -54,6 +115,14 @@ class EvenAsphereSpec(_CurvatureSpec):
     k: float = Field(0.0, description="conic constant")
     A: dict[int, float] = Field(default_factory=dict, description="aspheric coefficients A_n by power n")
 
+    @field_validator("A", mode="before")
+    @classmethod
+    def _one_key_per_power(cls, v):
+        """{"4": 7e-13, 4: 1e-19}: YAML's duplicate-key check sees two keys, the model one power."""
+        if isinstance(v, dict):
+            _one_key_each(v, _power, "coefficient", getattr(v, "key_lines", None))
+        return v
+
     @field_validator("A")
     @classmethod
     def _powers(cls, v):
@@ -73,16 +142,24 @@ class XYPolynomialSpec(_Spec):
     norm_radius: float = Field(1.0, gt=0, description="normalisation radius ρ (mm)")
     terms: dict[str, float] = Field(description="coefficients C_ij keyed 'x<i>y<j>' (mm)")
 
+    @field_validator("terms", mode="before")
+    @classmethod
+    def _one_key_per_term(cls, v):
+        """{x2y0: 1e-3, x02y0: 2e-3}: two keys to YAML, one term C_20 to the polynomial."""
+        if isinstance(v, dict):
+            _one_key_each(v, _term, "term", getattr(v, "key_lines", None), lambda t: f"x{t[0]}y{t[1]}")
+        return v
+
     @field_validator("terms")
     @classmethod
     def _names(cls, v):
         for name in v:
-            if not _TERM.match(name):
+            if _term(name) is None:
                 raise ValueError(f"term {name!r} is not of the form x<i>y<j>, e.g. x2y0")
         return v
 
     def build(self, base_dir: Path | None = None) -> XYPolynomial:
-        terms = {tuple(int(g) for g in _TERM.match(k).groups()): v for k, v in self.terms.items()}
+        terms = {_term(k): v for k, v in self.terms.items()}
         return XYPolynomial(terms, self.c, self.k, self.norm_radius, self.aperture)
 
 
