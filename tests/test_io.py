@@ -192,3 +192,125 @@ def test_a_title_line_is_not_taken_for_a_short_header(tmp_path):
     """A title with commas above headerless data names no axes: the data read as x, y, z."""
     c = read_cloud(write(tmp_path / "t.csv", "Part 7, run 3\n1,2,3\n4,5,6\n"))
     assert np.array_equal(c.xyz, [[1, 2, 3], [4, 5, 6]])
+
+
+@pytest.mark.parametrize("text,xyz", [
+    ("y;x;z\n1,2,3\n4,5,6\n", [[2, 1, 3], [5, 4, 6]]),
+    ("y x z\n1,2,3\n4,5,6\n", [[2, 1, 3], [5, 4, 6]]),
+    ("y,x,z\n1 2 3\n4 5 6\n", [[2, 1, 3], [5, 4, 6]]),
+    ("y x z\n1\t2\t3\n4\t5\t6\n", [[2, 1, 3], [5, 4, 6]]),  # a space-separated header, tab data
+    ("x [um] y [um] z [um]\n1000,2000,3\n4000,5000,6\n", [[1, 2, 0.003], [4, 5, 0.006]]),
+    ("x[um] y (um) z\n1000\t2000\t3\n4000\t5000\t6\n", [[1, 2, 3], [4, 5, 6]]),
+    ("Part 7, run 3\ny x z\n1\t2\t3\n4\t5\t6\n", [[2, 1, 3], [5, 4, 6]]),
+])
+def test_header_with_another_separator_than_the_data_is_read(tmp_path, text, xyz):
+    """Ignored, such a header swapped x and y or read µm as mm."""
+    c = read_cloud(write(tmp_path / "m.csv", text))
+    assert np.array_equal(c.xyz, xyz) and c.xyz.dtype == np.float64
+    assert c.meta["header_line"] == text.count("\n", 0, text.index("z")) + 1
+
+
+@pytest.mark.parametrize("text,pattern", [
+    ("x y z w\n1,2,3\n4,5,6\n", r"m.csv, line 1: the header names 4 columns \(x, y, z, w\) but line 2 "
+                                r"holds 3 value"),
+    ("y;x;z\n1,2,3,4\n5,6,7,8\n", r"m.csv, line 1: the header names 3 columns \(y, x, z\) but line 2 "
+                                  r"holds 4 value"),
+])
+def test_header_with_another_separator_and_count_is_refused(tmp_path, text, pattern):
+    with pytest.raises(InputError, match=pattern):
+        read_cloud(write(tmp_path / "m.csv", text))
+
+
+@pytest.mark.parametrize("text,pattern", [
+    ("y,x,z\n---\n4,5,6\n7,8,9\n", r"m.csv, line 2: a line that is neither numbers nor a comment "
+                                   r"stands between the header \(line 1\) and the data \(line 3\)"),
+    ("y,x,z\nunits: mm\n4,5,6\n7,8,9\n", r"m.csv, line 2: .* between the header \(line 1\) and "
+                                         r"the data \(line 3\)"),
+    ("x [um],y [um],z [um]\n-----\n1000,2000,3\n4000,5000,6\n",
+     r"m.csv, line 2: .* between the header \(line 1\) and the data \(line 3\)"),
+    ("# run 7\ny x z\n\n---\n# c\n1 2 3\n", r"m.csv, line 4: .* between the header \(line 2\) and the "
+                                           r"data \(line 6\)"),
+    # a first data row with extra text was taken for a text line, and the header dropped with it
+    ("y,x,z\n1,2,3,start\n4,5,6\n7,8,9\n", r"m.csv, line 2, column 4: 'start' is not a number — a "
+                                           r"line that is not all numbers stands between the header "
+                                           r"\(line 1\) and the data \(line 3\)"),
+    ('y,x,z\n"1,000.5",2,3\n4,5,6\n', r"m.csv, line 2: a line that is neither numbers nor a comment "
+                                      r"stands between the header \(line 1\) and the data \(line 3\)"),
+])
+def test_a_line_between_the_header_and_the_data_is_refused(tmp_path, text, pattern):
+    """Read as a title, the header was dropped: y for x, µm as mm, or a first row lost."""
+    with pytest.raises(InputError, match=pattern):
+        read_cloud(write(tmp_path / "m.csv", text))
+
+
+@pytest.mark.parametrize("text,xyz,header_line", [
+    ("Part 7, run 3\n1,2,3\n4,5,6\n", [[1, 2, 3], [4, 5, 6]], None),
+    ("Part 7, run 3\ny,x,z\n1,2,3\n4,5,6\n", [[2, 1, 3], [5, 4, 6]], 2),
+    ("Part 7, run 3\nOperator: A\n1 2 3 4\n5 6 7 8\n", [[1, 2, 3], [5, 6, 7]], None),
+    ("Measured by John Smith\n1,2,3,4\n5,6,7,8\n", [[1, 2, 3], [5, 6, 7]], None),
+])
+def test_title_lines_naming_no_axes_still_read(tmp_path, text, xyz, header_line):
+    c = read_cloud(write(tmp_path / "m.csv", text))
+    assert np.array_equal(c.xyz, xyz) and c.meta["header_line"] == header_line
+
+
+@pytest.mark.parametrize("text,xyz,channels", [
+    ("//X [um] Y [um] Z [um]\n1000 2000 3\n4000 5000 6\n", [[1, 2, 0.003], [4, 5, 0.006]], []),
+    ("# x[um] y[um] z[um]\n1000 2000 3\n4000 5000 6\n", [[1, 2, 0.003], [4, 5, 0.006]], []),
+    ("# export\n# y x z\n\n2 1 3\n5 4 6\n", [[1, 2, 3], [4, 5, 6]], []),
+    ("//X [mm] Y [mm] Z [um] Scalar field\n1 2 3 0.5\n4 5 6 0.25\n", [[1, 2, 0.003], [4, 5, 0.006]],
+     ["scalar_field"]),
+])
+def test_comment_header_with_units_names_the_columns(tmp_path, text, xyz, channels):
+    c = read_cloud(write(tmp_path / "cc.txt", text))
+    assert np.array_equal(c.xyz, xyz)
+    assert sorted(c.channels) == sorted(["index", *channels])
+
+
+@pytest.mark.parametrize("text", ["# x y z w\n1 2 3\n4 5 6\n", "# x y\n1 2 3\n4 5 6\n",
+                                  "# measured x, y and z\n1 2 3\n4 5 6\n"])
+def test_other_hash_comments_stay_comments(tmp_path, text):
+    c = read_cloud(write(tmp_path / "m.txt", text))
+    assert np.array_equal(c.xyz, [[1, 2, 3], [4, 5, 6]]) and c.meta["header_line"] is None
+
+
+@pytest.mark.parametrize("value,column", [("1e300", 4), ("9.3e18", 4), ("-1", 4), ("2.5", 4),
+                                          ("9223372036854775808", 4)])
+def test_index_out_of_range_or_not_whole_is_named(tmp_path, value, column):
+    """Cast as read, 1e300 wrapped to -9223372036854775808 with only a RuntimeWarning."""
+    p = write(tmp_path / "m.csv", f"x,y,z,index\n4,5,6,2\n1,2,3,{value}\n")
+    with pytest.raises(InputError, match=rf"m.csv, line 3, column {column} \(index\): .*is not a "
+                                         r"non-negative whole number"):
+        read_cloud(p)
+
+
+def test_integer_channels_out_of_int64_range_are_named(tmp_path):
+    with pytest.raises(InputError, match=r"m.csv, line 2, column 4 \(line\): 1e\+300 is not a whole "
+                                         r"number"):
+        read_cloud(write(tmp_path / "m.csv", "x,y,z,line\n1,2,3,1e300\n4,5,6,2\n"))
+    big = read_cloud(write(tmp_path / "ok.csv", "x,y,z,index\n1,2,3,9223372036854774784\n4,5,6,0\n"))
+    assert big.index.tolist() == [2**63 - 1024, 0]  # the largest float64 below 2**63 still fits
+
+
+@pytest.mark.parametrize("text", [
+    "x,y,z\n1,2,3\n   \n4,5,6\n",
+    "x\ty\tz\n1\t2\t3\n \t\n4\t5\t6\n",
+    "x y z\n1 2 3\n\t\n4 5 6\n",
+    "x,y,z\r\n1,2,3\r\n  \r\n4,5,6\r\n",
+    "x,y,z\r1,2,3\r4,5,6\r",  # classic Mac OS: CR alone ends a line
+    "x;y;z\r1;2;3\r\r4;5;6",
+])
+@pytest.mark.parametrize("fast", [False, True])
+def test_blank_lines_and_cr_line_ends_read_as_lines(tmp_path, monkeypatch, text, fast):
+    import pointspro.core.io.text as text_io
+
+    if fast:  # pandas' reader first, as for big files
+        monkeypatch.setattr(text_io, "_FAST_BYTES", 0)
+    c = read_cloud(write(tmp_path / "m.csv", text))
+    assert np.array_equal(c.xyz, [[1, 2, 3], [4, 5, 6]]) and np.array_equal(c.index, [0, 1])
+    assert c.meta["header_line"] == 1
+
+
+def test_a_bad_row_after_a_blank_line_is_still_named(tmp_path):
+    with pytest.raises(InputError, match=r"m.csv, line 4, column 2: 'abc' is not a number"):
+        read_cloud(write(tmp_path / "m.csv", "x,y,z\n1,2,3\n  \n4,abc,6\n"))

@@ -1,9 +1,12 @@
 """Text exports of CMMs and profilers: CSV / TXT / XYZ / ASC / DAT.
 
 Accepted: a header line or none; preamble lines before the header (instrument, date...); comma,
-semicolon, tab or whitespace separators; decimal commas when the separator is a semicolon, tab or
-space (European exports); comment lines starting with #, //, % or !, except CloudCompare's
-``//X Y Z …`` line right above the data, which names the columns. A length unit in brackets in the
+semicolon, tab or whitespace separators, the header's may differ from the data's (``y x z`` over
+tab-separated rows; at whitespace ``x [um]`` is one name); decimal commas when the separator is a
+semicolon, tab or space (European exports); LF, CRLF or CR-alone line ends; lines of blanks read as
+empty; comment lines starting with #, //, % or !, except CloudCompare's ``//X Y Z …`` line (or a
+``# x y z`` one) right above the data, which names the columns. A line naming the axes must be the
+last before the data: one in between (``---``, ``units: mm``) is refused. A length unit in brackets in the
 header (``X [µm]``, ``residual [nm]``) converts that column to mm (core.units.length_to_mm: one
 correctly rounded operation, none at all for mm, so PointsPro's own files read back bit for bit);
 counts and flags (index, row, col …) are never converted; other units (``t [s]``) are kept as read.
@@ -30,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cloud import INTEGER_CHANNELS
 from ..errors import InputError
 from ..units import LENGTH_UNITS, UNITLESS_CHANNELS, is_length_unit, length_to_mm
 
@@ -48,6 +52,31 @@ def _is_comment(line: str) -> bool:
 def _split(line: str, delim: str | None) -> list[str]:
     parts = line.strip().split(delim) if delim else line.split()
     return [p.strip() for p in parts]
+
+
+# The separators a header may be written with, whatever the data's: tab, ';', ',', whitespace.
+_SEPARATORS = ("\t", ";", ",", None)
+# At whitespace, a unit in brackets or parentheses is part of the name before it: "x [um]", "x(mm)".
+_UNIT = r"(?:\[[^\]]*\]|\([^)]*\))"
+_WS_FIELD = re.compile(rf"(?:[^\s\[(]|{_UNIT})+(?:\s+{_UNIT})?|\S+")
+
+
+def _header_tokens(line: str, delim: str | None) -> list[str]:
+    """A header's fields split at ``delim`` (without the empty one after a trailing separator); at
+    whitespace (None) a unit token belongs to the name before it, so ``x [um] y [um]`` is two
+    fields, as ``x [um],y [um]`` is."""
+    if delim is None:
+        return _WS_FIELD.findall(line)
+    toks = _split(line, delim)
+    return toks[:-1] if toks and toks[-1] == "" else toks
+
+
+def _names_axes(toks: list[str], decimal_comma: bool = False) -> bool:
+    """Fields that name the axes (x and z, after ``_AXIS_ALIASES``) and hold no number: a header,
+    not a title ("Part 7, run 3")."""
+    if len(toks) < 2 or any(_is_number(t, decimal_comma) for t in toks):
+        return False
+    return {"x", "z"} <= {_AXIS_ALIASES.get(n, n) for n, _, _ in map(_header_name, toks)}
 
 
 def _is_number(tok: str, decimal_comma: bool) -> bool:
@@ -148,9 +177,13 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
     text, encoding = _decode(raw)
     # Only the head is split into lines to find the layout; the body goes to the C reader whole.
     head = text.split("\n", 200)[:200]
+    cr_only = len(head) == 1 and "\r" in text
+    if cr_only:  # classic Mac OS line ends (CR alone): one "line" holding the whole file otherwise
+        text = text.replace("\r", "\n")
+        head = text.split("\n", 200)[:200]
     lines = _LazyLines(text, head)
     lay = _find_layout(path, head, lines, quote)
-    data = _parse_numbers(path, raw, text, lines, lay, encoding, quote)
+    data = _parse_numbers(path, raw, text, lines, lay, encoding, quote, cr_only)
     meta: dict = {"format": "text", "delimiter": lay.delim or "whitespace",
                   "decimal_comma": lay.decimal_comma,
                   "header_line": lay.header[0] + 1 if lay.header else None}
@@ -174,7 +207,7 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
         cols = {n: a[keep] for n, a in cols.items()}
         if "index" not in cols:
             cols["index"] = np.flatnonzero(keep).astype(np.int64)
-    _check_index(path, cols)
+    _check_index(path, lines, lay.first_data, cols, names, rows, quote)
     if "y" not in names:
         xyz, cols, meta["profile"] = _profile_placed(path, lines, lay.first_data, xyz, cols, rows,
                                                      profile_angle_deg)
@@ -216,6 +249,7 @@ def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True)
     lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty)
     if candidates:
         lay.header = _find_header(path, lines, candidates[-1], lay, quote)
+        _check_nothing_between(path, lines, candidates, lay, quote)
     if lay.header is None:
         lay.header = _comment_header(lines, first_data, lay)
     return lay
@@ -223,26 +257,37 @@ def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True)
 
 def _comment_header(lines: "_LazyLines", first_data: int, lay: _Layout) -> tuple[int, list[str]] | None:
     """CloudCompare's ASCII export names its columns in a comment right above the data:
-    ``//X Y Z SF`` or ``//X,Y,Z,R,G,B,Scalar field``. That line is the header when it names x, y and
-    z and has one name a column (a space inside the last name is kept: ``//X Y Z Scalar field``);
-    any other comment stays a comment."""
+    ``//X Y Z SF``, ``//X,Y,Z,R,G,B,Scalar field`` or ``//X [um] Y [um] Z [um]``; so may a ``#``
+    comment (``# x[um] y[um] z[um]``). That line is the header when it names x, y and z and has one
+    name a column — split at the data's separator, else at the one other that gives as many (a
+    space inside the last name is kept after ``//``: ``//X Y Z Scalar field``); any other comment
+    stays a comment."""
     i = first_data - 1
     while i >= 0 and not lines[i].strip():
         i -= 1
-    if i < 0 or not lines[i].lstrip().startswith("//"):
+    if i < 0:
         return None
-    body = lines[i].lstrip()[2:].strip()
-    toks = _split(body, lay.delim)
-    if toks and toks[-1] == "":
-        toks = toks[:-1]
-    if len(toks) > lay.ncols and lay.delim is None and lay.ncols >= 4:
+    s = lines[i].lstrip()
+    if s.startswith("//"):
+        body = s[2:].strip()
+    elif s.startswith("#"):
+        body = s.lstrip("#").strip()
+    else:
+        return None
+    toks = _header_tokens(body, lay.delim)
+    if s.startswith("//") and len(toks) > lay.ncols and lay.delim is None and lay.ncols >= 4:
         toks = toks[:lay.ncols - 1] + [" ".join(toks[lay.ncols - 1:])]
-    if len(toks) != lay.ncols:
+    fits = [t for t in [toks] + [_header_tokens(body, d) for d in _SEPARATORS if d != lay.delim]
+            if len(t) == lay.ncols and _names_xyz_once(t)]
+    if not fits or any(t != fits[0] for t in fits):  # none, or several ways: a comment
         return None
+    return i, fits[0]
+
+
+def _names_xyz_once(toks: list[str]) -> bool:
+    """Whether the fields name x, y and z, and no column twice."""
     names = [_AXIS_ALIASES.get(n, n) for n, _, _ in map(_header_name, toks)]
-    if not {"x", "y", "z"} <= set(names) or len(set(names)) != len(names):
-        return None
-    return i, toks
+    return {"x", "y", "z"} <= set(names) and len(set(names)) == len(names)
 
 
 def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = True
@@ -271,11 +316,11 @@ def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = T
 
 def _find_header(path, lines: "_LazyLines", i: int, lay: _Layout, quote: bool = True
                  ) -> tuple[int, list[str]] | None:
-    """The header is the last non-numeric line before the data when it has as many fields."""
+    """The header is the last non-numeric line before the data when it has as many fields: split at
+    the data's separator, else at the one other separator (tab, ';', ',', whitespace) that gives as
+    many fields naming the axes — "y x z" over tab-separated rows, "y;x;z" over "1,2,3"."""
     hline = lines[i]
-    htoks = _split(hline, lay.delim)
-    if htoks and htoks[-1] == "":
-        htoks = htoks[:-1]
+    htoks = _header_tokens(hline, lay.delim)
     numeric = [_is_number(t, lay.decimal_comma) for t in htoks]
     if len(htoks) == lay.ncols and all(numeric):  # numbers, split otherwise than the rows after
         raise InputError(f"{path}, line {i + 1}: a row of numbers whose separators differ from "
@@ -287,50 +332,99 @@ def _find_header(path, lines: "_LazyLines", i: int, lay: _Layout, quote: bool = 
                          "not a number")
     if len(htoks) == lay.ncols:
         return i, htoks
-    if len(_split(hline, None)) == lay.ncols and lay.delim is None:
-        return i, _split(hline, None)
+    # Written with another separator than the rows: ignored, "y;x;z" over "1,2,3" would read y as x
+    # and "x [um] y [um] z [um]" over "1000,2000,3" µm as mm. Only a split that names the axes is
+    # taken: a title ("Measured by A. Smith") may split into as many words as there are columns.
+    others = [t for t in (_header_tokens(hline, d) for d in _SEPARATORS if d != lay.delim)
+              if _names_axes(t, lay.decimal_comma)]
+    fits = {tuple(t) for t in others if len(t) == lay.ncols}
+    if len(fits) == 1:
+        return i, list(fits.pop())
     # A header that names the axes but not as many columns as the data holds: read without it,
     # "y,x,z" over four columns would silently become x, y, z, col4, and "x,y,z" over a short first
     # row a stylus profile. A title line ("Part 7, run 3") names no axes and stays a title.
-    named = {_AXIS_ALIASES.get(n, n) for n, _, _ in map(_header_name, htoks)}
-    if len(htoks) >= 2 and not any(numeric) and {"x", "z"} <= named:
-        names = f" ({', '.join(t.strip() for t in htoks)})" if quote else ""
-        raise InputError(f"{path}, line {i + 1}: the header names {len(htoks)} columns{names} but "
+    named = htoks if _names_axes(htoks, lay.decimal_comma) else others[0] if others else None
+    if fits:
+        raise InputError(f"{path}, line {i + 1}: the header splits into {lay.ncols} names in more "
+                         f"than one way — write it with the separator of the data (line "
+                         f"{lay.first_data + 1})")
+    if named:
+        names = f" ({', '.join(t.strip() for t in named)})" if quote else ""
+        raise InputError(f"{path}, line {i + 1}: the header names {len(named)} columns{names} but "
                          f"line {lay.first_data + 1} holds {lay.ncols} value(s)")
     return None
 
 
+def _check_nothing_between(path, lines: "_LazyLines", candidates: list[int], lay: _Layout,
+                           quote: bool = True) -> None:
+    """A line naming the axes must be the last before the data: with a line in between ("---",
+    "units: mm", a first row with a stray field or a quoted "1,000.5") it would be taken for a
+    title and the columns read as x, y, z in mm — y for x, µm for mm. A title naming no axes
+    ("Part 7, run 3") may stand anywhere."""
+    for n in range(len(candidates) - 2, -1, -1):
+        k = candidates[n]
+        if not any(_names_axes(_header_tokens(lines[k], d), lay.decimal_comma) for d in _SEPARATORS):
+            continue
+        m = candidates[n + 1]
+        where = f"between the header (line {k + 1}) and the data (line {lay.first_data + 1})"
+        toks = _header_tokens(lines[m], lay.delim)
+        numeric = [_is_number(t, lay.decimal_comma) for t in toks]
+        if toks and all(numeric):  # numbers, split otherwise than the rows after
+            raise InputError(f"{path}, line {m + 1}: a row of numbers whose separators differ from "
+                             f"those of line {lay.first_data + 1}, {where}")
+        if sum(numeric) > len(toks) / 2:  # a data row with a stray field: say which
+            j = numeric.index(False)
+            raise InputError(f"{path}, line {m + 1}, column {j + 1}: {_q(toks[j], quote)}is not a "
+                             f"number — a line that is not all numbers stands {where}")
+        raise InputError(f"{path}, line {m + 1}: a line that is neither numbers nor a comment "
+                         f"stands {where} — remove it or make it a comment")
+
+
 def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layout,
-                   encoding: str, quote: bool = True) -> np.ndarray:
+                   encoding: str, quote: bool = True, cr_only: bool = False) -> np.ndarray:
     """The data rows as an (N, ncols) array: pandas' C reader for big files, else numpy's; a
-    failure is named by line and column (``_diagnose``)."""
+    failure is named by line and column (``_diagnose``). ``cr_only``: the file's line ends are CR
+    alone, ``text`` has them as LF (the readers of the path would count lines otherwise)."""
     # numpy's reader is ~2x slower with several comment markers, so pass only those present.
     present = [c for c in COMMENTS if c in text]
     comments = None if not present else present[0] if len(present) == 1 else present
     usecols = range(lay.ncols) if lay.trailing_empty else None
     data = None
-    if len(raw) > _FAST_BYTES:
+    if len(raw) > _FAST_BYTES and not cr_only:
         data = _fast_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
                            lay.trailing_empty, encoding)
     try:
         if data is not None:
             pass
-        elif lay.decimal_comma or encoding != "utf-8-sig":
-            body = "\n".join(text.split("\n")[lay.first_data:])
-            if lay.decimal_comma:
-                body = body.replace(",", ".")
-            data = np.loadtxt(io.StringIO(body), delimiter=lay.delim, comments=comments, ndmin=2,
-                              dtype=np.float64, usecols=usecols)
+        elif lay.decimal_comma or encoding != "utf-8-sig" or cr_only:
+            data = _loadtxt_text(text.split("\n")[lay.first_data:], lay, comments, usecols)
         else:
             data = np.loadtxt(path, delimiter=lay.delim, comments=comments, ndmin=2, dtype=np.float64,
                               usecols=usecols, skiprows=lay.first_data, encoding="utf-8-sig")
     except ValueError:
-        _diagnose(path, lines.all(), lay.first_data, lay.delim, lay.decimal_comma, lay.ncols,
-                  lay.trailing_empty, quote)
-        raise InputError(f"{path}: could not parse the numeric data")  # pragma: no cover
+        # Lines of blanks only ("   ", a stray tab) read as the empty lines they look like; numpy
+        # takes them for a row of empty fields. Looked for only now, so good files pay nothing.
+        body = text.split("\n")[lay.first_data:]
+        try:
+            if not any(ln and not ln.strip() for ln in body):
+                raise ValueError  # no line of blanks: the failure is elsewhere
+            data = _loadtxt_text([ln for ln in body if ln.strip()], lay, comments, usecols)
+        except ValueError:
+            _diagnose(path, lines.all(), lay.first_data, lay.delim, lay.decimal_comma, lay.ncols,
+                      lay.trailing_empty, quote)
+            raise InputError(f"{path}: could not parse the numeric data") from None  # pragma: no cover
     if data.shape[1] != lay.ncols:  # pragma: no cover - loadtxt keeps the width
         raise InputError(f"{path}: expected {lay.ncols} columns, got {data.shape[1]}")
     return data
+
+
+def _loadtxt_text(body: list[str], lay: _Layout, comments, usecols) -> np.ndarray:
+    """numpy's reader on data lines already decoded (decimal commas made points)."""
+    text = "\n".join(body)
+    if lay.decimal_comma:
+        text = text.replace(",", ".")
+    return np.loadtxt(io.StringIO(text), delimiter=lay.delim, comments=comments, ndmin=2,
+                      dtype=np.float64, usecols=usecols)
 
 
 def _header_columns(path, lay: _Layout, need_xyz: bool, quote: bool = True):
@@ -412,13 +506,25 @@ def _rows_to_keep(path, lines, first_data, data, names, invalid: str, quote: boo
     return keep
 
 
-def _check_index(path, cols: dict) -> None:
-    if "index" in cols:
-        idx = cols["index"]
-        if np.any(idx != np.round(idx)) or np.any(idx < 0):
-            raise InputError(f"{path}: the index column must hold non-negative integers")
-        if len(np.unique(idx)) != len(idx):
-            raise InputError(f"{path}: the index column has repeated values")
+def _check_index(path, lines, first_data, cols: dict, names, rows, quote: bool = True) -> None:
+    """The integer columns of the file (index, line, fiducial, sensor) must be whole numbers that an
+    int64 holds — cast as they are, 1e300 or 9.3e18 wraps to -9223372036854775808 with no more than a
+    RuntimeWarning — and the index non-negative (it numbers the input rows) and never repeated; the
+    first bad value is named by line and column."""
+    for n in (n for n in names if n in INTEGER_CHANNELS and n in cols):
+        v = cols[n]
+        low = 0.0 if n == "index" else -2.0**63
+        bad = ~((v == np.floor(v)) & (v >= low) & (v < 2.0**63))  # 2**63 itself is out of range
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            ln = _data_line_number(lines.all(), first_data, int(rows[row]))
+            val = f"{float(v[row])!r} " if quote else ""
+            what = ("a non-negative whole number (the index numbers the input rows)" if n == "index"
+                    else "a whole number within ±9.2e18")
+            raise InputError(f"{path}, line {ln}, column {names.index(n) + 1} ({n}): {val}is not "
+                             f"{what}")
+    if "index" in cols and len(np.unique(cols["index"])) != len(cols["index"]):
+        raise InputError(f"{path}: the index column has repeated values")
 
 
 _FAST_BYTES = 4_000_000
