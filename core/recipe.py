@@ -200,7 +200,8 @@ def _plain(o):
 def load_recipe(path, registry: Registry | None = None) -> Recipe:
     path = Path(path)
     if not path.is_file():
-        raise RecipeError(f"{path}: recipe file not found")
+        raise RecipeError(f"{path}: " + ("is a folder, not a recipe file" if path.is_dir()
+                                         else "recipe file not found"))
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:

@@ -48,6 +48,10 @@ class Params(BaseModel):
 
             raise PydanticCustomError("bool_word", "Input should be true or false (yes, no, on and off "
                                       "are words in YAML 1.2)")
+        if f.annotation in (bool, bool | None) and isinstance(v, (int, float)) and not isinstance(v, bool):
+            from pydantic_core import PydanticCustomError  # lax mode takes 1 and 0.0 as yes and no
+
+            raise PydanticCustomError("bool_number", "Input should be true or false (got {got})", {"got": v})
         if isinstance(v, (bool, list, tuple, dict)):
             from .yamlio import bool_as_number
 

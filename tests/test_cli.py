@@ -95,6 +95,7 @@ def test_one_bad_input_among_several_fails_alone(run_cli, tmp_path):
                 write(t / "g.csv", "1 2 3\n")), r"key 'diameter': Input should be greater than 0"),
     (lambda t: ("--batch", t / "r.yaml"), r"--batch needs RECIPE and at least one INPUT"),
     (lambda t: ("--batch", t / "nope.yaml", write(t / "g.csv", "1 2 3\n")), r"nope.yaml: recipe file not found"),
+    (lambda t: ("--batch", t, write(t / "g.csv", "1 2 3\n")), r": is a folder, not a recipe file"),
 ])
 def test_bad_input_exit_2_one_line_no_output(run_cli, tmp_path, make, pattern):
     import re

@@ -223,6 +223,12 @@ def test_true_and_false_still_fill_yes_no_parameters_and_other_fields_say_their_
         load_recipe(write(tmp_path / "r2.yaml", _steps("bspline_map: {extrapolate: yes}")))
     with pytest.raises(RecipeError, match=r"key 'note': Input should be a valid string \(got true\)$"):
         load_recipe(write(tmp_path / "r3.yaml", _steps("manual_edit: {note: true}")))
+    # nor is a number a yes/no (lax mode took 1 as true)
+    with pytest.raises(RecipeError, match=r"key 'extrapolate': Input should be true or false \(got 1\)"):
+        load_recipe(write(tmp_path / "r4.yaml", _steps("bspline_map: {extrapolate: 1}")))
+    with pytest.raises(RecipeError, match=r"key 'mesh.repair': Input should be true or false \(got 0\)"):
+        load_recipe(write(tmp_path / "r5.yaml", "pointspro: 1\nsurface: {type: mesh, path: m.obj, repair: 0}\n"
+                                                "steps: []\n"))
 
 
 def test_true_is_not_a_number_through_the_python_api_and_the_step_editor():

@@ -143,7 +143,8 @@ class Session:
     def load_recipe(self, path) -> None:
         p = Path(path)
         if not p.is_file():
-            raise RecipeError(f"{p}: recipe file not found")
+            raise RecipeError(f"{p}: " + ("is a folder, not a recipe file" if p.is_dir()
+                                          else "recipe file not found"))
         self.set_recipe(load_yaml(p.read_text(encoding="utf-8"), str(p)), str(p))
 
     # -- pipeline editing ---------------------------------------------------------------------------

@@ -48,6 +48,11 @@ class _Spec(BaseModel):
                            f"1.2) (got {v!r})")
                     raise PydanticCustomError("bool_word", "key {name}: {detail}",
                                               {"name": repr(name), "keys": [name], "detail": why})
+                if (f is not None and f.annotation in (bool, bool | None) and isinstance(v, (int, float))
+                        and not isinstance(v, bool)):  # lax mode takes 1 and 0.0 as yes and no
+                    raise PydanticCustomError("bool_number", "key {name}: {detail}",
+                                              {"name": repr(name), "keys": [name],
+                                               "detail": f"Input should be true or false (got {v})"})
                 if f is not None and isinstance(v, (bool, list, tuple, dict)):
                     error = bool_as_number(f.annotation, v, name)
                     if error is not None:
