@@ -314,3 +314,127 @@ def test_blank_lines_and_cr_line_ends_read_as_lines(tmp_path, monkeypatch, text,
 def test_a_bad_row_after_a_blank_line_is_still_named(tmp_path):
     with pytest.raises(InputError, match=r"m.csv, line 4, column 2: 'abc' is not a number"):
         read_cloud(write(tmp_path / "m.csv", "x,y,z\n1,2,3\n  \n4,abc,6\n"))
+
+
+_UM = "x [um],y [um],z [um]\n1000,2000,3\n4000,5000,6\n"
+
+
+@pytest.mark.parametrize("lines", [60, 500, 998])
+@pytest.mark.parametrize("fast", [False, True])
+def test_a_long_preamble_is_skipped(tmp_path, monkeypatch, lines, fast):
+    """Instrument exports carry 100+ metadata lines; the data was looked for in the first 50."""
+    import pointspro.core.io.text as text_io
+
+    if fast:
+        monkeypatch.setattr(text_io, "_FAST_BYTES", 0)
+    text = "".join(f"Info{i}: value\n" for i in range(lines)) + _UM
+    c = read_cloud(write(tmp_path / "m.csv", text))
+    assert np.array_equal(c.xyz, [[1, 2, 0.003], [4, 5, 0.006]]) and c.meta["header_line"] == lines + 1
+
+
+@pytest.mark.parametrize("text,pattern", [
+    ("".join(f"Info{i}: value\n" for i in range(1000)) + _UM,
+     r"m.csv: no numeric data rows in the first 1000 lines \(first line 1: 'Info0: value'\)"),
+    ("".join(f"# note {i}\n" for i in range(1200)) + "1,2,3\n",
+     r"m.csv: no numeric data rows in the first 1000 lines \(comments and blank lines only\)"),
+])
+def test_no_data_in_the_head_says_how_far_it_looked(tmp_path, text, pattern):
+    with pytest.raises(InputError, match=pattern):
+        read_cloud(write(tmp_path / "m.csv", text))
+
+
+@pytest.mark.parametrize("text,xyz,decimal_comma", [
+    # a decimal comma in a later row, not the first: read as one
+    ("x;y;z\n1;2;3\n4,5;5;6\n", [[1, 2, 3], [4.5, 5, 6]], True),
+    ("x\ty\tz\n1\t2\t3\n4,5\t5\t6\n", [[1, 2, 3], [4.5, 5, 6]], True),
+    ("x;y;z\n1;2;3\n# v1.2, test\n4;5;6,25 # rev 2.1\n", [[1, 2, 3], [4, 5, 6.25]], True),
+    # decimal points with ';' or tab, and any ',' file, read as before
+    ("x;y;z\n1.5;2;3\n4.25;5;6\n", [[1.5, 2, 3], [4.25, 5, 6]], False),
+    ("x\ty\tz\n1.5\t2\t3\n4.25\t5\t6\n", [[1.5, 2, 3], [4.25, 5, 6]], False),
+    ("x,y,z\n1.5,2,3\n4,5,6\n", [[1.5, 2, 3], [4, 5, 6]], False),
+])
+@pytest.mark.parametrize("fast", [False, True])
+def test_decimal_comma_in_any_row_of_the_head(tmp_path, monkeypatch, text, xyz, decimal_comma, fast):
+    import pointspro.core.io.text as text_io
+
+    if fast:
+        monkeypatch.setattr(text_io, "_FAST_BYTES", 0)
+    c = read_cloud(write(tmp_path / "m.csv", text))
+    assert np.array_equal(c.xyz, xyz) and c.meta["decimal_comma"] is decimal_comma
+
+
+@pytest.mark.parametrize("text,pattern", [
+    ("x;y;z\n1;2;3\n4,5;5;6\n7.5;8;9\n", r"m.csv, line 4, column 1: '7.5' has a decimal point but "
+                                        r"line 3 a decimal comma"),
+    ("x;y;z\n1.5;2;3\n4,5;5;6\n", r"m.csv, line 2, column 1: '1.5' has a decimal point but line 3 a "
+                                  r"decimal comma"),
+    ("x\ty\tz\n1\t2,5\t3\n4\t5.5\t6\n", r"m.csv, line 3, column 2: '5.5' has a decimal point"),
+    ("1,5 2,5 3,5\n4.0 5.0 6.0\n", r"m.csv, line 2, column 1: '4.0' has a decimal point but line 1"),
+    ("x;y;z\n1;2;3\n1.000,5;5;6\n", r"m.csv, line 3, column 1: '1.000,5' is not a number"),
+    ("x;y;z\n1.5;2;3\n4.5;5;6\nEnd, 2 points\n", r"m.csv, line 4: 1 column\(s\), expected 3"),
+    ("x\ty\tz\n" + "1\t2\t3\n" * 1200 + "4,5\t5\t6\n",
+     r"m.csv, line 1202, column 1: '4,5' is not a number \(a decimal comma where the rows above "
+     r"have none"),
+])
+@pytest.mark.parametrize("fast", [False, True])
+def test_decimal_commas_and_points_mixed_are_refused(tmp_path, monkeypatch, text, pattern, fast):
+    """Read with the commas made points, "4.5" among "4,5" passed unseen (or "1.000,5" as 1.0005)."""
+    import pointspro.core.io.text as text_io
+
+    if fast:
+        monkeypatch.setattr(text_io, "_FAST_BYTES", 0)
+    with pytest.raises(InputError, match=pattern):
+        read_cloud(write(tmp_path / "m.csv", text))
+
+
+_UTF16_TEXT = "x [µm],y [µm],z [µm]\r\n1000,2000,3\r\n4000,5000,6\r\n"
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be"])
+@pytest.mark.parametrize("fast", [False, True])
+def test_utf16_text_is_read(tmp_path, monkeypatch, encoding, fast):
+    """Latin-1 was the fallback: every other byte a NUL, and a message about something else."""
+    import pointspro.core.io.text as text_io
+
+    if fast:  # pandas reads the raw bytes: not taken for UTF-16
+        monkeypatch.setattr(text_io, "_FAST_BYTES", 0)
+        monkeypatch.setattr(text_io, "_fast_parse", lambda *a: pytest.fail("fast path on UTF-16"))
+    p = tmp_path / "m.csv"
+    p.write_bytes(_UTF16_TEXT.encode(encoding))  # "utf-16" with its BOM, the others without
+    xyz, _, meta = text_io.read_text(p)
+    assert np.array_equal(xyz, [[1, 2, 0.003], [4, 5, 0.006]]) and meta["header_line"] == 1
+    (tmp_path / "cut.csv").write_bytes(p.read_bytes()[:-1])  # an odd byte count
+    with pytest.raises(InputError, match=r"cut.csv: UTF-16 text that does not decode at byte \d+ — "
+                                         r"save it as UTF-8"):
+        text_io.read_text(tmp_path / "cut.csv")
+
+
+def test_utf16_text_is_read_by_read_cloud(tmp_path):
+    p = tmp_path / "m.csv"
+    p.write_bytes(_UTF16_TEXT.encode("utf-16"))
+    assert np.array_equal(read_cloud(p).xyz, [[1, 2, 0.003], [4, 5, 0.006]])
+
+
+@pytest.mark.parametrize("text,xyz", [
+    ('x,y,z\n"1","2","3"\n"4","5","6"\n', [[1, 2, 3], [4, 5, 6]]),
+    ('"x","y","z"\n"1.5",2,"3"\n4,"5",6\n', [[1.5, 2, 3], [4, 5, 6]]),
+    ('"x";"y";"z"\n"1,5";"2";"3"\n"4";"5";"6"\n', [[1.5, 2, 3], [4, 5, 6]]),
+    ('"1" "2" "3"\n"4" "5" "6"\n', [[1, 2, 3], [4, 5, 6]]),
+])
+@pytest.mark.parametrize("fast", [False, True])
+def test_numbers_in_double_quotes_are_read(tmp_path, monkeypatch, text, xyz, fast):
+    import pointspro.core.io.text as text_io
+
+    if fast:  # pandas takes the quotes off itself
+        monkeypatch.setattr(text_io, "_FAST_BYTES", 0)
+    c = read_cloud(write(tmp_path / "m.csv", text))
+    assert np.array_equal(c.xyz, xyz) and c.xyz.dtype == np.float64
+
+
+@pytest.mark.parametrize("text,pattern", [
+    ('x,y,z\n"1","2","3"\n"4","a","6"\n', r"m.csv, line 3, column 2: '\"a\"' is not a number"),
+    ('x,y,z\n"1","2","3"\n"4,5","5","6"\n', r"m.csv, line 3: 4 column\(s\), expected 3 as on line 2"),
+])
+def test_bad_quoted_fields_are_named(tmp_path, text, pattern):
+    with pytest.raises(InputError, match=pattern):
+        read_cloud(write(tmp_path / "m.csv", text))

@@ -154,7 +154,8 @@ def _sniff(path: Path) -> tuple[bytes, bool]:
             f.seek(max(size - 4096, _HEAD_BYTES))
             tail = f.read()
     if b"\0" in head or b"\0" in tail:
-        return head, False
+        return head, _printable_utf16(head)
+
     try:
         head.decode("utf-8")
         return head, True
@@ -164,6 +165,20 @@ def _sniff(path: Path) -> tuple[bytes, bool]:
     sample = head[:4096]
     printable = sum(b >= 32 or b in (9, 10, 13) for b in sample)
     return head, printable >= 0.95 * len(sample)
+
+
+def _printable_utf16(head: bytes) -> bool:
+    """UTF-16 text (a BOM, or ASCII with every other byte NUL) whose first characters are printable:
+    read as text (core.io.text decodes it). The printable test keeps a binary map of small 16-bit
+    numbers, whose high bytes are NUL as well, out."""
+    from .text import _utf16
+
+    codec = _utf16(head)
+    if codec is None:
+        return False
+    sample = head[:4096]
+    text = sample[:len(sample) // 2 * 2].decode(codec, errors="replace")
+    return bool(text) and sum(c.isprintable() or c in "\t\r\n" for c in text) >= 0.95 * len(text)
 
 
 _MESH_NOTE = " (a nominal for `register` or `surface: {type: mesh}`)"

@@ -3,7 +3,11 @@
 Accepted: a header line or none; preamble lines before the header (instrument, date...); comma,
 semicolon, tab or whitespace separators, the header's may differ from the data's (``y x z`` over
 tab-separated rows; at whitespace ``x [um]`` is one name); decimal commas when the separator is a
-semicolon, tab or space (European exports); LF, CRLF or CR-alone line ends; lines of blanks read as
+semicolon, tab or space (European exports; with ';' or tab a comma in any data row of the first
+1000 lines, not only the first, decides) — a file mixing decimal commas and points is
+refused naming the first point; fields in double quotes (``"1","2","3"``); a preamble of up to
+1000 lines before the data; UTF-8 (with or without BOM), UTF-16 (BOM, or told by its NUL
+bytes) or Latin-1 text; LF, CRLF or CR-alone line ends; lines of blanks read as
 empty; comment lines starting with #, //, % or !, except CloudCompare's ``//X Y Z …`` line (or a
 ``# x y z`` one) right above the data, which names the columns. A line naming the axes must be the
 last before the data: one in between (``---``, ``units: mm``) is refused. A length unit in brackets in the
@@ -49,6 +53,15 @@ def _is_comment(line: str) -> bool:
     return not s or s.startswith(COMMENTS)
 
 
+def _code(line: str) -> str:
+    """``line`` up to its first comment marker (the C readers end a line there)."""
+    for c in COMMENTS:
+        k = line.find(c)
+        if k >= 0:
+            line = line[:k]
+    return line
+
+
 def _split(line: str, delim: str | None) -> list[str]:
     parts = line.strip().split(delim) if delim else line.split()
     return [p.strip() for p in parts]
@@ -80,6 +93,10 @@ def _names_axes(toks: list[str], decimal_comma: bool = False) -> bool:
 
 
 def _is_number(tok: str, decimal_comma: bool) -> bool:
+    """Whether ``tok`` is a number, also written in double quotes (``"1.5"``: numpy's and pandas'
+    readers take the quotes off)."""
+    if len(tok) >= 2 and tok[0] == tok[-1] == '"':
+        tok = tok[1:-1]
     try:
         float(tok.replace(",", ".") if decimal_comma else tok)
         return True
@@ -174,13 +191,17 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
     file (a parameter file, which is not the user's measurement). ``profile_angle_deg``: the azimuth
     of a stylus profile (see the module doc)."""
     raw = path.read_bytes()
-    text, encoding = _decode(raw)
+    try:
+        text, encoding = _decode(raw)
+    except UnicodeDecodeError as e:  # only UTF-16 is decoded strictly
+        raise InputError(f"{path}: UTF-16 text that does not decode at byte {e.start} — save it "
+                         "as UTF-8") from None
     # Only the head is split into lines to find the layout; the body goes to the C reader whole.
-    head = text.split("\n", 200)[:200]
+    head = _head_lines(text)
     cr_only = len(head) == 1 and "\r" in text
     if cr_only:  # classic Mac OS line ends (CR alone): one "line" holding the whole file otherwise
         text = text.replace("\r", "\n")
-        head = text.split("\n", 200)[:200]
+        head = _head_lines(text)
     lines = _LazyLines(text, head)
     lay = _find_layout(path, head, lines, quote)
     data = _parse_numbers(path, raw, text, lines, lay, encoding, quote, cr_only)
@@ -229,10 +250,50 @@ class _Layout:
     ncols: int
     trailing_empty: bool  # "1,2,3," rows: an empty field after the last delimiter
     header: tuple[int, list[str]] | None = None  # (0-based line, names as written)
+    comma_line: int | None = None  # 0-based line of the first decimal comma
+
+
+# Lines split up front to find the layout: a preamble (instrument, part, operator …) may be this long.
+_HEAD_LINES = 1000
+
+
+def _head_lines(text: str, n: int = _HEAD_LINES) -> list[str]:
+    """The first ``n`` lines of ``text``, as ``str.split`` at line feeds gives them, without copying
+    the rest of a big file (a split with ``maxsplit`` does: 50 ms on 40 MB)."""
+    end = 0
+    for _ in range(n):
+        k = text.find("\n", end)
+        if k < 0:
+            return text.split("\n")
+        end = k + 1
+    return text[:end].split("\n")[:n]
+
+
+def _utf16(raw: bytes) -> str | None:
+    """The UTF-16 codec of ``raw`` — by its BOM, else by the NUL bytes of ASCII text in UTF-16 (every
+    other byte zero) — or None."""
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return "utf-16"
+    sample = raw[:4096]
+    sample = sample[:len(sample) // 2 * 2]
+    if len(sample) < 4 or b"\0" not in sample:
+        return None
+    even, odd = sample[0::2].count(0), sample[1::2].count(0)
+    half = len(sample) // 2
+    if odd >= 0.9 * half and even <= 0.1 * half:
+        return "utf-16-le"
+    if even >= 0.9 * half and odd <= 0.1 * half:
+        return "utf-16-be"
+    return None
 
 
 def _decode(raw: bytes) -> tuple[str, str]:
-    """(text, encoding): UTF-8 (with or without BOM), else Latin-1 (Windows exports with µ)."""
+    """(text, encoding): UTF-16 (BOM, or the NUL bytes of BOM-less UTF-16: decoded strictly, a
+    UnicodeDecodeError otherwise), UTF-8 (with or without BOM), else Latin-1 (Windows exports with
+    µ)."""
+    utf16 = _utf16(raw)
+    if utf16:
+        return raw.decode(utf16), utf16
     try:
         return raw.decode("utf-8-sig"), "utf-8-sig"
     except UnicodeDecodeError:
@@ -243,16 +304,31 @@ def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True)
     """The first data line, the delimiter, the column count and the header (if any)."""
     first_data, candidates = _first_data_line(path, head, lines, quote)
     delim, decimal_comma = _sniff_delimiter(lines[first_data])
+    comma_line = first_data if decimal_comma else None
+    if delim in (";", "\t") and not decimal_comma:
+        # "1;2;3" then "4,5;5;6": a decimal comma in any data row of the head decides, not the first
+        # row alone (a comma is no separator here). At whitespace "4, 5, 6" may be comma-separated.
+        comma_line = next((i for i in range(first_data + 1, len(head))
+                           if "," in head[i] and _comma_row(head[i], delim)), None)
+        decimal_comma = comma_line is not None
     first_toks = _split(lines[first_data], delim)
     trailing_empty = bool(first_toks) and first_toks[-1] == ""
     ncols = len(first_toks) - (1 if trailing_empty else 0)
-    lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty)
+    lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty, comma_line=comma_line)
     if candidates:
         lay.header = _find_header(path, lines, candidates[-1], lay, quote)
         _check_nothing_between(path, lines, candidates, lay, quote)
     if lay.header is None:
         lay.header = _comment_header(lines, first_data, lay)
     return lay
+
+
+def _comma_row(line: str, delim: str) -> bool:
+    """Whether ``line`` is a row of numbers with a decimal comma ("4,5;5;6"), not a footer or a note
+    ("End, 2 points") nor "1,000.5" (a thousands comma: refused later, naming it)."""
+    code = _code(line)
+    toks = [t for t in _split(code, delim) if t != ""]
+    return "," in code and bool(toks) and all(_is_number(t, True) for t in toks)
 
 
 def _comment_header(lines: "_LazyLines", first_data: int, lay: _Layout) -> tuple[int, list[str]] | None:
@@ -292,7 +368,8 @@ def _names_xyz_once(toks: list[str]) -> bool:
 
 def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = True
                      ) -> tuple[int, list[int]]:
-    """(first all-numeric line, the non-numeric non-comment lines before it) — 0-based."""
+    """(first all-numeric line, the non-numeric non-comment lines before it) — 0-based; looked for
+    in the head (``_HEAD_LINES``), so a preamble of any length up to that is skipped."""
     candidates = []
     for i, line in enumerate(head):
         line = line.rstrip("\r")
@@ -303,13 +380,16 @@ def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = T
         if all(_is_number(t, dc) for t in toks if t != "") and any(t != "" for t in toks):
             return i, candidates
         candidates.append(i)
-        if len(candidates) > 50:
-            break
+    beyond = lines.beyond(len(head))
+    if beyond and not candidates:
+        raise InputError(f"{path}: no numeric data rows in the first {len(head)} lines (comments and "
+                         "blank lines only)")
     if candidates:
         ln = candidates[0] + 1
+        where = f"in the first {len(head)} lines" if beyond else "found"
         if not quote:
-            raise InputError(f"{path}: no numeric data rows found (from line {ln} on)")
-        raise InputError(f"{path}: no numeric data rows found (first line {ln}: "
+            raise InputError(f"{path}: no numeric data rows {where} (from line {ln} on)")
+        raise InputError(f"{path}: no numeric data rows {where} (first line {ln}: "
                          f"{lines[candidates[0]].strip()[:60]!r})")
     raise InputError(f"{path}: empty file — no data rows")
 
@@ -363,7 +443,9 @@ def _check_nothing_between(path, lines: "_LazyLines", candidates: list[int], lay
     ("Part 7, run 3") may stand anywhere."""
     for n in range(len(candidates) - 2, -1, -1):
         k = candidates[n]
-        if not any(_names_axes(_header_tokens(lines[k], d), lay.decimal_comma) for d in _SEPARATORS):
+        low = lines[k].lower()  # a preamble may be long: only a line with an x and a z can name them
+        if "x" not in low or "z" not in low or not any(
+                _names_axes(_header_tokens(lines[k], d), lay.decimal_comma) for d in _SEPARATORS):
             continue
         m = candidates[n + 1]
         where = f"between the header (line {k + 1}) and the data (line {lay.first_data + 1})"
@@ -389,18 +471,24 @@ def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layou
     present = [c for c in COMMENTS if c in text]
     comments = None if not present else present[0] if len(present) == 1 else present
     usecols = range(lay.ncols) if lay.trailing_empty else None
+    if lay.decimal_comma:
+        _check_decimal_marks(path, text, lines.offset(lay.first_data), lay, quote)
     data = None
-    if len(raw) > _FAST_BYTES and not cr_only:
+    # pandas reads the file's bytes: not for UTF-16 (the numpy path reads the decoded text)
+    if len(raw) > _FAST_BYTES and not cr_only and encoding in ("utf-8-sig", "latin-1"):
         data = _fast_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
                            lay.trailing_empty, encoding)
+    # "1","2","3": numpy takes the quotes off when told to; looked for only when there are any
+    quotechar = '"' if data is None and '"' in text else None
     try:
         if data is not None:
             pass
         elif lay.decimal_comma or encoding != "utf-8-sig" or cr_only:
-            data = _loadtxt_text(text.split("\n")[lay.first_data:], lay, comments, usecols)
+            data = _loadtxt_text(text.split("\n")[lay.first_data:], lay, comments, usecols, quotechar)
         else:
             data = np.loadtxt(path, delimiter=lay.delim, comments=comments, ndmin=2, dtype=np.float64,
-                              usecols=usecols, skiprows=lay.first_data, encoding="utf-8-sig")
+                              usecols=usecols, skiprows=lay.first_data, encoding="utf-8-sig",
+                              quotechar=quotechar)
     except ValueError:
         # Lines of blanks only ("   ", a stray tab) read as the empty lines they look like; numpy
         # takes them for a row of empty fields. Looked for only now, so good files pay nothing.
@@ -408,7 +496,8 @@ def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layou
         try:
             if not any(ln and not ln.strip() for ln in body):
                 raise ValueError  # no line of blanks: the failure is elsewhere
-            data = _loadtxt_text([ln for ln in body if ln.strip()], lay, comments, usecols)
+            data = _loadtxt_text([ln for ln in body if ln.strip()], lay, comments, usecols,
+                                 quotechar)
         except ValueError:
             _diagnose(path, lines.all(), lay.first_data, lay.delim, lay.decimal_comma, lay.ncols,
                       lay.trailing_empty, quote)
@@ -418,13 +507,33 @@ def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layou
     return data
 
 
-def _loadtxt_text(body: list[str], lay: _Layout, comments, usecols) -> np.ndarray:
+def _loadtxt_text(body: list[str], lay: _Layout, comments, usecols, quotechar=None) -> np.ndarray:
     """numpy's reader on data lines already decoded (decimal commas made points)."""
     text = "\n".join(body)
     if lay.decimal_comma:
         text = text.replace(",", ".")
     return np.loadtxt(io.StringIO(text), delimiter=lay.delim, comments=comments, ndmin=2,
-                      dtype=np.float64, usecols=usecols)
+                      dtype=np.float64, usecols=usecols, quotechar=quotechar)
+
+
+def _check_decimal_marks(path, text: str, start: int, lay: _Layout, quote: bool = True) -> None:
+    """A file of decimal commas must write no decimal point in its data (from ``start``, the first
+    data line's offset in ``text``): "4,5" and "4.5" mixed — or "1.000,5" — would read half wrong,
+    so the first point is named by line and column. A point in a comment is no number's."""
+    pos = text.find(".", start)
+    while pos >= 0:
+        a = text.rfind("\n", 0, pos) + 1
+        b = text.find("\n", pos)
+        b = len(text) if b < 0 else b
+        code = _code(text[a:b].rstrip("\r"))
+        if "." in code:
+            toks = _split(code, lay.delim)
+            j = next(k for k, t in enumerate(toks) if "." in t)
+            ln = text.count("\n", 0, a) + 1
+            comma = lay.comma_line + 1 if lay.comma_line is not None else lay.first_data + 1
+            raise InputError(f"{path}, line {ln}, column {j + 1}: {_q(toks[j], quote)}has a decimal "
+                             f"point but line {comma} a decimal comma — write every number one way")
+        pos = text.find(".", b)
 
 
 def _header_columns(path, lay: _Layout, need_xyz: bool, quote: bool = True):
@@ -626,6 +735,14 @@ class _LazyLines:
             self._all = self._text.splitlines()
         return self._all
 
+    def offset(self, i: int) -> int:
+        """Where line ``i`` (of the head) starts in the text."""
+        return sum(len(h) + 1 for h in self._head[:i])
+
+    def beyond(self, n: int) -> bool:
+        """Whether the text goes on after its first ``n`` lines (those of the head)."""
+        return self.offset(n) < len(self._text)
+
 
 def _data_line_number(lines, first_data, row) -> int:
     k = -1
@@ -656,4 +773,8 @@ def _diagnose(path, lines, first_data, delim, decimal_comma, ncols, trailing_emp
                              f"as on line {first_data + 1}")
         for j, t in enumerate(toks):
             if not _is_number(t, decimal_comma):
-                raise InputError(f"{path}, line {i + 1}, column {j + 1}: {_q(t, quote)}is not a number")
+                hint = (" (a decimal comma where the rows above have none — write every number "
+                        "one way)"
+                        if delim in (";", "\t") and _is_number(t, True) else "")
+                raise InputError(f"{path}, line {i + 1}, column {j + 1}: {_q(t, quote)}is not a "
+                                 f"number{hint}")
