@@ -111,6 +111,12 @@ def test_resume_skips_complete_outputs_and_reruns_changed_recipes(run_cli, tmp_p
     run_cli("--batch", other, *files, "--out", out, "--quiet", "--resume", "--workers", "1")
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert [e["status"] for e in s["inputs"]] == ["ok", "ok", "ok"]
+    # the same name measured again (same size, one height changed): run again, not its old numbers
+    text = files[1].read_text(encoding="utf-8")
+    files[1].write_text(text.replace("86.", "87.", 1), encoding="utf-8")
+    run_cli("--batch", other, *files, "--out", out, "--quiet", "--resume", "--workers", "1")
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert [e["status"] for e in s["inputs"]] == ["skipped", "ok", "skipped"]
 
 
 def _heavy_inputs(tmp_path, n, points=60_000):
