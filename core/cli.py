@@ -621,6 +621,18 @@ def cmd_info(args) -> int:
     return EXIT_OK
 
 
+def _check_simulate_out(out: Path, model: Path) -> None:
+    """simulate writes one file: its folder must exist, the path must not be a folder or the model."""
+    from .errors import RecipeError
+
+    if out.resolve() == model.resolve():
+        raise RecipeError(f"--out {out}: is the model file itself; choose another file name")
+    if out.is_dir():
+        raise RecipeError(f"--out {out}: is a folder; give the file to write (e.g. {out / 'simulated.csv'})")
+    if not out.parent.is_dir():
+        raise RecipeError(f"--out {out}: the folder {out.parent} does not exist")
+
+
 def cmd_simulate(args) -> int:
     from .cloud import PointCloud
     from .io import write_cloud
@@ -635,15 +647,37 @@ def cmd_simulate(args) -> int:
         raise RecipeError(f"{args.model}: {e}") from None
     extra = {"fiducial": sim["fiducial"]} if "fiducial" in sim else {}
     cloud = PointCloud.from_xyz(sim["x"], sim["y"], sim["z"], t=sim["t"], c=sim["c"], xd=sim["xd"], **extra)
+    _check_simulate_out(Path(args.out), Path(args.model))
     write_cloud(cloud, args.out)
     print(f"{args.out}: {cloud.n} simulated points")
     return EXIT_OK
+
+
+def _check_explain_out(out: Path, inputs: list[Path]) -> None:
+    """explain replaces its --out folder as a whole: refuse a path that holds or is one of its inputs,
+    a file, or a folder that is not an earlier explain output (no explain.json; an empty one is
+    fine). Before: `--out meas.csv` moved the measurement aside, `--out notes/` deleted the notes."""
+    from .errors import RecipeError
+
+    o = out.resolve()
+    for p in inputs:
+        pr = p.resolve()
+        if pr == o or o in pr.parents:
+            raise RecipeError(f"--out {out}: holds the input {p}, and explain replaces that folder as a "
+                              "whole; choose another --out")
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise RecipeError(f"--out {out}: exists and is not a folder; explain writes a folder there — "
+                          "choose another --out")
+    if out.is_dir() and not (out / "explain.json").is_file() and any(out.iterdir()):
+        raise RecipeError(f"--out {out}: exists and is not an explain output folder (no explain.json); "
+                          "explain would replace it — move it or choose another --out")
 
 
 def cmd_explain(args) -> int:
     from .explain.workflow import explain
 
     out = Path(args.out)
+    _check_explain_out(out, [Path(a) for a in (args.measured, args.model, args.simulated) if a])
     out.parent.mkdir(parents=True, exist_ok=True)
     rep = explain(Path(args.measured), out, Path(args.model) if args.model else None,
                   Path(args.simulated) if args.simulated else None, bootstrap=args.bootstrap)

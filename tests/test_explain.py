@@ -164,3 +164,24 @@ def test_commands_and_simulated_file(tmp_path, run_cli):
     assert code == 2 and "unknown parameter(s) ['gamma']" in err
     code, _, err = run_cli("explain", "--measured", tmp_path / "meas.csv", "--out", tmp_path / "o3")
     assert code == 2 and "--model" in err
+    # outputs never replace what is not theirs; too few points; simulate's --out checked
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "keep.txt").write_text("precious", encoding="utf-8")
+    for out, want in ((tmp_path / "meas.csv", "holds the input"), (notes, "not an explain output folder"),
+                      (tmp_path, "holds the input")):
+        code, _, err = run_cli("explain", "--model", tmp_path / "base.yaml", "--measured", tmp_path / "meas.csv",
+                               "--out", out)
+        assert code == 2 and want in err, err
+    assert (notes / "keep.txt").read_text(encoding="utf-8") == "precious" and (tmp_path / "meas.csv").is_file()
+    code, _, err = run_cli("explain", "--model", tmp_path / "base.yaml", "--measured", tmp_path / "meas.csv",
+                           "--out", tmp_path / "o2")  # an earlier explain output is replaced
+    assert code == 0, err
+    (tmp_path / "few.csv").write_text("x,y,z\n1,2,3\n4,5,6\n7,8,10\n", encoding="utf-8")
+    code, _, err = run_cli("explain", "--model", tmp_path / "base.yaml", "--measured", tmp_path / "few.csv",
+                           "--out", tmp_path / "o4")
+    assert code == 2 and "3 point(s); explain compares" in err and not (tmp_path / "o4").exists()
+    for out, want in ((tmp_path / "nodir" / "s.csv", "does not exist"), (notes, "is a folder"),
+                      (tmp_path / "base.yaml", "is the model file itself")):
+        code, _, err = run_cli("simulate", tmp_path / "base.yaml", "--out", out)
+        assert code == 2 and want in err and "internal error" not in err, err

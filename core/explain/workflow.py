@@ -70,12 +70,22 @@ def _view(name: str) -> str:
             "dynamic_lag": "time", "vibration": "spectrum"}.get(name, "map")
 
 
+#: fewer points cannot separate the library's signatures from the noise: a 1-point file came out
+#: "nothing_missing" with a zero gap, a 3-point line "nothing missing, noise 808 µm"
+MIN_POINTS = 100
+
+
 def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simulated: Path | None = None,
             bootstrap: int = 10) -> dict:
     from ..io import read_cloud
     from ..simulate.model import load_model
 
     meas = read_cloud(measured)
+    if meas.n < MIN_POINTS:
+        from ..errors import InputError
+
+        raise InputError(f"{measured}: {meas.n} point(s); explain compares a scan with its simulation "
+                         f"and needs {MIN_POINTS} points at least to tell an effect from the noise")
     model = None
     if model_path is not None:
         model = load_model(model_path)
