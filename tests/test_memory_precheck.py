@@ -132,3 +132,27 @@ def _forbid_bulk_reads(monkeypatch):
         monkeypatch.setattr(e57, "read_e57", boom)
     except ImportError:
         pass
+
+
+@pytest.mark.parametrize("name", ["m.dat", "m.x3p"])
+def test_a_header_stating_more_than_the_file_holds_is_no_memory_advice(tmp_path, monkeypatch, name):
+    """A 5 KB MetroPro of random bytes was told it "needs 158 GB — decimate the map first": a header
+    that states more points than the file's bytes can hold is damaged, and its reader says so."""
+    path = tmp_path / name
+    MAKERS[name](path)
+    if name == "m.dat":
+        path.write_bytes(path.read_bytes()[:5000])  # the header says 640 × 480, 5 KB are left
+    else:
+        import zipfile
+
+        with zipfile.ZipFile(path) as zf:
+            members = {nm: zf.read(nm) for nm in zf.namelist()}
+        members["main.xml"] = members["main.xml"].replace(b"<SizeX>40</SizeX>", b"<SizeX>6400000</SizeX>")
+        with zipfile.ZipFile(path, "w") as zf:
+            for nm, data in members.items():
+                zf.writestr(nm, data)
+    assert memory.stated_points(path, *_sniffed(path)) is None
+    monkeypatch.setattr(memory, "available_bytes", lambda: 10_000)
+    with pytest.raises(InputError) as e:
+        read_cloud(path)
+    assert "decimate" not in str(e.value) and str(e.value).startswith(str(path))

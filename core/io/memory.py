@@ -123,7 +123,9 @@ def stated_points(path, head: bytes, is_text: bool) -> tuple[int, str] | None:
         if head[:4] in (b"\x88\x1b\x03\x6f", b"\x88\x1b\x03\x70", b"\x88\x1b\x03\x71"):  # MetroPro
             w = int.from_bytes(head[68:70], "big")
             h = int.from_bytes(head[70:72], "big")
-            return (w * h, "MetroPro header (phase-map size)") if w and h else None
+            if not (w and h) or 4 * w * h > size:  # 4 bytes a phase pixel: more than the file holds
+                return None  # is a damaged header, which the reader names (not a memory advice)
+            return w * h, "MetroPro header (phase-map size)"
         if is_text:
             lines = head.splitlines()[1:-1]  # the first (a header?) and the cut last one left out
             rows = [ln for ln in lines if ln.strip() and not ln.lstrip()[:1] in (b"#", b"/", b";")]
@@ -169,6 +171,9 @@ def _zip_points(path: Path) -> tuple[int, str] | None:
                 return None
             vals = {c.tag.split("}")[-1]: int(c.text or 1) for c in dims}
             n = vals.get("SizeX", 1) * vals.get("SizeY", 1) * vals.get("SizeZ", 1)
+            data = max((zf.getinfo(nm).file_size for nm in names if nm.startswith("bindata/")), default=0)
+            if 2 * n > data:  # 2 bytes a point at least (int16): a damaged header, which the reader names
+                return None
             return n, "X3P MatrixDimension"
         npy = next((nm for nm in names if nm in ("x.npy", "xyz.npy")), None)
         if npy is None:
