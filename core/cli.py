@@ -676,6 +676,10 @@ def _check_explain_out(out: Path, inputs: list[Path]) -> None:
 def cmd_explain(args) -> int:
     from .explain.workflow import explain
 
+    if not 0 <= args.bootstrap <= 1000:
+        from .errors import RecipeError
+
+        raise RecipeError(f"--bootstrap {args.bootstrap}: replicates from 0 (none) to 1000")
     out = Path(args.out)
     _check_explain_out(out, [Path(a) for a in (args.measured, args.model, args.simulated) if a])
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -717,12 +721,29 @@ def cmd_steps(argv) -> int:
     return EXIT_OK
 
 
+def _check_display(args) -> None:
+    """The window on Linux without a display: Qt aborts the process (exit 134, plugin noise); say
+    what to do instead. A screenshot run, QT_QPA_PLATFORM set (offscreen, xcb …) or a display go on."""
+    import os
+
+    from .errors import PointsProError
+
+    if not sys.platform.startswith("linux") or os.environ.get("QT_QPA_PLATFORM") or args.screenshot:
+        return
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return
+    raise PointsProError("no display to open the window on (DISPLAY and WAYLAND_DISPLAY are unset): "
+                         "process files with `pointspro --batch RECIPE INPUT… --out DIR`, or run the "
+                         "window under xvfb-run or with QT_QPA_PLATFORM=offscreen")
+
+
 def cmd_window(args) -> int:
     from .errors import InputError
 
     for f in args.files:
         if not Path(f).exists():
             raise InputError(f"{f}: file not found")
+    _check_display(args)
     from pointspro.app.main import run_window  # the only path that imports Qt
 
     return run_window([Path(f) for f in args.files], screenshot=args.screenshot, run=args.run)

@@ -309,3 +309,21 @@ def test_a_step_needing_the_nominal_without_surface_is_the_recipes_error(run_cli
     code, _, err = run_cli("--batch", recipe, inp, "--out", tmp_path / "o", *extra)
     assert code == 2 and "r.yaml, line 4: step 2 'misalignment' needs the recipe's nominal `surface:`" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_window_without_a_display_says_what_to_do(run_cli, monkeypatch):
+    """Qt aborted the process (exit 134) with plugin noise when no display was there."""
+    import sys as _sys
+
+    if not _sys.platform.startswith("linux"):
+        pytest.skip("the check is for Linux's DISPLAY/WAYLAND_DISPLAY")
+    for k in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM"):
+        monkeypatch.delenv(k, raising=False)
+    code, _, err = run_cli(EXAMPLE / "asphere_cmm.csv")
+    assert code == 2 and "no display to open the window on" in err and "xvfb-run" in err
+
+
+def test_explain_bootstrap_out_of_range(run_cli, tmp_path):
+    code, _, err = run_cli("explain", "--model", tmp_path / "m.yaml", "--measured", tmp_path / "x.csv",
+                           "--out", tmp_path / "o", "--bootstrap", "-1")
+    assert code == 2 and "--bootstrap -1: replicates from 0" in err
