@@ -281,14 +281,22 @@ def _batch(args, recipe_path: Path, pool) -> int:
     out = Path(args.out)
     stems = output_stems(inputs)
     check_output_targets(out, inputs, stems)  # before the folder is made: a refusal leaves nothing
+    made = not out.exists()
     check_output_folder(out)
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
     t0 = time.perf_counter()
     workers = args.workers or _cores()
 
-    session = _cluster_session(args, recipe_path, recipe, inputs, out, workers)  # --scheduler
-    if args.check_only:
-        return _check_only(args, recipe, inputs, out, session)
+    try:  # a cluster that does not answer, or --check-only: no empty --out folder left behind
+        session = _cluster_session(args, recipe_path, recipe, inputs, out, workers)  # --scheduler
+        if args.check_only:
+            try:
+                return _check_only(args, recipe, inputs, out, session)
+            finally:
+                _remove_if_made_empty(out, made)
+    except BaseException:
+        _remove_if_made_empty(out, made)
+        raise
     try:
         results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "auto")
         # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
@@ -332,6 +340,15 @@ def _check_batch_args(args) -> None:
     if args.ship and not args.scheduler:
         raise RecipeError("--ship goes with --scheduler ADDRESS (it sends the inputs to a cluster's "
                           "workers)")
+
+
+def _remove_if_made_empty(out: Path, made: bool) -> None:
+    """Remove the --out folder this run made when nothing was written into it."""
+    if made:
+        try:
+            out.rmdir()  # only an empty folder goes
+        except OSError:
+            pass
 
 
 def _cluster_session(args, recipe_path: Path, recipe, inputs: list[Path], out: Path, workers: int):
