@@ -21,6 +21,13 @@ The channels ``row`` (j) and ``col`` (i) keep the pixel so a map can go back to 
 Units are converted to mm from what the file says. A file without lateral calibration is an error
 naming the reader option ``pixel_size_um`` (never a silent "pixel = 1 mm"); heights without a
 length unit need ``height_unit`` (or ``wavelength_nm`` for fringes/waves).
+
+A header scale that would collapse the map — a wavelength, height scale, pixel size or increment of
+0, NaN or inf (every height 0: a "perfect part"; every x equal), or a negative pixel size — is refused
+naming the field (``bad_header_scale``: MetroPro, Digital Surf, Wyko OPD, SDF, MI, namespace-less
+X3P). Where the reader's metadata does not show the field, ``check_map_geometry`` refuses the map
+afterwards: x (y) all equal on several columns (rows), or every valid height equal on 100 pixels or
+more (not for formats that store plain numbers without a scale, nor for x y z text).
 """
 from __future__ import annotations
 
@@ -46,12 +53,110 @@ def is_metropro(path: Path) -> bool:
         return f.read(4) in METROPRO_MAGICS
 
 
-def _short(e: BaseException) -> str:
+def _short(e: BaseException, limit: int = _MAX_MSG) -> str:
     """The first line of a library's message, printable and bounded (some quote whole buffers)."""
     s = str(e).strip()
     s = s.splitlines()[0].strip() if s else type(e).__name__
     s = "".join(ch if ch.isprintable() else "?" for ch in s)
-    return s if len(s) <= _MAX_MSG else s[:_MAX_MSG - 1] + "…"
+    return s if len(s) <= limit else s[:limit - 1] + "…"
+
+
+# --- scales that collapse a map ------------------------------------------------------------------------
+def bad_header_scale(path, field: str, value, what: str, positive: bool = False) -> InputError | None:
+    """The error for a header scale that would collapse the map (0, NaN, inf: every height or every x
+    the same) or, with ``positive``, mirror it (a negative pixel size or wavelength); None when the
+    value is usable. ``what``: what the scale gives ("heights", "x positions")."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return InputError(f"{path}: the header's {field} is {str(value)[:40]!r}, not a number — "
+                          f"{what} cannot be scaled")
+    if not np.isfinite(v):
+        return InputError(f"{path}: the header's {field} is {'not a number' if np.isnan(v) else v} "
+                          f"— {what} cannot be scaled")
+    if v == 0:
+        return InputError(f"{path}: the header's {field} is 0 — {what} cannot be scaled")
+    if positive and v < 0:
+        return InputError(f"{path}: the header's {field} is negative ({v:g}) — {what} would be "
+                          f"{'mirrored' if 'position' in what else 'upside down'}")
+    return None
+
+
+def _raise_bad(path, fields) -> None:
+    """Raise the first bad_header_scale of (field, value, what, positive) tuples."""
+    for field, value, what, positive in fields:
+        err = bad_header_scale(path, field, value, what, positive)
+        if err is not None:
+            raise err
+
+
+#: minimum valid pixels for "every height equal" to mean a zero scale (a real map is never that flat)
+FLAT_MAP_PIXELS = 100
+
+
+def check_map_geometry(path, xyz, channels, heights: bool = True) -> None:
+    """Safety net after reading an instrument map, for scales its reader's metadata does not show:
+    x (y) all equal on a map of several columns (rows), non-finite positions, or — with ``heights``,
+    for maps whose heights come through a header's scale — every valid height exactly equal on
+    ``FLAT_MAP_PIXELS`` pixels or more. Never for x y z text (a synthetic flat is legitimate there)."""
+    n = len(xyz)
+    if n == 0:
+        return
+    for k, axis, chan, along in ((0, "x", "col", "columns"), (1, "y", "row", "rows")):
+        idx = channels.get(chan)
+        v = xyz[:, k]
+        if not np.isfinite(v).all():
+            raise InputError(f"{path}: the map's {axis} positions are not finite numbers — a pixel "
+                             f"size or {axis} scale in the header that is not a number?")
+        if idx is None or n < 2:
+            continue
+        lo, hi = int(np.min(idx)), int(np.max(idx))
+        if lo != hi and float(np.min(v)) == float(np.max(v)):
+            raise InputError(f"{path}: every point has the same {axis} ({float(v[0]):g} mm) on a map "
+                             f"of {hi - lo + 1} {along} — the {axis} spacing is 0; is a scale or pixel "
+                             f"size in the header zero?")
+    if heights and n >= FLAT_MAP_PIXELS:
+        z = xyz[:, 2]
+        if float(np.min(z)) == float(np.max(z)):
+            raise InputError(f"{path}: all {n} valid heights are exactly {float(z[0]):g} mm — is a "
+                             "height scale or wavelength in the header zero?")
+
+
+#: header fields (SurfaceTopography's raw metadata) that scale a map: format → (key, name, what,
+#: must be positive)
+_HEADER_SCALES = {
+    "metropro": (("intf_scale_factor", "intf_scale_factor", "heights", False),
+                 ("wavelength_in", "wavelength", "heights", True),
+                 ("obliquity_factor", "obliquity_factor", "heights", False)),
+    "sur": (("grid_spacing_x", "x spacing", "x positions", True),
+            ("grid_spacing_y", "y spacing", "y positions", True),
+            ("height_scale_factor", "height scale", "heights", False)),
+    "opd": (("Wavelength", "Wavelength", "heights", True),
+            ("Pixel_size", "Pixel_size", "x and y positions", True),
+            ("Aspect", "Aspect", "y positions", True)),
+    "sdf": (("Xscale", "Xscale", "x positions", True), ("Yscale", "Yscale", "y positions", True),
+            ("Zscale", "Zscale", "heights", False)),
+    "mi": (("xLength", "xLength", "x positions", True), ("yLength", "yLength", "y positions", True)),
+}
+#: Digital Surf's binary header (little-endian float32 at these offsets) — checked before
+#: SurfaceTopography reads it, whose messages for a NaN there are a bare TypeError
+_SUR_SCALES = ((120, "x spacing (offset 120)", "x positions", True),
+               (124, "y spacing (offset 124)", "y positions", True),
+               (128, "height scale (offset 128)", "heights", False))
+
+
+def _check_raw_scales(path, fmt: str, info: dict) -> None:
+    fields = _HEADER_SCALES.get(fmt, ())
+    _raise_bad(path, ((name, info[key], what, pos) for key, name, what, pos in fields if key in info))
+
+
+def _check_sur_header(path, head: bytes) -> None:
+    import struct
+
+    if head[:12] not in (b"DIGITAL SURF", b"DSCOMPRESSED") or len(head) < 132:
+        return
+    _raise_bad(path, ((name, struct.unpack_from("<f", head, off)[0], what, pos)
+                      for off, name, what, pos in _SUR_SCALES))
 
 
 def _to_cloud(X_mm, Y_mm, Z_mm, valid, path):
@@ -83,6 +188,10 @@ def read_x3p(path: Path):
         if plain:
             return read_x3p_plain(path)
         raise InputError(f"{path}: not a readable X3P file ({_short(e)})") from None
+    ftype = _x3p_feature_type(path)
+    if ftype == "PRF" or type(f).__name__ == "Profile":
+        raise InputError(f"{path}: an X3P of feature type PRF (a line profile), not an areal map; "
+                         "profiles are not yet supported as input")
     if isinstance(f, x3pio.PointCloud):
         p = np.asarray(f.layers[0].points, dtype=np.float64) * 1e3
         ok = np.all(np.isfinite(p), axis=1)
@@ -95,7 +204,24 @@ def read_x3p(path: Path):
     off = getattr(f, "placement", None)
     ox, oy, oz = (0.0, 0.0, 0.0) if off is None else tuple(np.asarray(off.offset) * 1e3)
     xyz, ch, m = _grid_cloud(z * 1e3 + oz, hx, hy, path, ox, oy)
+    check_map_geometry(path, xyz, ch, heights=False)  # x3pio refuses a zero or NaN increment itself
     return xyz, ch, {"instrument_format": "x3p", **m}
+
+
+def _x3p_feature_type(path: Path) -> str:
+    """Record1/FeatureType of an X3P's main.xml ("SUR", "PRF", "PCL"), '' when unreadable (x3pio
+    infers a surface from the data's shape whatever the header says)."""
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    try:  # parsed up to the element only: main.xml may hold the data inline (DataList)
+        with zipfile.ZipFile(path) as zf, zf.open("main.xml") as f:
+            for _, node in ET.iterparse(f, events=("end",)):
+                if isinstance(node.tag, str) and node.tag.rsplit("}", 1)[-1] == "FeatureType":
+                    return (node.text or "").strip().upper()
+    except Exception:  # noqa: BLE001 - x3pio has read it; nothing more to learn here
+        return ""
+    return ""
 
 
 def _plain_iso5436_root(path: Path) -> bool:
@@ -147,6 +273,13 @@ def read_x3p_plain(path: Path):
             dtype = (axes["CZ"].findtext("DataType") or "D").strip()
             if dtype not in _X3P_TYPES:
                 fail(f"CZ data type {dtype!r} is not supported (D, F, L, I)")
+            _raise_bad(path, (("CX <Increment>", inc["CX"], "x positions", True),
+                              ("CY <Increment>", inc["CY"], "y positions", True)))
+            if _X3P_TYPES[dtype][1] == "i":  # integer heights are scaled by CZ's increment
+                _raise_bad(path, (("CZ <Increment>", inc["CZ"], "heights", False),))
+            bad_off = next((a for a in axes if not np.isfinite(off[a])), None)
+            if bad_off:
+                fail(f"axis {bad_off} <Offset> is {off[bad_off]}, not a finite number")
             size = r3.find("MatrixDimension")
             if size is None:
                 fail("Record3 has no MatrixDimension")
@@ -163,7 +296,9 @@ def read_x3p_plain(path: Path):
                 fail(f"its point data {link} is missing from the archive")
             raw = zf.read(link)
             valid_link = (r3.findtext("DataLink/ValidPointsLink") or "").strip()
-            valid_raw = zf.read(valid_link) if valid_link in names else None
+            if valid_link and valid_link not in names:
+                fail(f"its validity mask {valid_link} (ValidPointsLink) is missing from the archive")
+            valid_raw = zf.read(valid_link) if valid_link else None
     except zipfile.BadZipFile as e:
         raise InputError(f"{path}: not a readable X3P file ({_short(e)})") from None
     except ET.ParseError as e:
@@ -179,11 +314,15 @@ def read_x3p_plain(path: Path):
     z = z * (inc["CZ"] if dt.kind == "i" else 1.0) + off["CZ"]
     valid = np.ones_like(z, bool)
     if valid_raw is not None:
+        need = (nx * ny + 7) // 8
+        if len(valid_raw) < need:
+            fail(f"its validity mask {valid_link} holds {len(valid_raw)} bytes where {nx} × {ny} "
+                 f"pixels need {need} (truncated or damaged)")
         bits = np.unpackbits(np.frombuffer(valid_raw, np.uint8), bitorder="little")
-        if bits.size >= nx * ny:
-            valid = bits[:nx * ny].reshape(ny, nx).astype(bool)
+        valid = bits[:nx * ny].reshape(ny, nx).astype(bool)
     xyz, ch, m = _grid_cloud(z * 1e3, inc["CX"] * 1e3, inc["CY"] * 1e3, path, off["CX"] * 1e3,
                              off["CY"] * 1e3, valid)
+    check_map_geometry(path, xyz, ch, heights=False)  # the increments are checked above
     return xyz, ch, {"instrument_format": "x3p (namespace-less ISO5436, own reader)", **m}
 
 
@@ -241,7 +380,9 @@ class quiet:
 
 
 def read_surface_topography(path: Path, opts=None, head: bytes | None = None):
-    """(xyz mm, channels, meta) of any file SurfaceTopography reads, found by content."""
+    """(xyz mm, channels, meta) of any file SurfaceTopography reads, found by content; a map whose
+    header scales collapse it (a zero wavelength, pixel size, height scale) is refused naming the
+    field, or — where the reader's metadata does not show it — by check_map_geometry."""
     if opts is None:
         from .formats import ReaderOptions
 
@@ -249,6 +390,18 @@ def read_surface_topography(path: Path, opts=None, head: bytes | None = None):
     if head is None:
         with open(path, "rb") as f:
             head = f.read(4096)
+    _check_sur_header(path, head)
+    xyz, ch, meta = _read_surface_topography(path, opts, head)
+    check_map_geometry(path, xyz, ch, heights=meta.get("instrument_format") not in _PLAIN_ARRAYS)
+    return xyz, ch, meta
+
+
+#: SurfaceTopography formats that store heights as plain numbers, no header scale (a synthetic flat
+#: array is legitimate there)
+_PLAIN_ARRAYS = ("npy", "npz", "mat", "h5", "nc", "xyz", "asc")
+
+
+def _read_surface_topography(path: Path, opts, head: bytes):
     if head[:4] in METROPRO_MAGICS:  # the common MetroPro map without importing SurfaceTopography
         from .metropro import read_metropro
 
@@ -297,8 +450,16 @@ def _not_readable(path: Path, head: bytes, e: BaseException) -> InputError:
         return InputError(f"{path}: cannot read this instrument file ({_short(e)})")
     magic = _magic_readers(head)
     if magic:
+        # the detection hides why the reader refused: ask that reader alone for its reason
+        why = ""
+        try:
+            from SurfaceTopography.IO import open_topography
+
+            open_topography(str(path), format=magic[0].format()).close()
+        except Exception as e2:  # noqa: BLE001 - the library raises many classes
+            why = f" ({_short(e2, 150)})"
         return InputError(f"{path}: a damaged or truncated {magic[0].name()} file — its header is "
-                          f"recognised but it cannot be read")
+                          f"recognised but it cannot be read{why}")
     what = foreign_kind(head)
     lie = f"; the extension '{suffix}' says {claimed}" if claimed else ""
     if what:
@@ -339,6 +500,7 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
     if ch.dim != 2:
         raise InputError(f"{path}: a line profile ({reader.name()}), not an areal map; profiles are "
                          "not yet supported as input")
+    _check_raw_scales(path, fmt, ch.info.get("raw_metadata", {}) or {})
     unit = ch.unit.replace("Âµ", "µ") if isinstance(ch.unit, str) else ch.unit  # Latin-1 µ as UTF-8
     kwargs = {}
     if unit is None or not is_length_unit(unit):

@@ -23,7 +23,12 @@ rows first so that a ragged matrix or a non-number is named by line. Conventions
   * heights are converted from ``Value units`` to mm; NaN values are invalid pixels, dropped and
     counted in ``meta["invalid_dropped"]``.
 A matrix without lateral calibration needs the reader option ``pixel_size_um``; one without a unit
-for its values needs ``height_unit``.
+for its values needs ``height_unit``. A lateral size without a unit of its own (``# Width: 12.34``;
+SPIP's ``x-length = 12.34`` without ``x-unit``) is refused naming the key when the file states a unit
+for its values — SurfaceTopography would lend it that unit (or nm for SPIP), silently — unless
+``pixel_size_um`` is given, which then replaces the sizes. A size of 0, below 0 or not finite, and a
+header's ``x-pixels``/``y-pixels`` that disagree with the rows, are refused naming the key. A file
+that names no unit at all reads its sizes in ``height_unit``, as SurfaceTopography does.
 """
 from __future__ import annotations
 
@@ -45,6 +50,114 @@ _NUMBER_ROW = re.compile(r"^\s*[-+0-9.]")
 _NUM = r"[-+]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eEdD][-+]?[0-9]+)?|nan|NaN|NAN|inf|Inf|INF)"
 _SEP = re.compile(r"[\s,;]+")
 _ROW = re.compile(rf"^\s*{_NUM}(?:[\s,;]+{_NUM})*[\s,;]*$")
+
+
+_GWY_WIDTH = "Width|Šířka|Breite|Anchura|Largeur|Larghezza|幅|폭|Largura|Ширина"
+_GWY_HEIGHT = "Height|Výška|Höhe|Altura|Hauteur|Altezza|高さ|높이|Высота"
+_GWY_VALUE = ("Value units|Jednotky hodnot|Einheiten|Unités|unità valore|値の単位|값 단위|"
+              "Unidades de valor|Единицы измерения")
+_KV = r"\s*(?:=|:|：)\s*"
+# the keys SurfaceTopography's text reader takes the lateral sizes, units and pixel counts from
+# (case-sensitive, as there)
+_SIZE_LINE = re.compile(rf"^\s*#?\s*(?P<key>x-length|y-length|{_GWY_WIDTH}|{_GWY_HEIGHT}){_KV}"
+                        r"(?P<rest>.*)$")
+_SIZE_VALUE = re.compile(r"(?P<value>[-+]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?|nan|inf)"
+                         r")(?P<unit>.*)$", re.I)
+_UNIT_LINE = re.compile(rf"^\s*#?\s*(?P<key>x-unit|y-unit|Unit X|z-unit|Unit Data|{_GWY_VALUE})"
+                        rf"{_KV}(?P<unit>\S*)")
+_PIXELS_LINE = re.compile(r"^\s*#?\s*(?P<key>x-pixels|y-pixels|NX|NY)\s*(?:=|:)\s*(?P<n>[0-9]+)\s*$")
+_SPIP = re.compile(r"^#\s*File Format\s*=\s*ASCII\s*$")
+_STREAM = re.compile(r"<_io\.\w+ object at 0x[0-9a-fA-F]+>")
+
+
+def _header(text: str) -> list[tuple[int, str]]:
+    """(0-based line, text) of the header: the lines before the first row of numbers."""
+    out = []
+    for i, line in enumerate(text.splitlines()):
+        s = line.strip()
+        if _NUMBER_ROW.match(s) and _ROW.match(s):
+            break
+        out.append((i, line))
+    return out
+
+
+def _check_header(path: Path, text: str, opts, nrows: int, ncols: int) -> str:
+    """The text to give SurfaceTopography's reader, after the checks of the module doc: unchanged,
+    or without its unit-less size lines (``pixel_size_um`` given), or with ``# Value units`` added
+    (``height_unit`` given to a file whose sizes have units but whose values have none)."""
+    from .instruments import bad_header_scale
+
+    sizes: dict = {}   # "x" / "y" → (line, key, value text, unit text)
+    units: dict = {}   # "x", "y", "z", "lateral" → unit
+    spip = False
+    for i, line in _header(text):
+        body = line.lstrip("\ufeff")
+        if _SPIP.match(body.strip()):
+            spip = True
+            continue
+        m = _PIXELS_LINE.match(body)
+        if m:
+            key, n = m.group("key"), int(m.group("n"))
+            along_x = key in ("x-pixels", "NX")
+            have = ncols if along_x else nrows
+            if n != have:
+                raise InputError(f"{path}, line {i + 1}: the header's {key} = {n} but the matrix has "
+                                 f"{have} {'values a row' if along_x else 'rows'}")
+            continue
+        m = _UNIT_LINE.match(body)
+        if m:
+            key, unit = m.group("key"), m.group("unit").strip()
+            axis = {"x-unit": "x", "y-unit": "y", "Unit X": "lateral"}.get(key, "z")
+            if unit:
+                units[axis] = unit
+            continue
+        m = _SIZE_LINE.match(body)
+        if m:
+            key = m.group("key")
+            axis = "x" if key == "x-length" or re.fullmatch(_GWY_WIDTH, key) else "y"
+            rest = m.group("rest").strip()
+            v = _SIZE_VALUE.match(rest)
+            label = body[:m.end("key")].strip()  # the key as written: "# Width", "x-length"
+            sizes[axis] = (i, label, v.group("value"), v.group("unit").strip()) if v else \
+                (i, label, rest or "(nothing)", "")
+    for axis, (i, label, value, _) in sizes.items():
+        err = bad_header_scale(f"{path}, line {i + 1}", label, value, f"{axis} positions",
+                               positive=True)
+        if err is not None:
+            raise err
+    # the unit SurfaceTopography gives each size: its own, its axis's unit key, else the x one (Nova's
+    # `Unit X`, `x-unit`) — except in SPIP files, where a y-length without y-unit is taken as nm
+    lent = {"x": units.get("x") or units.get("lateral"),
+            "y": units.get("y") or (None if spip else units.get("x") or units.get("lateral"))}
+    unitless = [(i, label, value) for axis, (i, label, value, unit) in sorted(sizes.items())
+                if not (unit or lent[axis])]
+    if opts.pixel_size_um is not None and (unitless or len(sizes) == 1):
+        # the option replaces sizes that cannot be read as lengths (SurfaceTopography would refuse
+        # the option next to a size): the size lines go
+        lines = text.splitlines(keepends=True)
+        for i, *_ in sizes.values():
+            lines[i] = "\n"
+        return "".join(lines)
+    if unitless and ("z" in units or spip):
+        i, label, value = unitless[0]
+        line = _header(text)[i][1].strip()
+        if label.lstrip("# ") in ("x-length", "y-length"):
+            fix = f"add a line '# {label.lstrip('# ')[0]}-unit = µm' (the unit it is in)"
+        else:
+            fix = f"write e.g. '{line} µm'"
+        raise InputError(f"{path}, line {i + 1}: {label} has no unit ('{line}'); {fix} or give the "
+                         "reader option pixel_size_um")
+    if len(sizes) == 1:
+        (axis, (i, label, _, _)), = sizes.items()
+        other = "y" if axis == "x" else "x"
+        raise InputError(f"{path}, line {i + 1}: the header gives the map's {axis} size ({label}) "
+                         f"but not its {other} size; add it, or give the reader option "
+                         "pixel_size_um")
+    if "z" not in units and opts.height_unit is not None and sizes and not unitless:
+        # SurfaceTopography converts the sizes' units only to a unit the file states
+        unit = "µm" if opts.height_unit in ("um", "μm") else opts.height_unit
+        return f"# Value units: {unit}\n" + text
+    return text
 
 
 def _head_lines(text_head: str, n: int = 60) -> list[str]:
@@ -100,7 +213,7 @@ def _check_rows(path: Path):
 
 def read_matrix(path: Path, opts):
     """(xyz mm, channels, meta) of a text height matrix with a header."""
-    from .instruments import _short, _topography_to_cloud, quiet
+    from .instruments import _short, _topography_to_cloud, check_map_geometry, quiet
 
     ny, nx = _check_rows(path)
     with quiet():
@@ -115,11 +228,14 @@ def read_matrix(path: Path, opts):
             text = raw.decode("utf-8")
         except UnicodeDecodeError:
             text = raw.decode("latin-1")
+        text = _check_header(path, text, opts, ny, nx)
         try:
             reader = open_topography(io.StringIO(text), format="asc")
         except Exception as e:  # noqa: BLE001
-            raise InputError(f"{path}: cannot read this height matrix ({_short(e)})") from None
+            why = _short(Exception(_STREAM.sub(path.name, str(e)) or type(e).__name__))
+            raise InputError(f"{path}: cannot read this height matrix ({why})") from None
         xyz, ch, meta = _topography_to_cloud(path, reader, opts, b"")
+        check_map_geometry(path, xyz, ch, heights=False)  # values are written as they are
     grid = meta.get("grid")
     if grid and grid != [nx, ny]:  # pragma: no cover - the two parsers disagree on the layout
         raise InputError(f"{path}: the matrix has {ny} rows of {nx} values but the header describes "

@@ -21,9 +21,10 @@ SurfaceTopography.IO.MetroPro and Gwyddion's metropro.c):
 
     height (m) = (−1 if sign else 1) · intf_scale_factor · obliquity_factor · wavelength / counts · value
 
-``read_metropro`` returns None for anything outside that common case (a header of another size, no
-lateral calibration, reader options given, a short file): the caller then reads the file with
-SurfaceTopography, whose messages name what is wrong. tests/test_speed_metropro.py compares both
+A wavelength, intf_scale_factor or obliquity_factor of 0 or NaN is refused naming the field (every
+height would be 0: a perfect part). ``read_metropro`` returns None for anything outside that common
+case (a header of another size, no lateral calibration, reader options given, a short file): the
+caller then reads the file with SurfaceTopography, whose messages name what is wrong. tests/test_speed_metropro.py compares both
 readers bit for bit.
 """
 from __future__ import annotations
@@ -39,16 +40,36 @@ _INVALID = 2147483640
 _M_TO_MM = 1000.0
 
 
+#: the header's height scales: (offset, name, must be positive)
+_HEIGHT_SCALES = ((164, "intf_scale_factor", False), (168, "wavelength", True),
+                  (176, "obliquity_factor", False))
+
+
+def check_height_scales(path: Path, head: bytes) -> None:
+    """InputError naming the first height scale of a MetroPro header (≥ 180 bytes) that is 0, NaN
+    or inf (every height would be 0 or invalid: a "perfect" part), or a negative wavelength."""
+    from .instruments import bad_header_scale
+
+    for off, name, positive in _HEIGHT_SCALES:
+        (v,) = struct.unpack_from(">f", head, off)
+        err = bad_header_scale(path, name, v, "heights", positive)
+        if err is not None:
+            raise err
+
+
 def read_metropro(path: Path, opts=None):
     """(xyz mm, channels, meta) as core.io.instruments.read_surface_topography gives them, or None
-    when this file needs SurfaceTopography's reader (module doc)."""
-    if opts is not None and (getattr(opts, "pixel_size_um", None) is not None
-                             or getattr(opts, "height_unit", None) is not None):
-        return None  # the options' checks and messages are the general reader's
+    when this file needs SurfaceTopography's reader (module doc). A height scale that would make
+    every height 0 (or NaN) — wavelength, intf_scale_factor or obliquity_factor 0 or not a number,
+    a negative wavelength — is refused naming the field, whoever reads the rest."""
     with open(path, "rb") as f:
         head = f.read(834)
         if len(head) < 834 or head[:4] not in MAGICS:
             return None
+        check_height_scales(path, head)
+        if opts is not None and (getattr(opts, "pixel_size_um", None) is not None
+                                 or getattr(opts, "height_unit", None) is not None):
+            return None  # the options' checks and messages are the general reader's
         (header_size,) = struct.unpack_from(">I", head, 6)
         ac_w, ac_h, ac_n = struct.unpack_from(">3H", head, 52)
         cn_w, cn_h = struct.unpack_from(">2H", head, 68)
