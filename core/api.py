@@ -40,7 +40,7 @@ def read(path, **options) -> PointCloud:
 
 def write(cloud: PointCloud, path) -> Path:
     """Write ``cloud`` to ``path`` (.csv: every channel, shortest round-trip decimals, bit-exact when
-    read back; .ply: binary float64), atomically. Returns the path."""
+    read back; .ply: binary, float64 coordinates, integer channels as int/uint or double by range), atomically. Returns the path."""
     from .io import write_cloud
 
     path = Path(path)
@@ -76,10 +76,14 @@ def run(recipe, cloud, *, progress: bool | Callable[[float, str], None] | None =
     from .pipeline import run_pipeline
 
     rec = load(recipe)
-    input_path = None
+    input_path = digest = None
     if isinstance(cloud, (str, Path)):
+        from .batch import input_digest
+
         input_path = str(cloud)
-        cloud = read(cloud, **rec.input)
+        read_cloud = read(cloud, **rec.input)
+        digest = input_digest(cloud)  # as the batch records it (report.json, --resume)
+        cloud = read_cloud
     cloud = _as_cloud(cloud)
     if input_path is None:
         input_path = str(cloud.meta.get("source") or "(in memory)")
@@ -92,7 +96,7 @@ def run(recipe, cloud, *, progress: bool | Callable[[float, str], None] | None =
         text = f"{w.category.__name__}: {w.message}"
         if text not in seen:
             seen.append(text)
-    return Result(rec, res, input_path, seen)
+    return Result(rec, res, input_path, seen, digest)
 
 
 def _as_cloud(obj) -> PointCloud:
@@ -176,6 +180,8 @@ class Result:
     #: Python warnings raised by the libraries during the run (deduplicated; steps' own warnings are
     #: in each step's report)
     warnings: list = field(default_factory=list)
+    #: SHA-256 of the input file as read (None for a cloud given in memory): report.json's input_sha256
+    input_sha256: str | None = field(default=None, repr=False)
     _report: dict | None = field(default=None, init=False, repr=False)
 
     @property
@@ -230,7 +236,8 @@ class Result:
         if not stem or Path(stem).name != stem:
             raise PointsProError(f"stem {stem!r} must be a plain folder name")
         folder = out / stem
-        write_outputs(folder, self.input, self.recipe, self._run, figures=figures)
+        write_outputs(folder, self.input, self.recipe, self._run, figures=figures,
+                      input_sha256=self.input_sha256)
         return folder
 
     def __repr__(self) -> str:

@@ -260,8 +260,8 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
     stage = "reading"
     try:
         progress = Progress(sink, token)
-        digest = input_digest(path)  # before reading: the content these results are of
         cloud = read_cloud(path, **recipe.input)  # the recipe's `input:` reader options
+        digest = input_digest(path)  # the content these results are of (--resume compares it)
         progress.update(0.05, "read")
         stage = "running the steps"
         result = run_pipeline(cloud, recipe, progress=progress.sub(0.05, 0.9), surface=surface,

@@ -3,8 +3,9 @@
 read (see docs/formats.md for units and the pixel convention):
   point clouds   x y z text columns (.csv .txt .xyz .asc .dat … — core.io.text, CloudCompare's
                  ``//X Y Z`` header included), .ply (all vertex properties kept), .pcd .pts
-                 (open3d), LAS/LAZ (core.io.las) and E57 (core.io.e57) of laser scanners — the
-                 optional extra ``pip install 'pointspro[scanners]'``; metres → mm
+                 (core.io.ply, core.io.pcd: our numpy readers, every count checked), LAS/LAZ
+                 (core.io.las) and E57 (core.io.e57) of laser scanners — the optional extra
+                 ``pip install 'pointspro[scanners]'``; metres → mm
   height maps    every format SurfaceTopography reads — Zygo .datx and MetroPro .dat, Digital Surf
                  .sur, ISO 25178-71 .sdf, Wyko/Bruker .opd, Bruker .di, Sensofar .plu/.plux, Keyence
                  .vk4/.zon, Gwyddion .gwy, FRT .frt, Alicona .al3d, Igor .ibw, Agilent .mi … — found
@@ -15,7 +16,8 @@ read (see docs/formats.md for units and the pixel convention):
   core.profiles), or a height matrix with a header. A file whose extension lies about its
   content is read for what it is; one that matches no reader is refused naming what it looks like.
 write: .csv (all channels, `index` included, shortest round-trip decimal, each column's unit in the
-       header: ``x [mm],y [mm],z [mm],index,residual [mm]``), .ply (binary, float64)
+       header: ``x [mm],y [mm],z [mm],index,residual [mm]``), .ply (binary: float64, each integer
+       channel in a type that holds it — core.io.ply)
 
 Reader options (``read_cloud(path, pixel_size_um=…, …)``, a recipe's ``input:`` block):
   pixel_size_um  lateral pixel size, one number or [x, y], for maps whose file has no calibration
@@ -42,7 +44,7 @@ from ..units import channel_unit
 from .atomic import atomic_path
 
 TEXT_SUFFIXES = (".csv", ".txt", ".xyz", ".asc", ".dat")
-OPEN3D_SUFFIXES = (".pcd", ".pts")
+OPEN3D_SUFFIXES = (".pcd", ".pts")  # the name kept: read by core.io.pcd (open3d read them once)
 from .instruments import AREAL_SUFFIXES  # noqa: E402
 
 SCANNER_SUFFIXES = (".las", ".laz", ".e57")  # core.io.las, core.io.e57: the `scanners` extra
@@ -220,13 +222,16 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
     from .memory import check_stated
 
     check_stated(path, head, is_text)  # too large for memory: said before reading (issue 26)
-    if head.startswith((b"ply\n", b"ply\r\n")):
-        from .ply import NotSimplePly, read_ply
+    from .pcd import looks_like_pcd
 
-        try:
-            xyz, cols, meta = read_ply(path)
-        except NotSimplePly:
-            xyz, cols, meta = _read_open3d(path)
+    if head.startswith((b"ply\n", b"ply\r\n")):
+        from .ply import read_ply
+
+        xyz, cols, meta = read_ply(path)
+    elif looks_like_pcd(head):  # a PCD header, whatever the extension
+        from .pcd import read_pcd
+
+        xyz, cols, meta = read_pcd(path, invalid=opts.invalid)
     elif head.startswith(b"LASF"):  # LAS / LAZ (laspy, the `scanners` extra)
         from .las import read_las
 
@@ -235,12 +240,18 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
         from .e57 import read_e57
 
         xyz, cols, meta = read_e57(path)
-    elif suffix in OPEN3D_SUFFIXES:
-        xyz, cols, meta = _read_open3d(path)
+    elif suffix == ".pcd":  # no PCD header: read_pcd says "no points read — not a PCD file"
+        from .pcd import read_pcd
+
+        xyz, cols, meta = read_pcd(path, invalid=opts.invalid)
+    elif suffix == ".pts":
+        from .pcd import read_pts
+
+        xyz, cols, meta = read_pts(path, invalid=opts.invalid)
     elif head.startswith(b"PK\x03\x04") and _zip_has(path, "pointspro_meta.npy"):  # --cloud-format npz
         from .npz import read_npz
 
-        xyz, cols, meta = read_npz(path)
+        xyz, cols, meta = read_npz(path, invalid=opts.invalid)
     elif head.startswith(b"PK\x03\x04") and _zip_has(path, "main.xml"):
         from .instruments import read_x3p
 
@@ -296,25 +307,6 @@ def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOpti
             raise InputError(f"{e} — the content is text, not a {claimed} file as the extension "
                              f"'{suffix}' says") from None
         raise
-def _read_open3d(path: Path):
-    import open3d as o3d  # lazy: heavy
-
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # no C++ warnings
-        pc = o3d.io.read_point_cloud(str(path))
-    xyz = np.asarray(pc.points, dtype=np.float64)
-    if len(xyz) == 0:
-        raise InputError(f"{path}: no points read (empty or not a {path.suffix} point cloud)")
-    if not np.all(np.isfinite(xyz)):
-        row = int(np.argwhere(~np.isfinite(xyz))[0, 0])
-        raise InputError(f"{path}: point {row} has a NaN/inf coordinate")
-    cols = {}
-    if pc.has_normals():
-        n = np.asarray(pc.normals, dtype=np.float64)
-        cols.update(nx=n[:, 0], ny=n[:, 1], nz=n[:, 2])
-    if pc.has_colors():
-        c = np.asarray(pc.colors, dtype=np.float64)
-        cols.update(red=c[:, 0], green=c[:, 1], blue=c[:, 2])
-    return xyz.copy(), cols, {"format": path.suffix.lower().lstrip(".")}
 
 
 def _format_column(a: np.ndarray) -> list[str]:
@@ -392,7 +384,7 @@ def write_ply_cloud(cloud: PointCloud, path) -> None:
 
     ch = {n: cloud[n] for n in cloud.column_names[3:]}
     with atomic_path(path) as tmp:
-        write_ply(tmp, np.asarray(cloud.xyz), ch)
+        write_ply(tmp, np.asarray(cloud.xyz), ch, shown=path)
 
 
 def write_cloud(cloud: PointCloud, path) -> None:
