@@ -71,49 +71,40 @@ class WorkerPool:
 
     def __init__(self, workers: int, initializer: Callable | None = None, initargs: tuple = (),
                  env: dict[str, str] | None = None):
-        import os
-
         self._ctx = multiprocessing.get_context("spawn")
         self._init = (initializer, tuple(initargs))
         self._env = dict(env or {})
         self._workers: list[_Worker] = []
-        saved = {k: os.environ.get(k) for k in self._env}
-        os.environ.update(self._env)
         try:
             for _ in range(max(1, int(workers))):
                 self._workers.append(self._spawn())
         except BaseException:
             self.terminate()
             raise
+
+    def _spawn(self) -> _Worker:
+        """A started worker; the environment holds ``env`` while it starts (the child copies it)."""
+        import os
+
+        parent, child = self._ctx.Pipe()
+        p = self._ctx.Process(target=_worker_main, args=(child, *self._init), daemon=True)
+        saved = {k: os.environ.get(k) for k in self._env}
+        os.environ.update(self._env)
+        try:
+            p.start()
         finally:
             for k, v in saved.items():
                 if v is None:
                     os.environ.pop(k, None)
                 else:
                     os.environ[k] = v
-
-    def _spawn(self) -> _Worker:
-        parent, child = self._ctx.Pipe()
-        p = self._ctx.Process(target=_worker_main, args=(child, *self._init), daemon=True)
-        p.start()
         child.close()
         return _Worker(p, parent)
 
     def _replace(self, w: _Worker) -> _Worker:
         """A fresh worker instead of ``w`` (which ended or is ended here)."""
-        import os
-
         self._stop(w)
-        saved = {k: os.environ.get(k) for k in self._env}
-        os.environ.update(self._env)
-        try:
-            new = self._spawn()
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+        new = self._spawn()
         self._workers[self._workers.index(w)] = new
         return new
 

@@ -483,10 +483,7 @@ def _read_ascii(f, path: Path, elements, vi: int, header_lines: int) -> tuple[np
     lines after them must be as many as the other elements' items."""
     for name, count, _ in elements[:vi]:
         for i in range(count):
-            line = f.readline()
-            while line and not line.strip():
-                line = f.readline()
-            if not line:
+            if not _next_nonblank(f):
                 raise InputError(f"{path}: the file is truncated: element '{name}' has {i} of the "
                                  f"{count} lines its header declares")
     _, n, props = elements[vi]
@@ -518,6 +515,14 @@ def _read_ascii(f, path: Path, elements, vi: int, header_lines: int) -> tuple[np
     return xyz, cols
 
 
+def _next_nonblank(f) -> str:
+    """The next line that is not blank ("" at the end of the file)."""
+    line = f.readline()
+    while line and not line.strip():
+        line = f.readline()
+    return line
+
+
 def _ascii_integers(path: Path, prop: str, code: str, v: np.ndarray) -> np.ndarray:
     info = np.iinfo(code)
     bad = ~((v == np.floor(v)) & (v >= info.min) & (v <= info.max))
@@ -535,9 +540,7 @@ def _ascii_list_rows(f, path: Path, n: int, props) -> dict:
     rows = np.empty((n, len(fixed)), dtype=np.float64)
     start = f.tell()
     for i in range(n):
-        line = f.readline()
-        while line and not line.strip():
-            line = f.readline()
+        line = _next_nonblank(f)
         if not line:
             raise InputError(f"{path}: the file is truncated: the header declares {n} vertices, the "
                              f"file holds {i}")
