@@ -171,7 +171,7 @@ def read_yaml_mapping(path, what: str, version_key: str, version: int = 1,
     ("project", "measurement model")."""
     path = Path(path)
     if not path.is_file():
-        raise error(f"{path}: {what} file not found")
+        raise error(f"{path}: " + (f"is a folder, not a {what} file" if path.is_dir() else f"{what} file not found"))
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:

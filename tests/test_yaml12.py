@@ -125,6 +125,8 @@ def test_project_read_by_yaml_1_2(tmp_path):
         load_project(p)
     with pytest.raises(InputError, match=r"none.yaml: project file not found"):
         load_project(tmp_path / "none.yaml")
+    with pytest.raises(InputError, match=r": is a folder, not a project file"):
+        load_project(tmp_path)
 
 
 MODEL = """pointspro_model: 1
