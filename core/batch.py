@@ -23,6 +23,7 @@ from typing import Callable
 
 from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
+from .io.atomic import why_not_replace
 from .io.background import BackgroundWrite, share_out
 from .io.formats import write_ply_cloud
 from .io.npz import write_npz_cloud
@@ -110,15 +111,14 @@ def check_output_targets(out: Path, inputs: list[Path], stems: list[str]) -> Non
         if stem in BATCH_FILES:
             raise RecipeError(f"{p}: its output folder would be the batch's own {out / stem}; rename "
                               "the input")
-        target = out_r / stem
-        for q, qr in zip(inputs, ins):
-            if qr == target or target in qr.parents:
-                raise RecipeError(f"{q}: lies in {out / stem}, the output folder of {p}, which the batch "
-                                  "replaces as a whole; copy the input elsewhere or choose another --out")
-        if target.is_symlink() or (target.exists() and not target.is_dir()):
+        why = why_not_replace(out / stem, "report.json", inputs)
+        if why is not None and why[0] == "input":
+            raise RecipeError(f"{why[1]}: lies in {out / stem}, the output folder of {p}, which the batch "
+                              "replaces as a whole; copy the input elsewhere or choose another --out")
+        if why is not None and why[0] == "file":
             raise RecipeError(f"{out / stem}: exists and is not a folder; the batch would put the output "
                               f"of {p} there — move it or choose another --out")
-        if target.is_dir() and not (target / "report.json").is_file() and any(target.iterdir()):
+        if why is not None:
             raise RecipeError(f"{out / stem}: exists and is not a PointsPro output folder (no report.json); "
                               f"the batch would replace it with the output of {p} — move it or choose "
                               "another --out")

@@ -675,17 +675,16 @@ def _check_explain_out(out: Path, inputs: list[Path]) -> None:
     a file, or a folder that is not an earlier explain output (no explain.json; an empty one is
     fine). Before: `--out meas.csv` moved the measurement aside, `--out notes/` deleted the notes."""
     from .errors import RecipeError
+    from .io.atomic import why_not_replace
 
-    o = out.resolve()
-    for p in inputs:
-        pr = p.resolve()
-        if pr == o or o in pr.parents:
-            raise RecipeError(f"--out {out}: holds the input {p}, and explain replaces that folder as a "
-                              "whole; choose another --out")
-    if out.is_symlink() or (out.exists() and not out.is_dir()):
+    why = why_not_replace(out, "explain.json", inputs)
+    if why is not None and why[0] == "input":
+        raise RecipeError(f"--out {out}: holds the input {why[1]}, and explain replaces that folder as a "
+                          "whole; choose another --out")
+    if why is not None and why[0] == "file":
         raise RecipeError(f"--out {out}: exists and is not a folder; explain writes a folder there — "
                           "choose another --out")
-    if out.is_dir() and not (out / "explain.json").is_file() and any(out.iterdir()):
+    if why is not None:
         raise RecipeError(f"--out {out}: exists and is not an explain output folder (no explain.json); "
                           "explain would replace it — move it or choose another --out")
 

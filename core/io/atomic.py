@@ -50,6 +50,25 @@ def make_temp_dir(path: Path, suffix: str = ".partial") -> Path:
     raise FileExistsError(f"{path.parent}: no free temporary name for {path.name}")  # pragma: no cover
 
 
+def why_not_replace(target: Path, marker: str, inputs=()) -> tuple[str, Path | None] | None:
+    """Why ``atomic_dir`` must not replace the folder ``target`` as a whole (it swaps the old one out
+    and deletes it): ("input", p) when it is or holds the input ``p``; ("file", None) when it is a
+    file or a link; ("foreign", None) when it is a folder with something in it but no ``marker``
+    (report.json, explain.json: not an earlier output of ours). None when it may be replaced. The
+    callers (the batch's folders, explain's --out) word the refusal."""
+    t = Path(target).resolve()
+    for p in inputs:
+        pr = Path(p).resolve()
+        if pr == t or t in pr.parents:
+            return "input", Path(p)
+    target = Path(target)
+    if target.is_symlink() or (target.exists() and not target.is_dir()):
+        return "file", None
+    if target.is_dir() and not (target / marker).is_file() and any(target.iterdir()):
+        return "foreign", None
+    return None
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path``; on success rename it to ``path``, else remove it."""

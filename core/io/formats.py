@@ -173,9 +173,9 @@ def _printable_utf16(head: bytes) -> bool:
     """UTF-16 text (a BOM, or ASCII with every other byte NUL) whose first characters are printable:
     read as text (core.io.text decodes it). The printable test keeps a binary map of small 16-bit
     numbers, whose high bytes are NUL as well, out."""
-    from .text import _utf16
+    from .text import utf16_codec
 
-    codec = _utf16(head)
+    codec = utf16_codec(head)
     if codec is None:
         return False
     sample = head[:4096]

@@ -269,7 +269,7 @@ def _head_lines(text: str, n: int = _HEAD_LINES) -> list[str]:
     return text[:end].split("\n")[:n]
 
 
-def _utf16(raw: bytes) -> str | None:
+def utf16_codec(raw: bytes) -> str | None:
     """The UTF-16 codec of ``raw`` — by its BOM, else by the NUL bytes of ASCII text in UTF-16 (every
     other byte zero) — or None."""
     if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
@@ -291,7 +291,7 @@ def _decode(raw: bytes) -> tuple[str, str]:
     """(text, encoding): UTF-16 (BOM, or the NUL bytes of BOM-less UTF-16: decoded strictly, a
     UnicodeDecodeError otherwise), UTF-8 (with or without BOM), else Latin-1 (Windows exports with
     µ)."""
-    utf16 = _utf16(raw)
+    utf16 = utf16_codec(raw)
     if utf16:
         return raw.decode(utf16), utf16
     try:
