@@ -82,6 +82,11 @@ def _start_worker(figures: str) -> None:
             preload()
     except Exception:  # noqa: BLE001,S110 — reported by the input that meets it (above)
         pass
+    # what the imports made lives as long as the worker: the cyclic collector need not walk it at
+    # every full collection (~150,000 objects; a 50,000-point input's collections 0.19 → ~0.1 s)
+    import gc
+
+    gc.freeze()
 
 
 def _lost_input(out_dir: Path, task: tuple, reason: str) -> InputOutcome:

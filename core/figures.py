@@ -61,11 +61,17 @@ def preload() -> None:
     save_png(fig, io.BytesIO())
 
 
+#: zlib level of the report PNGs. Level 1 instead of Pillow's default 6: a 1100 × 460 map encodes
+#: in 0.025 s instead of 0.053 s (an eighth of drawing it) and the files are ~8 % larger (8 report
+#: figures of a 50,000-point input: 1144 → 1231 KiB); PNG is lossless, the pixels are the same.
+PNG_COMPRESS_LEVEL = 1
+
+
 def save_png(fig, path: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
-    fig.savefig(path, format="png", dpi=100)
+    fig.savefig(path, format="png", dpi=100, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
 
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
