@@ -50,6 +50,21 @@ def dof_names_valid(names) -> list[str]:
     return list(names)
 
 
+def with_design(surface: EvenAsphere, free, x, pose_names) -> EvenAsphere:
+    """``surface`` with the design parameters among ``free`` (radius → c, conic → k, A4… by name) set
+    to their values in ``x``; the names in ``pose_names`` are the pose's and left out (clouds and
+    profiles share this: core/profiles/fit.py)."""
+    upd = {}
+    for n, v in zip(free, x):
+        if n == "radius":
+            upd["c"] = v
+        elif n == "conic":
+            upd["k"] = v
+        elif n not in pose_names:
+            upd[n] = v
+    return surface.with_parameters(**upd)
+
+
 @dataclass
 class PosedFitResult:
     pose: Pose
@@ -126,17 +141,7 @@ class PosedSurfaceFit:
     def _unpack(self, x):
         vals = dict(self.initial)
         vals.update({n: v for n, v in zip(self.free, x) if n in POSE_DOF})
-        surf = self.surface0
-        if self.design_free:
-            upd = {}
-            for n, v in zip(self.free, x):
-                if n == "radius":
-                    upd["c"] = v
-                elif n == "conic":
-                    upd["k"] = v
-                elif n not in POSE_DOF:
-                    upd[n] = v
-            surf = self.surface0.with_parameters(**upd)
+        surf = with_design(self.surface0, self.free, x, POSE_DOF) if self.design_free else self.surface0
         return vals, surf
 
     # -- the model ----------------------------------------------------------------------------------

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import DomainError, StepError
 from ..geometry.lsq import levenberg_marquardt
+from ..geometry.posed_fit import with_design
 from ..surfaces import EvenAsphere, SurfaceOfRevolution
 
 DEG = np.pi / 180.0
@@ -117,17 +118,7 @@ class ProfileFit:
     def _unpack(self, x):
         vals = dict(self.initial)
         vals.update({n: v for n, v in zip(self.free, x) if n in PROFILE_POSE})
-        surf = self.surface0
-        if self.design_free:
-            upd = {}
-            for n, v in zip(self.free, x):
-                if n == "radius":
-                    upd["c"] = v
-                elif n == "conic":
-                    upd["k"] = v
-                elif n not in PROFILE_POSE:
-                    upd[n] = v
-            surf = self.surface0.with_parameters(**upd)
+        surf = with_design(self.surface0, self.free, x, PROFILE_POSE) if self.design_free else self.surface0
         return vals, surf
 
     def part(self, vals):
