@@ -47,7 +47,7 @@ def test_raster_620_reproduces_within_2_percent_inside_95_percent():
     res = _run(BSplineMapStep, cloud, diameter=620.0, spacing=2.0, centre=(0.0, 0.0))
     from pointspro.core.maps import MapGrid  # noqa: F401
 
-    spline = fit_bspline(x, y, z, bounds=(-R620, R620, -R620, R620))
+    spline = fit_bspline(x, y, z)  # over the points' box, as the step fits it
     grid = grid_map(spline, 2.0, x, y, diameter=620.0)
     X, Y = np.meshgrid(grid.xs, grid.ys)
     inner = (np.hypot(X, Y) <= 0.95 * R620) & grid.valid
@@ -297,3 +297,36 @@ def test_random_points_and_scan_patterns_have_no_holes(seed):
         d = np.full(inside.shape, np.nan)
         d[inside] = cKDTree(np.column_stack([px, py])).query(g[inside])[0]
         assert not _holes(d, inside).any()
+
+
+def test_a_patch_of_a_large_part_is_mapped_at_its_own_sampling(tmp_path, run_cli):
+    """A 100 mm patch measured at 1 mm on a part whose aperture is 1300 mm: the spline covers the
+    patch, not the aperture's box (where its knots were coarsened to 15 mm and the map missed the
+    10 nm ripple it was measured for), and every map file is written (psd.csv failed: "no grid
+    line is half inside the map")."""
+    import pointspro.core as pp
+
+    x, y, e, gx, gy = _ripple_grid(1.0, 50.0, 10.0, 1e-5)
+    keep = np.hypot(x, y) <= 50
+    x, y, e = x[keep] + 300.0, y[keep], e[keep]
+    surface = {"type": "even_asphere", "c": 5e-4, "k": -1, "aperture": 1300}
+    cloud = PointCloud.from_numpy(np.column_stack([x, y, e]), residual=e, meta={"frame": "part"})
+    res = pp.run({"surface": surface, "steps": [{"bspline_map": {"spacing": 1.0}}]}, cloud)
+    rep = res.steps[0].report
+    assert rep["knot_spacing"] < 2.5
+    assert rep["map_rms_um"] * 1e3 == pytest.approx(np.std(e) * 1e6, rel=0.02)
+    assert rep["fit_residual_rms_um"] * 1e3 < 1.0  # the ripple is in the map, not left in the rest
+    assert rep["grid"][0] * rep["grid"][1] < 2 * rep["nodes"]  # the grid spans the patch
+    # the summary's slope RMS takes this very spline (core.pipeline._reusable)
+    assert res.summary["slope_rms_urad"] == pytest.approx(
+        1e6 * np.sqrt(np.mean((gx[keep] - gx[keep].mean()) ** 2 + (gy[keep] - gy[keep].mean()) ** 2)),
+        rel=0.02)
+    (tmp_path / "patch.csv").write_text("x,y,z,residual\n" + "\n".join(
+        f"{a!r},{b!r},{c!r},{c!r}" for a, b, c in zip(x.tolist(), y.tolist(), e.tolist())), encoding="utf-8")
+    (tmp_path / "r.yaml").write_text("pointspro: 1\nsurface: {type: even_asphere, c: 0.0005, k: -1, "
+                                     "aperture: 1300}\nsteps:\n  - bspline_map: {spacing: 1.0}\n",
+                                     encoding="utf-8")
+    code, _, err = run_cli("--batch", str(tmp_path / "r.yaml"), str(tmp_path / "patch.csv"), "--out",
+                           str(tmp_path / "o"), "--quiet", "--figures", "none")
+    assert code == 0, err
+    assert (tmp_path / "o" / "patch" / "psd.csv").stat().st_size > 100

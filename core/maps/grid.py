@@ -154,6 +154,9 @@ def grid_map(spline: TensorBSpline, spacing: float, px, py, *, diameter: float |
         lo_x, hi_x, lo_y, hi_y = center[0] - r, center[0] + r, center[1] - r, center[1] + r
     else:
         lo_x, hi_x, lo_y, hi_y = px.min(), px.max(), py.min(), py.max()
+    if not extrapolate:  # nodes beyond the spline's box are masked below: the grid need not hold
+        bx0, bx1, by0, by1 = spline.bounds  # them (a 100 mm patch of a 1300 mm part: 1 % of the nodes)
+        lo_x, hi_x, lo_y, hi_y = max(lo_x, bx0), min(hi_x, bx1), max(lo_y, by0), min(hi_y, by1)
     xs = node_axis(lo_x, hi_x, spacing)
     ys = node_axis(lo_y, hi_y, spacing)
     if xs.size * ys.size > 25_000_000:

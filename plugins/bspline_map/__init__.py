@@ -84,16 +84,22 @@ class BSplineMapStep(Step):
         # the aperture's and the profiles' centre: given, else the surface's axis, else the measured
         # region's bounding-box centre (never a file's corner origin)
         center = pupil_of(x, y, ctx.surface, params.given_centre).center
+        # the spline covers the points' own box (fit_bspline's default): the aperture's box only
+        # when the map is to be extrapolated over the whole aperture, where the penalty's
+        # continuation fills it. Over the aperture's box, a 100 mm patch of a 1300 mm part had its
+        # knots coarsened to 15 mm until the coefficients were no more than the points, and the map
+        # missed the form error it was measured for (issue 16's review).
+        bounds, whole = None, True
         if diameter is not None:
             inside = (x - center[0]) ** 2 + (y - center[1]) ** 2 <= (diameter / 2) ** 2
             if not inside.any():
                 raise StepError(f"no point lies inside the {diameter:g} mm aperture centred at "
                                 f"({center[0]:g}, {center[1]:g}) mm")
-            x, y, v = x[inside], y[inside], v[inside]
-            r = diameter / 2
-            bounds = (center[0] - r, center[0] + r, center[1] - r, center[1] + r)
-        else:
-            bounds = None
+            if not inside.all():
+                x, y, v, whole = x[inside], y[inside], v[inside], False
+            if params.extrapolate:
+                r = diameter / 2
+                bounds = (center[0] - r, center[0] + r, center[1] - r, center[1] + r)
         ctx.progress.check()
         sub = ctx.progress.sub(0.0, 0.8)
         try:
@@ -152,8 +158,8 @@ class BSplineMapStep(Step):
             arts[f"map_mesh.{params.mesh}"] = mesh_art
         out = cloud.replace()
         reuse = {}
-        if (diameter is None and params.knot_spacing is None and params.smoothing == DEFAULT_SMOOTHING
-                and channel == "residual"):
+        if (bounds is None and whole and params.knot_spacing is None
+                and params.smoothing == DEFAULT_SMOOTHING and channel == "residual"):
             # fit_bspline's defaults on the cloud's own arrays: the summary's slope-RMS spline
             # (core.pipeline._reusable), which need not be fitted again
             reuse["slope_spline"] = {"spline": spline, "xyz": out.xyz, "values": out["residual"]}
