@@ -110,7 +110,11 @@ def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None, reuse=(
         s.update({"rms_um": float(np.sqrt(np.mean(d * d))) * 1e3, "pv_um": float(np.ptp(v)) * 1e3,
                   "figures_of": f"{s['figures_of']} of stylus profiles (no PVr or map slope on lines)"})
         return s
-    pupil = pupil_of(x, y, surface)
+    # the centre a zernike or bspline_map step was given in the recipe (the last one), else the
+    # surface's axis or the box's centre (docs/conventions.md, Pupil); PVr does not depend on the
+    # normalisation radius (the span of Fringe Z1…Z36 is the same for any, see _reusable)
+    given = next((e["pupil_centre"] for e in reversed(list(reuse)) if e.get("pupil_centre")), None)
+    pupil = pupil_of(x, y, surface, given)
     pvr_parts, spline = _reusable(cloud_out, v, pupil, reuse) if s["figures_of"] == "residual" \
         else (None, None)
     s.update(form_metrics(x, y, v, pupil.radius, center=pupil.center, pvr_parts=pvr_parts,

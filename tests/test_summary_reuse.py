@@ -41,7 +41,9 @@ def _run(cloud, steps, surface=None):
 
 
 def _refit(res) -> dict:
-    return summarize(res.input_cloud, res.cloud, res.surface)  # no reuse: today's path
+    """The summary fitted afresh: no fit reused, only the pupil centre a step was given."""
+    given = [{"pupil_centre": r.reuse["pupil_centre"]} for r in res.steps if "pupil_centre" in r.reuse]
+    return summarize(res.input_cloud, res.cloud, res.surface, reuse=given)
 
 
 def _close(a: dict, b: dict):
@@ -94,7 +96,9 @@ def test_a_cmm_recipe_with_a_surface_takes_pvr_from_zernike(monkeypatch):
 @pytest.mark.parametrize("steps,pvr_refit,spline_refit", [
     ([{"zernike": {"terms": 15}}, {"bspline_map": {"knot_spacing": 4.0}}], 1, 1),  # other terms, knots
     ([{"zernike": {"terms": 36, "ordering": "noll"}}], 1, 1),  # another span; no spline at all
-    ([{"zernike": {"terms": 36, "centre": [1.0, -0.5], "remove": []}}], 1, 1),  # another centre
+    ([{"zernike": {"terms": 36, "centre": [1.0, -0.5], "remove": []}}], 0, 1),  # its centre is the summary's
+    ([{"zernike": {"terms": 36, "centre": [1.0, -0.5], "remove": []}},
+      {"bspline_map": {"centre": [0.0, 0.0]}}], 1, 0),  # the summary's centre is the last one given
     ([{"zernike": {"terms": 36}}, {"aperture": {"diameter": 30.0}}], 1, 1),  # points removed after it
     ([{"zernike": {"terms": 36}}, {"zernike": {"terms": 4, "remove": ["piston", "tilt"]}}], 1, 1),
     ([{"zernike": {"terms": 36}}, {"bspline_map": {"diameter": 36.0}}], 0, 1),  # a spline over a disk
@@ -113,3 +117,34 @@ def test_the_reused_arrays_are_not_written():
     res = _run(_map(6), [{"zernike": {"terms": 36}}, {"bspline_map": {}}])
     assert set(res.steps[0].reuse) == {"pvr"} and set(res.steps[1].reuse) == {"slope_spline"}
     assert all("reuse" not in rec.to_json() for rec in res.steps)
+
+
+@pytest.mark.parametrize("step", ["zernike", "bspline_map"])
+def test_summary_pvr_is_about_the_centre_given_in_the_recipe(step):
+    """An off-axis clear aperture (centre (300, 0), radius 50 mm, of a 1300 mm part): the centre given
+    on a zernike or bspline_map step is the summary's pupil too (docs/conventions.md, Pupil). About
+    the part's axis the 36-term fit was singular (condition 4e15) and PVr 4 % low."""
+    import pointspro.core as pp
+    from pointspro.core.metrics import form_metrics
+
+    rng = np.random.default_rng(11)
+    g = np.arange(-50, 50.001, 1.0)
+    X, Y = np.meshgrid(g, g)
+    m = X**2 + Y**2 <= 50.0**2
+    u, v = X[m], Y[m]
+    x, y = u + 300.0, v
+    e = (3e-5 * (2 * (u**2 + v**2) / 2500 - 1) + 2e-5 * u * v / 2500
+         + 2e-5 * np.exp(-((u - 20) ** 2 + (v + 10) ** 2) / 18.0) + 2e-6 * rng.standard_normal(len(u)))
+    surface = {"type": "even_asphere", "c": 1 / 2000, "k": -1, "aperture": 1300}
+    cloud = pp.PointCloud.from_numpy(np.column_stack([x, y, (x**2 + y**2) / 4000 + e]), residual=e,
+                                     meta={"frame": "part"})
+    params = {"centre": [300, 0]} | ({"remove": ["piston", "tilt"]} if step == "zernike" else {})
+    res = pp.run({"surface": surface, "steps": [{step: params}]}, cloud)
+    s = res.summary
+    assert s["pupil"]["centre_mm"] == [300.0, 0.0]
+    assert s["pupil"]["centre_from"] == "given in the recipe"
+    r = res.cloud["residual"]
+    own = form_metrics(res.cloud.x, res.cloud.y, r, 50.0, center=(300.0, 0.0))
+    assert s["pvr_um"] == pytest.approx(own["pvr_um"], rel=1e-9)
+    axis = form_metrics(res.cloud.x, res.cloud.y, r, 650.0, center=(0.0, 0.0))
+    assert abs(axis["pvr_um"] - own["pvr_um"]) > 1e-3 * own["pvr_um"]  # the case tells them apart
