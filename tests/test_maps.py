@@ -166,6 +166,17 @@ def test_zernike_step_removes_named_terms_and_keeps_the_rest():
     res2 = _run(ZernikeStep, cloud, ordering="noll", norm_radius=R620, remove=[1, 2, 3, 4])
     assert np.allclose(res2.cloud["residual"], keep_part, atol=1e-12)
     assert "zernike.csv" in res.artifacts and "j,n,m,name" in res.artifacts["zernike.csv"]
+    # every row parses to the header's 7 fields, the unnamed terms' "Z(4,2)" quoted (it shifted the
+    # coefficients into the uncertainty column of a CSV reader), and reads back the report's numbers
+    import csv
+    import io
+
+    rows = list(csv.DictReader(io.StringIO(res.artifacts["zernike.csv"])))
+    assert len(rows) == 36 and all(None not in r and len(r) == 7 for r in rows)
+    for r, c in zip(rows, res.report["coefficients"]):
+        assert (r["name"], float(r["coefficient_nm"]), float(r["uncertainty_nm"])) == \
+            (c["name"], c["coefficient_nm"], c["uncertainty_nm"])
+    assert rows[11]["name"] == "Z(4,2)"
 
 
 def test_zernike_bad_input():

@@ -136,7 +136,7 @@ class ZernikeStep(Step):
             "pv_after_um": float(np.ptp(after) * 1e3), "warnings": warnings,
         }
         csv = "j,n,m,name,coefficient_nm,uncertainty_nm,removed\n" + "".join(
-            f"{r['j']},{r['n']},{r['m']},{r['name']},{r['coefficient_nm']!r},{r['uncertainty_nm']!r},"
+            f"{r['j']},{r['n']},{r['m']},{_csv_field(r['name'])},{r['coefficient_nm']!r},{r['uncertainty_nm']!r},"
             f"{int(r['removed'])}\n" for r in rows)
         labels = [f"{params.ordering[0].upper()}{r['j']}" for r in rows]
         arts = {
@@ -199,3 +199,12 @@ def _um(v_mm: float) -> str:
     from pointspro.core.units import format_length
 
     return format_length(v_mm)
+
+
+def _csv_field(text: str) -> str:
+    """A CSV field (RFC 4180): quoted when it holds a comma, a quote or a line end — the unnamed
+    terms' names "Z(4,2)" made 8 fields of a 7-column row, and a reader shifted the coefficients
+    into the next column (issue 16's review)."""
+    if any(c in text for c in ',"\r\n'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
