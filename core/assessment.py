@@ -6,6 +6,9 @@ ISO 14253-1 (core.tolerance). Both land in the summary (``summary.uncertainty``,
 """
 from __future__ import annotations
 
+import functools
+
+from .metrics.pupil import recipe_centre
 from .progress import Progress
 
 
@@ -18,7 +21,11 @@ def assess(recipe, result, *, progress: Progress | None = None) -> None:
         return
     progress = progress or Progress()
     tolerance = recipe.tolerance
-    extra = tolerance.quantities if tolerance is not None else None
+    extra = None
+    centre = recipe_centre(s for s in recipe.steps if s.enabled)
+    if tolerance is not None:  # about the recipe's pupil centre, as the summary (the Monte Carlo's
+        extra = functools.partial(tolerance.quantities, centre=centre)  # samples too)
+        extra.kinds = tolerance.quantities.kinds
     block = None
     if recipe.uncertainty is not None:
         from .uncertainty import propagate
@@ -26,5 +33,5 @@ def assess(recipe, result, *, progress: Progress | None = None) -> None:
         result.uncertainty = propagate(recipe, result, extra_figures=extra, progress=progress)
         block = result.uncertainty.block()
     if tolerance is not None:
-        values = tolerance.quantities(result.cloud, result.surface)
+        values = tolerance.quantities(result.cloud, result.surface, centre)
         result.tolerance = tolerance.decide(values, block)

@@ -53,6 +53,8 @@ class PipelineResult:
     uncertainty: object | None = None
     #: core.tolerance's verdict block when the recipe has ``tolerance:`` (core/assessment.py)
     tolerance: dict | None = None
+    #: the pupil centre the recipe gives (core.metrics.pupil.recipe_centre; None: by the rules)
+    pupil_centre: tuple[float, float] | None = None
 
     @property
     def artifacts(self) -> dict:
@@ -68,7 +70,7 @@ class PipelineResult:
         """summarize() of input and output, computed once (PVr and slope RMS fit a map)."""
         if self._summary is None:
             self._summary = summarize(self.input_cloud, self.cloud, self.surface,
-                                      reuse=[rec.reuse for rec in self.steps])
+                                      reuse=[rec.reuse for rec in self.steps], centre=self.pupil_centre)
         s = dict(self._summary)
         if self.uncertainty is not None:
             s["uncertainty"] = self.uncertainty.block()
@@ -77,11 +79,12 @@ class PipelineResult:
         return s
 
 
-def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None, reuse=()) -> dict:
+def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None, reuse=(), centre=None) -> dict:
     """points in/out and the optician's metrics over the kept points: RMS, PV, PVr (µm) and slope
     RMS (µrad) — core.metrics.form — of the residual; for a height map with no residual and no
     nominal (or a flat), of the heights after piston and tilt removal, said in ``figures_of``.
-    PVr's 36-term fit uses the pupil of core.metrics.pupil (centre and radius reported).
+    PVr's 36-term fit uses the pupil of core.metrics.pupil (centre and radius reported) about
+    ``centre`` when the recipe gives one (core.metrics.pupil.recipe_centre).
 
     ``reuse``: the steps' StepResult.reuse, in order. PVr's fit and the slope spline are taken from
     a step instead of fitted again when that step fitted exactly them on exactly these data (see
@@ -110,11 +113,7 @@ def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None, reuse=(
         s.update({"rms_um": float(np.sqrt(np.mean(d * d))) * 1e3, "pv_um": float(np.ptp(v)) * 1e3,
                   "figures_of": f"{s['figures_of']} of stylus profiles (no PVr or map slope on lines)"})
         return s
-    # the centre a zernike or bspline_map step was given in the recipe (the last one), else the
-    # surface's axis or the box's centre (docs/conventions.md, Pupil); PVr does not depend on the
-    # normalisation radius (the span of Fringe Z1…Z36 is the same for any, see _reusable)
-    given = next((e["pupil_centre"] for e in reversed(list(reuse)) if e.get("pupil_centre")), None)
-    pupil = pupil_of(x, y, surface, given)
+    pupil = pupil_of(x, y, surface, centre)
     pvr_parts, spline = _reusable(cloud_out, v, pupil, reuse) if s["figures_of"] == "residual" \
         else (None, None)
     s.update(form_metrics(x, y, v, pupil.radius, center=pupil.center, pvr_parts=pvr_parts,
@@ -224,7 +223,9 @@ def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None
     assessing = assess and upto is None and (recipe.uncertainty is not None
                                              or recipe.tolerance is not None)
     whole, progress = progress, (progress.sub(0.0, 0.3) if assessing else progress)
-    result = PipelineResult(cloud, cloud, surface=surface)
+    from .metrics.pupil import recipe_centre
+
+    result = PipelineResult(cloud, cloud, surface=surface, pupil_centre=recipe_centre(steps))
     n = max(len(steps), 1)
     current = cloud
     for i, rs in enumerate(steps):

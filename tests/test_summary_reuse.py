@@ -41,9 +41,8 @@ def _run(cloud, steps, surface=None):
 
 
 def _refit(res) -> dict:
-    """The summary fitted afresh: no fit reused, only the pupil centre a step was given."""
-    given = [{"pupil_centre": r.reuse["pupil_centre"]} for r in res.steps if "pupil_centre" in r.reuse]
-    return summarize(res.input_cloud, res.cloud, res.surface, reuse=given)
+    """The summary fitted afresh: no fit reused, about the pupil centre the recipe gives."""
+    return summarize(res.input_cloud, res.cloud, res.surface, centre=res.pupil_centre)
 
 
 def _close(a: dict, b: dict):
@@ -139,12 +138,18 @@ def test_summary_pvr_is_about_the_centre_given_in_the_recipe(step):
     cloud = pp.PointCloud.from_numpy(np.column_stack([x, y, (x**2 + y**2) / 4000 + e]), residual=e,
                                      meta={"frame": "part"})
     params = {"centre": [300, 0]} | ({"remove": ["piston", "tilt"]} if step == "zernike" else {})
-    res = pp.run({"surface": surface, "steps": [{step: params}]}, cloud)
+    recipe = {"surface": surface, "steps": [{step: params}]}
+    if step == "zernike":  # a step that makes the residual: the drawing can be judged
+        recipe["tolerance"] = {"form": "3/-(1/0.5)", "pvr_um": 1.0}
+    res = pp.run(recipe, cloud)
     s = res.summary
     assert s["pupil"]["centre_mm"] == [300.0, 0.0]
     assert s["pupil"]["centre_from"] == "given in the recipe"
     r = res.cloud["residual"]
     own = form_metrics(res.cloud.x, res.cloud.y, r, 50.0, center=(300.0, 0.0))
     assert s["pvr_um"] == pytest.approx(own["pvr_um"], rel=1e-9)
+    if step == "zernike":  # the tolerance judges the same PVr
+        judged = {it["quantity"]: it["value"] for it in s["tolerance"]["items"]}
+        assert judged["pvr_um"] == pytest.approx(own["pvr_um"], rel=1e-9)
     axis = form_metrics(res.cloud.x, res.cloud.y, r, 650.0, center=(0.0, 0.0))
     assert abs(axis["pvr_um"] - own["pvr_um"]) > 1e-3 * own["pvr_um"]  # the case tells them apart

@@ -35,6 +35,23 @@ class Pupil:
                 "norm_radius_mm": float(self.radius), "centre_from": self.how}
 
 
+#: the steps whose ``centre`` is the pupil's (docs/conventions.md, Pupil)
+PUPIL_STEPS = ("zernike", "bspline_map")
+
+
+def recipe_centre(steps) -> tuple[float, float] | None:
+    """The centre the recipe gives the pupil: that of the last enabled zernike or bspline_map step
+    with ``centre`` (``steps``: core.recipe.RecipeStep), else None. The summary's PVr, the Monte
+    Carlo's samples of it and the tolerance's quantities take it, so they are about the same pupil
+    as the step's Zernike fit (an off-axis aperture's PVr was fitted about the part's axis)."""
+    for rs in reversed(list(steps)):
+        if getattr(rs, "enabled", True) and rs.id in PUPIL_STEPS:
+            c = getattr(rs.params, "given_centre", None)
+            if c is not None:
+                return float(c[0]), float(c[1])
+    return None
+
+
 def is_flat(surface) -> bool:
     """A nominal with no axis: zero sag and zero slope everywhere (a plane)."""
     if surface is None:

@@ -120,10 +120,11 @@ class ToleranceSpec:
                         f"[piston, tilt] — or drop that limit")
 
     # -- after the run ---------------------------------------------------------------------------
-    def quantities(self, cloud, surface) -> dict[str, float]:
+    def quantities(self, cloud, surface, centre=None) -> dict[str, float]:
         """The named quantities of the final cloud (µm; slope µrad); cheap, deterministic — the
-        Monte Carlo calls it on every sample (core.uncertainty, ``kinds`` says each one's bias)."""
-        return compute(cloud, surface, self.keys)
+        Monte Carlo calls it on every sample (core.uncertainty, ``kinds`` says each one's bias).
+        ``centre``: the pupil centre the recipe gives (core.metrics.pupil.recipe_centre)."""
+        return compute(cloud, surface, self.keys, centre)
 
     quantities.kinds = KINDS  # read by core.uncertainty through the bound method
 

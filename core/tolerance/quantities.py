@@ -134,8 +134,9 @@ def _solve(A, w):
     return np.linalg.lstsq(A, w, rcond=None)[0]
 
 
-def summary_quantities(x, y, w, surface, keys) -> dict[str, float]:
-    """The summary's figures named in ``keys``, computed as core.pipeline.summarize does."""
+def summary_quantities(x, y, w, surface, keys, centre=None) -> dict[str, float]:
+    """The summary's figures named in ``keys``, computed as core.pipeline.summarize does (``centre``:
+    the pupil centre the recipe gives, core.metrics.pupil.recipe_centre)."""
     from ..metrics.form import pvr, slope_rms_urad
     from ..metrics.pupil import pupil_of
 
@@ -145,7 +146,7 @@ def summary_quantities(x, y, w, surface, keys) -> dict[str, float]:
     if "pv_um" in keys:
         out["pv_um"] = float(np.ptp(w)) * 1e3
     if "pvr_um" in keys:
-        pupil = pupil_of(x, y, surface)
+        pupil = pupil_of(x, y, surface, centre)
         out["pvr_um"] = pvr(x, y, w, pupil.radius, center=pupil.center) * 1e3
     if "slope_rms_urad" in keys:
         s = slope_rms_urad(x, y, w)
@@ -154,8 +155,9 @@ def summary_quantities(x, y, w, surface, keys) -> dict[str, float]:
     return out
 
 
-def compute(cloud, surface, keys) -> dict[str, float]:
-    """The quantities ``keys`` of the final cloud (µm; slope in µrad)."""
+def compute(cloud, surface, keys, centre=None) -> dict[str, float]:
+    """The quantities ``keys`` of the final cloud (µm; slope in µrad), pupil-based ones about
+    ``centre`` when the recipe gives one (core.metrics.pupil.recipe_centre)."""
     from ..metrics.pupil import pupil_of
     from ..profiles import is_profile
 
@@ -167,10 +169,10 @@ def compute(cloud, surface, keys) -> dict[str, float]:
     if areal and _is_profile(cloud, is_profile):
         raise PointsProError(f"tolerance: {', '.join(ISO_KEYS.get(k, k) for k in areal)} need an area; a "
                              "stylus profile has none (a profile's limits: rms_um, pv_um)")
-    out = summary_quantities(x, y, w, surface, keys)
+    out = summary_quantities(x, y, w, surface, keys, centre)
     iso = [k for k in keys if k in ISO_KEYS]
     if iso:
-        c = pupil_of(x, y, surface).center
+        c = pupil_of(x, y, surface, centre).center
         out.update(iso_quantities(x, y, w, c, iso))
     return out
 

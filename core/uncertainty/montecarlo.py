@@ -186,10 +186,11 @@ def run_plan(plan: Plan, cloud: PointCloud, params_of=None):
 _PAIRS = {}
 
 
-def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = None) -> dict:
+def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = None, centre=None) -> dict:
     """rms_um, pv_um, pvr_um, slope_rms_urad as core.pipeline.summarize computes them, plus PVr's two
     parts (``pvr_fit_pv_um``: PV of the 36-term fit; ``pvr_rest_rms_um``: RMS of what it leaves).
-    ``knot_spacing``: the slope spline's (the nominal run's, reused by the samples; None: its default)."""
+    ``knot_spacing``: the slope spline's (the nominal run's, reused by the samples; None: its default);
+    ``centre``: the pupil centre the recipe gives (core.metrics.pupil.recipe_centre)."""
     from ..maps.bspline import default_knot_spacing, fit_bspline
     from ..metrics import zernike as zk
     from ..metrics.form import PVR_TERMS, slope_rms_urad
@@ -211,7 +212,7 @@ def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = Non
     out["pv_um"] = float(np.ptp(v)) * 1e3
     if _is_stylus_profile(cloud):
         return out
-    pupil = pupil_of(x, y, surface)
+    pupil = pupil_of(x, y, surface, centre)
     pairs = _PAIRS.get(PVR_TERMS) or _PAIRS.setdefault(PVR_TERMS, zk.terms(PVR_TERMS, "fringe"))
     R = pupil.radius if pupil.radius > 0 else 1.0
     if len(v) > 2 * len(pairs):
@@ -260,7 +261,9 @@ def report_figures(reports: dict, plan: Plan) -> dict:
 
 
 def all_figures(cloud, reports, plan, extra_figures=None, knot_spacing=None) -> dict:
-    f = summary_figures(cloud, plan.surface, knot_spacing)
+    from ..metrics.pupil import recipe_centre
+
+    f = summary_figures(cloud, plan.surface, knot_spacing, recipe_centre(p.rs for p in plan.steps))
     f.update(report_figures(reports, plan))
     if extra_figures is not None:
         for k, v in (extra_figures(cloud, plan.surface) or {}).items():

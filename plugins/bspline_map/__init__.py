@@ -163,8 +163,6 @@ class BSplineMapStep(Step):
             # fit_bspline's defaults on the cloud's own arrays: the summary's slope-RMS spline
             # (core.pipeline._reusable), which need not be fitted again
             reuse["slope_spline"] = {"spline": spline, "xyz": out.xyz, "values": out["residual"]}
-        if params.given_centre is not None:  # the summary's PVr is about the recipe's centre too
-            reuse["pupil_centre"] = tuple(map(float, params.given_centre))  # (docs/conventions.md, Pupil)
         return StepResult(out, report, arts, reuse)
 
     @classmethod

@@ -154,8 +154,6 @@ class ZernikeStep(Step):
         out = cloud.replace(channels={"residual": after})
         if reuse:
             reuse["pvr"]["residual"] = out["residual"]
-        if params.given_centre is not None:  # the summary's PVr is about the recipe's centre too
-            reuse["pupil_centre"] = tuple(map(float, params.given_centre))  # (docs/conventions.md, Pupil)
         return StepResult(out, report, arts, reuse)
 
 
