@@ -17,7 +17,7 @@ from pointspro.core.errors import PointsProError, RecipeError
 from pointspro.core.metrics import zernike as zk
 from pointspro.core.metrics.pupil import pupil_of
 from pointspro.core.tolerance import DEFAULT_WAVELENGTH_NM, parse_tolerance
-from pointspro.core.tolerance.decision import NO_UNCERTAINTY, item_verdict, overall
+from pointspro.core.tolerance.decision import CONFORMS, NO_UNCERTAINTY, NOT, UNDECIDED, item_verdict, overall
 from pointspro.core.tolerance.notation import NotationError, parse_form
 from pointspro.core.tolerance.quantities import iso_quantities
 
@@ -311,6 +311,28 @@ def test_decision_rules_at_their_boundaries(value, U, limit, rule, verdict):
     assert item_verdict(value, U, limit, rule)[0] == verdict
 
 
+@pytest.mark.parametrize("value, U, interval, limit, verdict", [
+    # the review's cases: ± U95 said "conforms" and "does not conform"; the intervals hold the limits
+    (0.387, 0.050, (0.348, 0.447), 0.4421, UNDECIDED),
+    (0.07299, 0.00286, (0.06963, 0.07536), 0.06988, UNDECIDED),
+    (0.387, 0.050, (0.348, 0.447), 0.447, CONFORMS),   # upper end = limit conforms
+    (0.387, 0.050, (0.348, 0.447), 0.348, UNDECIDED),  # lower end = limit is undecided
+    (0.387, 0.050, (0.348, 0.447), 0.3479, NOT),
+])
+def test_the_guard_band_is_the_interval_s_ends_when_it_is_not_symmetric(value, U, interval, limit, verdict):
+    assert item_verdict(value, U, limit, "guarded", interval)[0] == verdict
+
+
+def test_decide_compares_the_interval_of_the_magnitude_of_a():
+    spec = parse_tolerance({"form": "3/0.5", "unit": "um"}, AT)
+    unc = {"sag_um": {"value": -0.45, "U95": 0.03, "interval95": [-0.48, -0.42]}}
+    item = spec.decide({"sag_um": -0.45}, unc)["items"][0]
+    assert item["verdict"] == CONFORMS and item["interval95"] == pytest.approx([0.42, 0.48])
+    unc = {"sag_um": {"value": 0.01, "U95": 0.6, "interval95": [-0.59, 0.61]}}
+    item = spec.decide({"sag_um": 0.01}, unc)["items"][0]
+    assert item["verdict"] == UNDECIDED and item["interval95"] == pytest.approx([0.0, 0.61])
+
+
 def test_no_uncertainty_under_the_guarded_rule_is_undecided_and_says_why():
     v, note = item_verdict(0.1, None, 0.5, "guarded")
     assert v == "undecided" and note == NO_UNCERTAINTY
@@ -409,6 +431,12 @@ ASPHERE = "surface: {type: even_asphere, c: 1.0e-3, k: -1.0}\n"
     ("steps:\n  - misalignment: {}\ntolerance: \"3/2(0.5/0.2) RMSq < 1\"\n", 5,
      ["at character 17 'q'"]),
     ("steps:\n  - misalignment: {}\ntolerance: {form: \"3/2\", unit: mm}\n", 5, ["'mm'"]),
+    # a fitted radius takes the power (A), a conic the rotationally symmetric part (B, C) out of the
+    # residual: A read 8e-6 µm for a true 1.04 µm and "conforms"
+    ("steps:\n  - misalignment: {dof: [alpha, beta, dx, dy, dz, radius]}\ntolerance: \"3/2(0.5)\"\n", 4,
+     ["misalignment step fits the surface's radius", "sagitta deviation A", "dof: [alpha, beta, dx, dy, dz]"]),
+    ("steps:\n  - probe_radius: {radius: 1.0, dof: [alpha, beta, dx, dy, dz, conic]}\n  - misalignment: {}\n"
+     "tolerance: \"3/-(0.5/0.1)\"\n", 4, ["probe_radius step fits the surface's conic", "irregularity B"]),
 ])
 def test_bad_tolerance_lines_are_refused_at_load_before_any_file_is_read(tmp_path, body, line, words):
     p = write_recipe(tmp_path, "pointspro: 1\n" + ASPHERE + body)
@@ -426,6 +454,8 @@ def test_what_the_recipe_can_compute_is_accepted(tmp_path):
         "steps:\n  - misalignment: {}\n  - zernike: {remove: [piston, tilt]}\ntolerance: \"3/2(0.5/0.2) RMSa < .1\"\n",
         "steps:\n  - misalignment: {}\n  - zernike: {}\ntolerance: \"3/-(0.5/0.2) RMSi < 0.1\"\n",  # power off: B ok
         "steps:\n  - misalignment: {}\n  - zernike: {}\ntolerance: {rms_um: 0.3}\n",  # the summary's own RMS
+        # the residual's RMS after a best-fit radius is what the shop asked for: not an ISO 10110-5 figure
+        "steps:\n  - misalignment: {dof: [alpha, beta, dx, dy, dz, radius]}\ntolerance: {rms_um: 0.3}\n",
     ]
     for body in ok:
         assert pp.load(write_recipe(tmp_path, "pointspro: 1\n" + ASPHERE + body)).tolerance is not None

@@ -231,3 +231,20 @@ def test_extra_figures_get_their_entries_corrected_by_their_kind(issue_run):
         for key in ("value", "measured", "u", "U95"):
             assert b[mine][key] == pytest.approx(b[theirs][key], rel=1e-9), (mine, key)
     assert "SIMEX" in b["irr_um"]["method"] and "budget" in b["rmsi_um"]
+
+
+@pytest.mark.parametrize("kind", ["extreme", "smooth"])
+def test_a_figure_that_cannot_be_negative_is_floored_at_zero_below_the_noise(kind):
+    """PV, irregularity B, C, a fit's PV: a bias correction that overshoots zero (samples far above
+    the measured value: the form is below the noise) gives value 0, below_noise, an interval from 0
+    — irregularity B read −0.03 µm on a low-signal part (issue 16's review). A linear figure (a
+    Zernike coefficient, A) keeps its sign."""
+    from pointspro.core.uncertainty.estimate import estimate
+
+    rng = np.random.default_rng(3)
+    F = 0.10 + 0.01 * rng.standard_normal(200)  # samples of a figure measured at 0.02
+    e = estimate("irr_um", kind, 0.02, F, None)
+    assert e["value"] == 0.0 and e.get("below_noise") is True
+    assert e["interval95"][0] == 0.0 and e["interval95"][1] > 0.0
+    lin = estimate("sag_um", "linear", -0.02, -0.02 + 0.01 * rng.standard_normal(200), None)
+    assert lin["value"] == -0.02 and lin["interval95"][0] < -0.02

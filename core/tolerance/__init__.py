@@ -44,6 +44,12 @@ _IRREGULAR_ALLOWED = {(0, 0), (1, 1), (1, -1), (2, 0)}
 RESIDUAL_STEPS = ("misalignment", "register", "zernike")
 
 
+#: the pose's degrees of freedom (core/params/pose.py FIVE_DOF); any other name in a step's `dof` is
+#: a shape parameter of the nominal (radius, conic, A_n)
+POSE_NAMES = ("alpha", "beta", "dx", "dy", "dz")
+#: a stylus profile's pose (core/profiles/fit.py PROFILE_POSE)
+_PROFILE_POSE = ("tilt", "decentre", "dz")
+
 @dataclass(frozen=True)
 class Limit:
     """One toleranced quantity: ``key`` (µm or µrad), its name, the limit in ``unit`` (fringes, um,
@@ -101,10 +107,21 @@ class ToleranceSpec:
                 f"({', '.join(RESIDUAL_STEPS)}) and the nominal surface "
                 f"({(surface_spec or {}).get('type', '?')}) is not a flat: add a misalignment step")
         for s in enabled:
+            where = f"{at.rsplit(', line', 1)[0]}, line {s.line}" if s.line else at
+            shape = [n for n in (getattr(s.params, "dof", None) or [])
+                     if n not in POSE_NAMES and n not in _PROFILE_POSE]
+            iso = [lim for lim in self.limits if lim.key in ISO_KEYS]
+            if shape and iso:
+                # a fitted radius takes the power out of the residual (A = 0 whatever the part), a
+                # conic or A_n the rotationally symmetric terms (B, C, RMSx): all judged too small
+                raise RecipeError(
+                    f"{where}: tolerance: the {s.id} step fits the surface's {', '.join(shape)} to the "
+                    f"points, which takes part of the form deviation out of the residual, so "
+                    f"{_names([lim.key for lim in iso])} would be judged without it (too small): fit "
+                    f"the pose only (dof: [{', '.join(POSE_NAMES)}]) or drop those limits")
             if s.id != "zernike":
                 continue
             removed = _removed_pairs(s.params)
-            where = f"{at.rsplit(', line', 1)[0]}, line {s.line}" if s.line else at
             for lim in self.limits:
                 if lim.key not in ISO_KEYS:
                     continue
@@ -135,19 +152,27 @@ class ToleranceSpec:
         for lim in self.limits:
             e = unc.get(lim.key) if isinstance(unc, dict) else None
             value = values.get(lim.key)
-            U = None
+            U = interval = None
             if isinstance(e, dict) and e.get("value") is not None and e.get("U95") is not None:
                 value, U = float(e["value"]), float(e["U95"])
+                if e.get("interval95") is not None:
+                    interval = tuple(map(float, e["interval95"]))
             signed = value
             if value is not None and lim.key == "sag_um":
-                value = abs(value)  # −L ≤ A ≤ L; the interval about A is symmetric
+                value = abs(value)  # −L ≤ A ≤ L: the magnitude and its interval are compared
+                if interval is not None:
+                    lo, hi = interval
+                    interval = (lo, hi) if lo >= 0 else (-hi, -lo) if hi <= 0 else (0.0, max(-lo, hi))
             v_u = None if value is None else self.to_unit(value, lim.unit)
             U_u = None if U is None else self.to_unit(U, lim.unit)
-            verdict, note = dec.item_verdict(v_u, U_u, lim.limit, self.rule)
+            i_u = None if interval is None else tuple(self.to_unit(b, lim.unit) for b in interval)
+            verdict, note = dec.item_verdict(v_u, U_u, lim.limit, self.rule, i_u)
             native = "urad" if lim.key == "slope_rms_urad" else "um"
             item = {"name": lim.name, "quantity": lim.key, "value": v_u, "U95": U_u, "limit": lim.limit,
                     "unit": dec.UNIT_LABELS.get(lim.unit, lim.unit), "verdict": verdict,
                     f"value_{native}": value, f"U95_{native}": U, f"limit_{native}": lim.limit_native}
+            if i_u is not None:
+                item["interval95"] = list(i_u)
             if lim.key == "sag_um" and signed is not None:
                 item["signed_value_um"] = signed
             if note:

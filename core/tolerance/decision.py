@@ -31,8 +31,12 @@ _EPS = 1e-12
 UNIT_LABELS = {"fringes": "fr", "um": "µm", "nm": "nm", "urad": "µrad"}
 
 
-def item_verdict(value: float | None, U: float | None, limit: float, rule: str) -> tuple[str, str | None]:
-    """(verdict, note) of one upper limit; ``value`` is the compared magnitude."""
+def item_verdict(value: float | None, U: float | None, limit: float, rule: str,
+                 interval: tuple[float, float] | None = None) -> tuple[str, str | None]:
+    """(verdict, note) of one upper limit; ``value`` is the compared magnitude. ``interval``: the 95 %
+    interval of that magnitude when the uncertainty gives one — the guard band is its ends, not
+    value ± U95 (the interval of an RMS, a PV or PVr is not centred on its value: ± U95 passed a
+    limit the interval held, and failed another)."""
     if value is None or not math.isfinite(value):
         return UNDECIDED, "not computed on these points"
     slack = _EPS * max(abs(limit), abs(value), 1e-300)
@@ -41,9 +45,10 @@ def item_verdict(value: float | None, U: float | None, limit: float, rule: str) 
     if U is None or not math.isfinite(U):
         return UNDECIDED, NO_UNCERTAINTY + ("; the value alone exceeds the limit" if value > limit + slack
                                             else "")
-    if value + U <= limit + slack:
+    lo, hi = interval if interval is not None else (value - U, value + U)
+    if hi <= limit + slack:
         return CONFORMS, None
-    if value - U > limit + slack:
+    if lo > limit + slack:
         return NOT, None
     return UNDECIDED, "the 95 % interval holds the limit"
 

@@ -164,10 +164,16 @@ def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | Non
             se = 0.0
             placed = value + (F - F.mean())
             method = "linear: no noise bias; the samples' deviations about the measured value"
+    if kind != "linear" and value < 0.0:
+        # a PV, an irregularity, a fit's PV cannot be negative: a bias correction that overshoots zero
+        # says the figure is below the noise — value 0 and the interval's upper end stated, as for the
+        # quadratic figures (a low-signal part's irregularity B read −0.03 µm: issue 16's review)
+        value = 0.0
+        below = True
     lo_p, hi_p = _quantiles(placed)
     w = K95 * se
     lo, hi = value - math.hypot(value - lo_p, w), value + math.hypot(hi_p - value, w)
-    if kind == "quadratic":
+    if kind != "linear":  # ≥ 0 by definition (RMS, PV, irregularity): so is the interval
         lo = max(lo, 0.0)
     u = math.hypot(float(np.std(placed, ddof=1)), se) if M > 1 else float("nan")
     U95 = 0.5 * (hi - lo)
