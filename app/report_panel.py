@@ -54,7 +54,7 @@ class ReportPanel(QtWidgets.QWidget):
 
     def html_for(self, row: int) -> str:
         """The panel's page for row 0 (summary) or a step (1…), figures as far as drawn."""
-        from pointspro.core.report import table_html
+        from pointspro.core.report import not_computed_said, table_html
 
         r = self.result
         if r is None:
@@ -66,8 +66,8 @@ class ReportPanel(QtWidgets.QWidget):
             if s.get("uncertainty"):  # value ± U95 (k = 2), noise bias removed (docs/uncertainty.md)
                 figures = figure_rows(s)
             else:
-                figures = {"RMS (µm)": s["rms_um"], "PV (µm)": s["pv_um"], "PVr (µm)": s["pvr_um"],
-                           "slope RMS (µrad)": s["slope_rms_urad"]}
+                figures = not_computed_said({"RMS (µm)": s["rms_um"], "PV (µm)": s["pv_um"],
+                                             "PVr (µm)": s["pvr_um"], "slope RMS (µrad)": s["slope_rms_urad"]})
             page = verdict_banner_html(s.get("tolerance"))  # green / red / amber, ISO 14253-1
             page += "<h3>Form error after all steps</h3>" + table_html({
                 "points in": s["points_in"], "points out": s["points_out"], **figures})

@@ -108,6 +108,15 @@ def _records(v: list) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+NOT_COMPUTED = "not computed on these points"
+
+
+def not_computed_said(figures: dict) -> dict:
+    """The summary's figures with a None said in words: PVr needs more than 72 points, slope RMS
+    50 and an area (docs/conventions.md); a table would print "None"."""
+    return {k: NOT_COMPUTED if v is None else v for k, v in figures.items()}
+
+
 def table_html(d: dict) -> str:
     rows = []
     for k, v in d.items():
@@ -161,6 +170,7 @@ def render_html(report: dict, folder=None) -> str:
     if s.get("uncertainty"):
         summary = figure_rows(s)
     if any(v is not None for v in summary.values()):
+        summary = not_computed_said(summary)
         what = s.get("figures_of") or "residual"
         pupil = s.get("pupil") or {}
         note = (f"<p class='muted'>Figures of the {html.escape(what)}"

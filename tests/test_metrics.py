@@ -186,3 +186,15 @@ def test_chunked_fit_equals_numpy_lstsq(corner):
     assert np.allclose(f.residual, z - A @ coef, rtol=0, atol=1e-9 * np.ptp(z))
     if not corner:
         assert np.allclose(f.coef, coef, rtol=1e-9, atol=1e-15)
+
+
+def test_pvr_is_not_given_on_72_points_or_fewer_never_the_pv_in_its_place():
+    """The 36-term fit needs more than twice its terms: with 72 points or fewer PVr is None (it was
+    the plain PV under PVr's name); the summary says null and a tolerance on PVr 'not computed'."""
+    rng = np.random.default_rng(5)
+    for n, given in ((60, False), (72, False), (73, True), (200, True)):
+        x, y = rng.uniform(-10, 10, (2, n))
+        r = 1e-4 * (x * x - y * y) / 100 + 1e-6 * rng.standard_normal(n)
+        assert (pvr(x, y, r, 15.0) is not None) == given, n
+        m = form_metrics(x, y, r, 15.0, slopes=False)
+        assert (m["pvr_um"] is not None) == given and m["pv_um"] > 0

@@ -27,8 +27,9 @@ def _radius(x, y, radius: float | None, center=(0.0, 0.0)) -> float:
     return r if r > 0 else 1.0
 
 
-def pvr(x, y, r, radius: float | None = None, center=(0.0, 0.0)) -> float:
-    """Robust PV in the unit of r (see module doc). Needs more points than 36.
+def pvr(x, y, r, radius: float | None = None, center=(0.0, 0.0)) -> float | None:
+    """Robust PV in the unit of r (see module doc); None with 72 points or fewer (the 36-term fit
+    needs more than twice its terms — it was the plain PV, labelled PVr, without a word).
 
     The 36-term fit is over the disk of ``radius`` about ``center`` (core.metrics.pupil chooses
     them for a run: never a file's corner origin, where the fit is singular)."""
@@ -36,7 +37,7 @@ def pvr(x, y, r, radius: float | None = None, center=(0.0, 0.0)) -> float:
     R = _radius(x, y, radius, center)
     pairs = zk.terms(PVR_TERMS, "fringe")
     if len(r) <= 2 * len(pairs):
-        return float(np.ptp(r)) if len(r) else float("nan")
+        return None
     resid = zk.fit(x, y, r, R, pairs, center=center).residual
     fitted = r - resid
     return float(np.ptp(fitted) + 3.0 * np.sqrt(np.mean(resid**2)))
@@ -70,7 +71,11 @@ def form_metrics(x, y, r, radius: float | None = None, slopes: bool = True,
         return {"rms_um": None, "pv_um": None, "pvr_um": None, "slope_rms_urad": None}
     out = {"rms_um": float(np.sqrt(np.mean((r - r.mean()) ** 2)) * 1e3),
            "pv_um": float(np.ptp(r) * 1e3),
-           "pvr_um": (float(pvr_parts[0] + 3.0 * pvr_parts[1]) if pvr_parts is not None
-                      else pvr(x, y, r, radius, center)) * 1e3}
+           "pvr_um": _um(float(pvr_parts[0] + 3.0 * pvr_parts[1]) if pvr_parts is not None
+                         else pvr(x, y, r, radius, center))}
     out["slope_rms_urad"] = slope_rms_urad(x, y, r, spline) if slopes else None
     return out
+
+
+def _um(v_mm: float | None) -> float | None:
+    return None if v_mm is None else v_mm * 1e3

@@ -147,7 +147,9 @@ def summary_quantities(x, y, w, surface, keys, centre=None) -> dict[str, float]:
         out["pv_um"] = float(np.ptp(w)) * 1e3
     if "pvr_um" in keys:
         pupil = pupil_of(x, y, surface, centre)
-        out["pvr_um"] = pvr(x, y, w, pupil.radius, center=pupil.center) * 1e3
+        p = pvr(x, y, w, pupil.radius, center=pupil.center)
+        if p is not None:  # else not computed on these points (the verdict says so)
+            out["pvr_um"] = p * 1e3
     if "slope_rms_urad" in keys:
         s = slope_rms_urad(x, y, w)
         if s is not None:

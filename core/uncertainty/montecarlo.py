@@ -222,8 +222,7 @@ def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = Non
         out["pvr_fit_pv_um"] = fit_pv * 1e3
         out["pvr_rest_rms_um"] = rest * 1e3
         out["pvr_um"] = (fit_pv + 3.0 * rest) * 1e3
-    else:
-        out["pvr_um"] = out["pv_um"]
+    # else no PVr: 72 points or fewer cannot carry its 36-term fit (core.metrics.form.pvr)
     spline = None
     if len(v) >= 50:
         try:
