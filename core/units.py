@@ -49,7 +49,8 @@ def format_length(v_mm: float, digits: int = 3) -> str:
     v = float(v_mm)
     if not math.isfinite(v):
         return f"{v} mm"
-    scale, unit = length_unit(v)
+    # the unit of the value as rounded: 9.9996e-4 mm reads "1 µm", not "1e+03 nm"
+    scale, unit = length_unit(float(f"{v:.{digits}g}"))
     w = v / scale
     if abs(w) >= 10 ** digits:  # 1300 mm reads "1300 mm" (a drawing's figure), never "1.3e+03 mm"
         return f"{w:.0f} {unit}"

@@ -59,3 +59,14 @@ def test_report_figures_read_in_the_unit_of_their_size():
     spiky = 5e-5 * np.sin(X / 3.0)
     spiky[40, 40] = 2e-3  # one 2 µm spike in a 50 nm map
     assert length_axis(spiky) == (1e6, "nm")
+
+
+def test_format_length_rolls_over_to_the_next_unit_when_rounding_reaches_it():
+    from pointspro.core.units import format_length
+
+    assert format_length(9.9996e-4) == "1 µm"  # was "1e+03 nm"
+    assert format_length(0.99996) == "1 mm"  # was "1e+03 µm"
+    assert format_length(-9.9996e-4) == "-1 µm"
+    assert format_length(9.99e-4) == "999 nm"
+    assert format_length(4.39e-5) == "43.9 nm"
+    assert format_length(1300.0) == "1300 mm"
