@@ -125,3 +125,15 @@ def test_runner_writes_step_artifacts(tmp_path):
     folder = tmp_path / "in"
     assert (folder / "map.txt").read_text(encoding="utf-8") == "1 2\n3 4\n"
     assert (folder / "blob.bin").read_bytes() == b"\x00\x01" and (folder / "called.txt").read_text(encoding="utf-8") == "ok"
+
+
+def test_a_polygon_aperture_keeps_the_points_on_all_its_edges_as_a_circle_keeps_its_rim():
+    """Grid points on a square's, a triangle's and a rotated square's edges are kept on every side
+    (the even-odd rule alone dropped those on the right and top edges: 38 of 49 on the square)."""
+    g = np.arange(-5, 5.001, 1.0)
+    X, Y = np.meshgrid(g, g)
+    c = PointCloud.from_xyz(X.ravel(), Y.ravel(), np.zeros(X.size))
+    for verts, n in (([[-3, -3], [3, -3], [3, 3], [-3, 3]], 49), ([[0, 0], [4, 0], [0, 4]], 15),
+                     ([[0, -3], [3, 0], [0, 3], [-3, 0]], 25)):
+        assert _run(ApertureStep, c, shape="polygon", vertices=verts).cloud.n == n
+        assert points_in_polygon(c.x, c.y, np.asarray(verts, float)).sum() < n  # the lasso's open rule

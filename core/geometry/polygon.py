@@ -5,17 +5,36 @@ from __future__ import annotations
 import numpy as np
 
 
-def points_in_polygon(x, y, poly: np.ndarray) -> np.ndarray:
-    """Even-odd rule, vectorised over the points (loop over the polygon's edges only)."""
+def points_in_polygon(x, y, poly: np.ndarray, closed: bool = False) -> np.ndarray:
+    """Even-odd rule, vectorised over the points (loop over the polygon's edges only). ``closed``:
+    the edges included — a point on an edge (within 1e-9 of the polygon's size) is inside, as a
+    point on a circular aperture's rim is (the aperture step); the even-odd rule alone keeps the
+    points on a square's left and bottom edges and drops those on its right and top ones, which a
+    hand-drawn lasso (the window) does not mind and is not slowed for."""
+    poly = np.asarray(poly, dtype=np.float64)
     inside = np.zeros(x.shape, dtype=bool)
+    edge = np.zeros(x.shape, dtype=bool)
+    tol = 1e-9 * max(float(np.ptp(poly[:, 0])), float(np.ptp(poly[:, 1])), 1e-300)
     xj, yj = poly[-1]
     for xi, yi in poly:
         crosses = (yi > y) != (yj > y)
         with np.errstate(divide="ignore", invalid="ignore"):
             xint = (xj - xi) * (y - yi) / (yj - yi) + xi
         inside ^= crosses & (x < xint)
+        if closed:
+            edge |= _on_segment(x, y, xi, yi, xj, yj, tol)
         xj, yj = xi, yi
-    return inside
+    return inside | edge
+
+
+def _on_segment(x, y, x0, y0, x1, y1, tol) -> np.ndarray:
+    """Points within ``tol`` of the segment (x0, y0)–(x1, y1)."""
+    dx, dy = x1 - x0, y1 - y0
+    L2 = dx * dx + dy * dy
+    if L2 == 0.0:
+        return np.hypot(x - x0, y - y0) <= tol
+    t = np.clip(((x - x0) * dx + (y - y0) * dy) / L2, 0.0, 1.0)
+    return np.hypot(x - (x0 + t * dx), y - (y0 + t * dy)) <= tol
 
 
 def in_rectangle(x, y, x0, x1, y0, y1) -> np.ndarray:

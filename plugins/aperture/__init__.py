@@ -50,7 +50,7 @@ class ApertureStep(Step):
         ctx.progress.check()
         x, y = cloud.x, cloud.y
         if params.shape == "polygon":
-            keep = points_in_polygon(x, y, np.asarray(params.vertices, dtype=np.float64))
+            keep = points_in_polygon(x, y, np.asarray(params.vertices, dtype=np.float64), closed=True)
             desc = {"shape": "polygon", "vertices": len(params.vertices)}
         else:
             d = params.diameter
