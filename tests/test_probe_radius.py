@@ -145,3 +145,27 @@ def test_bad_input_gives_clear_errors(case, pattern):
         surface = None
     with pytest.raises(StepError, match=pattern):
         run(q, surface)
+
+
+@pytest.mark.parametrize("slope_deg", [45.0, 70.0, 80.0])
+def test_a_steep_convex_dome_whose_ball_centres_lie_beyond_the_conic(slope_deg):
+    """R −10 mm convex sphere probed from above by a 1 mm ball out to 70–80° slopes: the centres lie
+    at r up to 10.8 mm, beyond the sphere's r ≤ 10 mm (it was refused: "outside the conic's domain …
+    check the surface's c/k and the data's units"); the contact points are exact."""
+    R, rho = -10.0, 1.0
+    g = np.linspace(-1, 1, 41)
+    X, Y = np.meshgrid(g, g)
+    m = np.hypot(X, Y) <= 1
+    a = np.hypot(X[m], Y[m]) * np.radians(slope_deg)  # polar angle on the sphere
+    phi = np.arctan2(Y[m], X[m])
+    contact = np.column_stack([abs(R) * np.sin(a) * np.cos(phi), abs(R) * np.sin(a) * np.sin(phi),
+                               abs(R) * np.cos(a) - abs(R)])  # vertex at 0, the dome below it
+    normal = contact - [0.0, 0.0, -abs(R)]
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    shift = np.array([0.02, -0.01, 0.3])
+    q = contact + rho * normal + shift
+    surface = EvenAsphere(1 / R, 0.0, {}, 25.0)
+    cloud = PointCloud.from_xyz(*q.T)
+    res = ProbeRadiusStep().run(cloud, ProbeRadiusStep.Params.model_validate(
+        {"radius": rho, "side": 1, "dof": ["dx", "dy", "dz"]}), Context(surface=surface))
+    assert np.abs(res.cloud.xyz - contact - shift).max() < 1e-9

@@ -102,13 +102,29 @@ class SurfaceOfRevolution(NominalSurface):
         return foot, n, dist, out_shift
 
     def _newton(self, rho_p, zp, shift, tol):
-        """ρ, z(ρ), z'(ρ) of one chunk's foot points."""
+        """ρ, z(ρ), z'(ρ) of one chunk's foot points.
+
+        A conic exists only out to r_max (its slope turns vertical there). A point beyond it — the
+        ball centre over a steep convex dome: R −10 mm, 1 mm ball, 70° slopes put centres at r 10.36
+        mm — starts from 0.98 r_max, and no Newton step leaves the domain (clipped just inside it):
+        the foot lies on the surface, inside. Elsewhere the iterates are those of before. A point
+        beyond 2 r_max, or a foot held at the edge, is the conic's DomainError as before (data in µm
+        read as mm, a wrong c)."""
+        r_max = float(getattr(self, "r_max", np.inf))
+        inside = r_max * (1.0 - 1e-12) if np.isfinite(r_max) else None
+        rho_p0 = rho_p
+        if inside is not None and (rho_p > 2.0 * r_max).any():  # no ball centre lies that far out
+            self.sag_r(rho_p[rho_p > 2.0 * r_max])  # the conic's DomainError (µm read as mm, wrong c)
         if shift is None:
-            dz = zp - self.sag_r(rho_p)
-            zr = self.slope_r(rho_p)
-            rho = rho_p + dz * zr / (1.0 + zr * zr)
+            r0 = rho_p if inside is None or not (rho_p >= 0.98 * r_max).any() \
+                else np.minimum(rho_p, 0.98 * r_max)
+            dz = zp - self.sag_r(r0)
+            zr = self.slope_r(r0)
+            rho = r0 + dz * zr / (1.0 + zr * zr)
         else:
             rho = rho_p - shift
+        if inside is not None and (rho > inside).any():
+            rho = np.minimum(rho, inside)
         k = len(rho)
         rho_out, z_out, zr_out = np.empty(k), np.empty(k), np.empty(k)
         act = None  # indices still iterating (None: all of the chunk)
@@ -119,15 +135,19 @@ class SurfaceOfRevolution(NominalSurface):
             dh = -1.0 - zr * zr + e * zrr
             step = h / dh
             rho = rho - step
+            if inside is not None and (rho > inside).any():  # never past the domain's edge
+                over = rho > inside
+                step = np.where(over, rho - inside + step, step)  # the step actually taken
+                rho = np.minimum(rho, inside)
             z -= zr * step  # z and z' at the stepped radius, to first order in the step
             zr -= zrr * step
             done = np.abs(step) <= tol
             if act is None and done.all():
-                return rho, z, zr
+                return self._inside_domain(rho, rho_p0, inside), z, zr
             fin = np.flatnonzero(done) if act is None else act[done]
             rho_out[fin], z_out[fin], zr_out[fin] = rho[done], z[done], zr[done]
             if fin.size == (k if act is None else act.size):
-                return rho_out, z_out, zr_out
+                return self._inside_domain(rho_out, rho_p0, inside), z_out, zr_out
             keep = ~done
             act = np.flatnonzero(keep) if act is None else act[keep]
             rho, rho_p, zp = rho[keep], rho_p[keep], zp[keep]
@@ -135,7 +155,15 @@ class SurfaceOfRevolution(NominalSurface):
         z, zr, _ = self.profile_r(rho)
         sel = slice(None) if act is None else act
         rho_out[sel], z_out[sel], zr_out[sel] = rho, z, zr
-        return rho_out, z_out, zr_out
+        return self._inside_domain(rho_out, rho_p0, inside), z_out, zr_out
+
+    def _inside_domain(self, rho, rho_p, inside):
+        """``rho`` when no foot ended on the domain's edge: a foot held there by the clip is no foot
+        point (data far outside the conic: µm read as mm, a wrong c) — the conic's own DomainError,
+        naming those points' radii, as before the clip."""
+        if inside is not None and (rho >= inside).any():
+            self.sag_r(np.array([max(float(rho_p[rho >= inside].max()), 2.0 * inside)]))
+        return rho
 
     def gradient(self, x, y):
         x = np.asarray(x, dtype=np.float64)
