@@ -517,6 +517,14 @@ def _reporter(results: dict, args, progress=None):
             extra = (f", {what} RMS {format_length(s['rms_um'] * 1e-3, 4)}, "
                      f"PV {format_length(s['pv_um'] * 1e-3, 4)}"
                      if s.get("rms_um") is not None else "")
+            u = (s.get("uncertainty") or {}).get("rms_um")
+            u = u if isinstance(u, dict) else {}
+            if extra and u.get("value") is not None and u.get("U95") is not None:
+                # the table's RMS column: noise bias removed, ± U95 (docs/uncertainty.md)
+                from .statement import with_uncertainty
+
+                extra += (f" as measured; RMS {with_uncertainty(u['value'], u['U95'], 'µm', u.get('k') or 2.0)}"
+                          " with the noise bias removed")
             if not args.quiet:
                 say(f"{oc.input}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} "
                     f"points{extra}, {oc.seconds:.2f} s)")

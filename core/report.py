@@ -223,7 +223,8 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
         if not _is_figure(e):
             continue
         lo, hi = (e.get("interval95") or [None, None])[:2]
-        rows.append({"figure": name, "value": e.get("value"), "as measured": e.get("measured"),
+        rows.append({"figure": name, "unit": _unit_of_key(name), "value": e.get("value"),
+                     "as measured": e.get("measured"),
                      "bias": e.get("bias"), "u": e.get("u"), "U95": e.get("U95"),
                      "95 % interval": "—" if lo is None else f"[{lo:.6g}, {hi:.6g}]"})
     out = ["<h2>Uncertainty (Monte Carlo through the steps, JCGM 101)</h2>",
@@ -242,6 +243,15 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
         out.append(_records(rows))
     out.append(_img(folder, "uncertainty.png"))
     return out
+
+
+#: a figure's unit from its key's suffix (report.json's convention: rms_um, slope_rms_urad, alpha_deg)
+_KEY_UNITS = (("_um", "µm"), ("_nm", "nm"), ("_mm", "mm"), ("_urad", "µrad"), ("_deg", "°"),
+              ("_arcsec", "″"), ("_s", "s"))
+
+
+def _unit_of_key(name: str) -> str:
+    return next((u for suffix, u in _KEY_UNITS if name.endswith(suffix)), "")
 
 
 def _is_figure(e) -> bool:

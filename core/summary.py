@@ -48,7 +48,11 @@ def table(entries: list[dict]) -> str:
         return "—" if v is None else format(v, fmt)
 
     verdicts = any(e.get("verdict") for e in entries)  # a column only when a recipe has a tolerance
-    rows = [("input", "status", "points", "RMS µm", "PV µm", "s") + (("verdict",) if verdicts else ())]
+    # with an uncertainty the RMS is the noise-bias-corrected value ± U95 (the per-input line gives
+    # the value as measured too): the header says which
+    corrected = any(e.get("rms_U95_um") is not None for e in entries)
+    rms_head = "RMS µm (corrected ± U95)" if corrected else "RMS µm"
+    rows = [("input", "status", "points", rms_head, "PV µm", "s") + (("verdict",) if verdicts else ())]
     for e in entries:
         pts = "—" if e["points_in"] is None else f"{e['points_in']}→{e['points_out']}"
         rms = f(e["rms_um"], ".4g")
