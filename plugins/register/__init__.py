@@ -167,11 +167,12 @@ class RegisterStep(Step):
             ctx.progress.update(0.3 + 0.6 * it / max(params.refine_iterations, 1), "least squares")
             _, n, d = surf.foot_point(q)
             J = np.column_stack([np.cross(q, n), n])  # ∂d/∂(ω, t)
-            JtJ = J.T @ J
-            scale = np.sqrt(np.diag(JtJ))
-            scale[scale == 0] = 1.0
-            Js = J / scale
-            step, *_ = np.linalg.lstsq(Js, -d, rcond=1e-12)
+            # columns in the same unit (a rotation as the arc it moves a point at the extent, mm), not
+            # each scaled to unit norm: on a surface of revolution ∂d/∂ω_z is rounding noise, which
+            # unit scaling blew up to rotation steps of 10¹¹° (residual 0.1 → 286 µm, issue 16's
+            # review); here the null direction's singular value is cut and that motion held
+            scale = np.array([extent] * 3 + [1.0] * 3)
+            step, *_ = np.linalg.lstsq(J / scale, -d, rcond=NULL_MOTION)
             step /= scale
             R = _rot(step[:3])
             T = np.vstack([np.column_stack([R @ T[:3, :3], R @ T[:3, 3] + step[3:]]), [0, 0, 0, 1]])
@@ -186,11 +187,16 @@ class RegisterStep(Step):
         scale = np.sqrt(np.diag(JtJ))
         scale[scale == 0] = 1.0
         cond = float(np.linalg.cond(JtJ / np.outer(scale, scale)))
-        cov = np.linalg.pinv(JtJ) * s2
+        free = _free_motions(J, extent)
+        cov = np.linalg.pinv(JtJ, rcond=NULL_MOTION ** 2) * s2
         sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-        if cond > 1e6:
-            warnings.append(f"the shape does not fix every rigid motion (condition {cond:.3g}): "
-                            "a symmetric surface leaves a rotation or a slide free")
+        if free:
+            warnings.append(f"the shape does not fix {' and '.join(free)} (a symmetric surface): held "
+                            "where ICP left it, its uncertainty not given")
+            sd[[_MOTIONS.index(m) for m in free]] = np.nan
+        elif cond > 1e6:
+            warnings.append(f"the shape barely fixes every rigid motion (condition {cond:.3g}): a nearly "
+                            "symmetric surface leaves a rotation or a slide weakly determined")
         from scipy.spatial.transform import Rotation
 
         rz, ry, rx = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
@@ -200,9 +206,9 @@ class RegisterStep(Step):
             "rx_deg": float(rx), "ry_deg": float(ry), "rz_deg": float(rz),
             "tx": float(T[0, 3]), "ty": float(T[1, 3]), "tz": float(T[2, 3]),
             "transform": T.tolist(),
-            "uncertainty": {"rx_deg": float(np.degrees(sd[0])), "ry_deg": float(np.degrees(sd[1])),
-                            "rz_deg": float(np.degrees(sd[2])), "tx": float(sd[3]),
-                            "ty": float(sd[4]), "tz": float(sd[5])},
+            "uncertainty": {k: (None if not np.isfinite(v) else float(v)) for k, v in zip(
+                ("rx_deg", "ry_deg", "rz_deg", "tx", "ty", "tz"),
+                (np.degrees(sd[0]), np.degrees(sd[1]), np.degrees(sd[2]), sd[3], sd[4], sd[5]))},
             "icp_fitness": float(icp.fitness), "icp_rms_um": rms_icp * 1e3,
             "refine_iterations": it, "condition_number": cond,
             "residual_rms_um": float(np.sqrt(np.mean(d * d)) * 1e3),
@@ -214,3 +220,18 @@ class RegisterStep(Step):
     @classmethod
     def example_params(cls) -> dict:
         return {}
+
+
+#: singular values below this fraction of the largest (columns in mm) are motions the shape does not fix
+NULL_MOTION = 1e-9
+_MOTIONS = ("rotation about x", "rotation about y", "rotation about z", "a slide along x",
+            "a slide along y", "a slide along z")
+
+
+def _free_motions(J, extent) -> list[str]:
+    """The rigid motions (of ``_MOTIONS``) the surface leaves free: the dominant parameter of each
+    right-singular vector of J (rotation columns × extent, all in mm) whose singular value is below
+    NULL_MOTION of the largest — rotation about z on a surface of revolution, a slide on a plane."""
+    sv, vt = np.linalg.svd(J / np.array([extent] * 3 + [1.0] * 3), full_matrices=False)[1:]
+    null = vt[sv < NULL_MOTION * sv[0]]
+    return sorted({_MOTIONS[int(np.argmax(np.abs(v)))] for v in null}, key=_MOTIONS.index)
