@@ -128,3 +128,21 @@ def test_bad_time_series_and_calibrations(tmp_path):
     with pytest.raises(StepError, match="no xd/xc channel"):
         DynamicStep().run(PointCloud.from_xyz(np.zeros(5), np.zeros(5), np.zeros(5), t=np.arange(5.0)),
                           DynamicStep.Params(model="m.json"), Context(base_dir=tmp_path))
+
+
+def test_a_real_pole_is_no_resonance_not_even_a_negative_one():
+    """ln z of a real negative pole has the imaginary part π·fs: it was a 'mode' at the Nyquist
+    frequency and tripped the advice to sample faster. Only complex pairs are modes."""
+    from pointspro.core.dynamics.identify import LoopModel
+
+    assert LoopModel(np.array([0.7, 0.0]), np.array([1.0, -0.3]), 1000.0).modes() == []
+    assert LoopModel(np.array([1.3, 0.0]), np.array([1.0, 0.3]), 1000.0).modes() == []
+    # a 60 Hz pair, ζ 0.15, and a real negative pole: one mode, 60 Hz
+    fs, f, zeta = 2000.0, 60.0, 0.15
+    wn = 2 * np.pi * f
+    s = -zeta * wn + 1j * wn * np.sqrt(1 - zeta**2)
+    z = np.exp(s / fs)
+    a = np.real(np.poly([z, np.conj(z), -0.006]))
+    modes = LoopModel(np.array([a.sum()]), a, fs).modes()
+    assert len(modes) == 1 and modes[0]["frequency_hz"] == pytest.approx(f, rel=1e-9)
+    assert modes[0]["damping"] == pytest.approx(zeta, rel=1e-9)

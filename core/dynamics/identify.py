@@ -63,10 +63,14 @@ class LoopModel:
             return self.fs * np.log(self.poles_z.astype(complex))
 
     def modes(self) -> list[dict]:
-        """Resonances: natural frequency (Hz) and damping ratio of each complex pole pair."""
+        """Resonances: natural frequency (Hz) and damping ratio of each complex pole pair. A real
+        pole is none — also a real negative z, whose ln has the imaginary part π·fs: it was reported
+        as a mode at the Nyquist frequency (a z = −0.006 pole of an order-3 fit as "1906 Hz, ζ 0.85",
+        and the advice to sample faster; issue 16's review)."""
         out = []
-        for p in self.poles_s():
-            if p.imag > 0:
+        z = np.asarray(self.poles_z, dtype=complex)
+        for p, pz in zip(self.poles_s(), z):
+            if pz.imag > 1e-12 * max(abs(pz), 1e-300):
                 wn = abs(p)
                 out.append({"frequency_hz": float(wn / (2 * np.pi)), "damping": float(-p.real / wn)})
         return sorted(out, key=lambda m: m["frequency_hz"])
