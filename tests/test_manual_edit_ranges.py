@@ -158,3 +158,18 @@ def test_binary_ply_layouts_read_the_same_numbers(tmp_path, order):
 
     with pytest.raises(InputError, match=r"c.ply: PLY file is truncated"):
         read_ply(tmp_path / "c.ply")
+
+
+def test_rows_beyond_2_62_are_refused_and_the_absent_rows_are_reported_up_to_it():
+    """[[5, 2⁶³ − 1]] reported no absent rows (the run's end + 1 wrapped); rows are now ≤ 2⁶²."""
+    import numpy as np
+
+    import pointspro.core as pp
+    from pointspro.core.errors import RecipeError
+
+    c = pp.PointCloud.from_numpy(np.random.default_rng(0).normal(size=(10, 3)))
+    res = pp.run({"steps": [{"manual_edit": {"remove_ranges": [[5, 2**62]]}}]}, c)
+    assert res.cloud.n == 5 and res.steps[0].report["not_found_ranges"] == [[10, 2**62]]
+    for bad in ({"remove_ranges": [[2**63 - 2, 2**63 - 1]]}, {"remove": [2**62 + 1]}):
+        with pytest.raises(RecipeError, match="at most"):
+            pp.run({"steps": [{"manual_edit": bad}]}, c)

@@ -31,6 +31,8 @@ class ManualEditParams(Params):
     def _non_negative(cls, v):
         if any(i < 0 for i in v):
             raise ValueError("indices are input rows and cannot be negative")
+        if any(i > MAX_ROW for i in v):
+            raise ValueError(f"an input row is at most {MAX_ROW} (2⁶²)")
         return v
 
     @field_validator("remove_ranges")
@@ -40,7 +42,13 @@ class ManualEditParams(Params):
             if a < 0 or b < a:
                 raise ValueError(f"pair {k + 1} is [{a}, {b}]: each pair is [first, last] input rows "
                                  "with 0 ≤ first ≤ last")
+            if b > MAX_ROW:  # the runs' bounds ± 1 must stay int64 (reporting the absent rows)
+                raise ValueError(f"pair {k + 1} is [{a}, {b}]: an input row is at most {MAX_ROW} (2⁶²)")
         return v
+
+
+#: the largest input row a recipe may name: far beyond any cloud, and its neighbours stay in int64
+MAX_ROW = 2**62
 
 
 def _merged(ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
