@@ -13,10 +13,14 @@ import numpy as np
 
 from pointspro.core.units import display_unit  # noqa: F401  (the views' unit rule; tests import it here)
 
-# Signed deviations (mm): shown in µm on a diverging map centred on zero.
-DEVIATION_CHANNELS = ("residual", "probe_residual", "distance", "gap", "correction", "form_error")
-# Non-negative deviations and uncertainties (mm): shown in µm on a sequential map.
-MAGNITUDE_CHANNELS = ("omega", "u", "uncertainty", "u_z", "sigma")
+# Signed deviations (mm): shown in the unit their spread asks for on a diverging map centred on zero
+# (the steps' error channels too: core.units.LENGTH_CHANNELS lists what the steps make in mm).
+DEVIATION_CHANNELS = ("residual", "probe_residual", "distance", "gap", "correction", "form_error",
+                      "kinematic_error", "dynamic_error")
+# Non-negative deviations and uncertainties (mm): shown on a sequential map.
+MAGNITUDE_CHANNELS = ("omega", "u", "uncertainty", "u_x", "u_y", "u_z", "sigma")
+# Positions (mm): shown about their mean (a height's 1 mm offset would read every label as "1").
+POSITION_CHANNELS = ("x", "y", "z", "z_raw", "xd", "xc")
 
 #: points drawn in the 3D view at most (level of detail). Software OpenGL (llvmpipe, the CI's and
 #: many remote desktops') draws ~3 M points/s, so 150,000 keep a frame near 0.05 s — an edit redraws
@@ -47,14 +51,14 @@ def channel_display(cloud, name: str, unit: str | None = None, rows=None):
     view's level of detail), with the unit and the mean of all points."""
     full = np.asarray(cloud[name], dtype=np.float64)
     v = full if rows is None else full[rows]
-    if name in DEVIATION_CHANNELS or name in MAGNITUDE_CHANNELS or name in ("x", "y", "z"):
-        if name in ("x", "y", "z"):
+    if name in DEVIATION_CHANNELS or name in MAGNITUDE_CHANNELS or name in POSITION_CHANNELS:
+        if name in POSITION_CHANNELS:
             v = v - full.mean()
             label = f"{name} − mean"
         else:
             label = name
         if unit not in _DISPLAY_UNITS:
-            src = v if rows is None else full - full.mean() if name in ("x", "y", "z") else full
+            src = v if rows is None else full - full.mean() if name in POSITION_CHANNELS else full
             unit = display_unit(src)  # of all points, whatever is drawn
         return v / _DISPLAY_UNITS[unit], f"{label} ({unit})", unit, name in DEVIATION_CHANNELS
     return v, name, None, False

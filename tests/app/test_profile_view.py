@@ -52,3 +52,24 @@ def test_stylus_profiles_are_drawn_as_curves(qtbot):
     m.set_cloud(PointCloud.from_xyz(X.ravel(), Y.ravel(), 0 * X.ravel()), "z", new_input=True)
     assert m.stylus is None and m.pax.get_xlabel() == "along the cut (mm)"
     qtbot.wait(20)  # let the canvas's pending draw run before the widget is deleted
+
+
+def test_the_steps_error_and_position_channels_are_shown_as_lengths():
+    """kinematic_error / dynamic_error (signed, diverging), u_x (an uncertainty) and z_raw, xd
+    (positions, about their mean) in the unit their spread asks for — they were shown raw in mm
+    ("PV 9.996e-05", a 3D bar of "1" five times for z_raw around 1 mm)."""
+    import numpy as np
+
+    from pointspro.app import display
+    from pointspro.core import PointCloud
+
+    rng = np.random.default_rng(0)
+    n = 500
+    e = 5e-4 * rng.standard_normal(n)
+    c = PointCloud.from_xyz(rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), np.zeros(n),
+                            kinematic_error=e, dynamic_error=e, u_x=np.abs(e), z_raw=1.0 + e, xd=2.0 + e)
+    for name, diverging in (("kinematic_error", True), ("dynamic_error", True), ("u_x", False),
+                            ("z_raw", False), ("xd", False)):
+        v, title, unit, div = display.channel_display(c, name)
+        assert unit == "µm" and title.endswith("(µm)") and div == diverging, (name, title)
+        assert abs(np.mean(v)) < 50  # positions about their mean, in µm
