@@ -54,7 +54,7 @@ class ReportPanel(QtWidgets.QWidget):
 
     def html_for(self, row: int) -> str:
         """The panel's page for row 0 (summary) or a step (1…), figures as far as drawn."""
-        from pointspro.core.report import not_computed_said, table_html
+        from pointspro.core.report import table_html
 
         r = self.result
         if r is None:
@@ -63,14 +63,16 @@ class ReportPanel(QtWidgets.QWidget):
             from pointspro.core.statement import figure_rows, verdict_banner_html
 
             s = r.summary()
-            if s.get("uncertainty"):  # value ± U95 (k = 2), noise bias removed (docs/uncertainty.md)
-                figures = figure_rows(s)
-            else:
-                figures = not_computed_said({"RMS (µm)": s["rms_um"], "PV (µm)": s["pv_um"],
-                                             "PVr (µm)": s["pvr_um"], "slope RMS (µrad)": s["slope_rms_urad"]})
+            # in the unit their size asks for; with an uncertainty value ± U95, noise bias removed
+            figures = figure_rows(s)
             page = verdict_banner_html(s.get("tolerance"))  # green / red / amber, ISO 14253-1
-            page += "<h3>Form error after all steps</h3>" + table_html({
-                "points in": s["points_in"], "points out": s["points_out"], **figures})
+            page += "<h3>Form error after all steps</h3>"
+            if s.get("figures_of"):  # what the figures are of, and PVr's pupil (as report.html)
+                pupil = s.get("pupil") or {}
+                page += (f"<p style='color:#555'>Figures of the {html.escape(s['figures_of'])}"
+                         + (f"; PVr's pupil: centre ({pupil['centre_mm'][0]:.6g}, {pupil['centre_mm'][1]:.6g})"
+                            f" mm, radius {pupil['norm_radius_mm']:.6g} mm" if pupil else "") + ".</p>")
+            page += table_html({"points in": s["points_in"], "points out": s["points_out"], **figures})
             if s.get("uncertainty"):
                 from pointspro.core.report import uncertainty_html
 

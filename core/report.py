@@ -108,15 +108,6 @@ def _records(v: list) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-NOT_COMPUTED = "not computed on these points"
-
-
-def not_computed_said(figures: dict) -> dict:
-    """The summary's figures with a None said in words: PVr needs more than 72 points, slope RMS
-    50 and an area (docs/conventions.md); a table would print "None"."""
-    return {k: NOT_COMPUTED if v is None else v for k, v in figures.items()}
-
-
 def table_html(d: dict) -> str:
     rows = []
     for k, v in d.items():
@@ -164,13 +155,9 @@ def render_html(report: dict, folder=None) -> str:
 
     if s.get("tolerance"):  # the verdict against the drawing first: what a quality engineer signs
         parts.insert(2, "<h2>Verdict against the drawing</h2>" + verdict_banner_html(s["tolerance"]))
-    summary = {"RMS (µm)": s.get("rms_um"), "PV (µm)": s.get("pv_um"),
-               "PVr (µm, Evans: Zernike Z1–Z36 PV + 3·RMS of the rest)": s.get("pvr_um"),
-               "slope RMS (µrad, tilt removed)": s.get("slope_rms_urad")}
-    if s.get("uncertainty"):
-        summary = figure_rows(s)
-    if any(v is not None for v in summary.values()):
-        summary = not_computed_said(summary)
+    # in the unit their size asks for ("547.5 nm"; report.json keeps the µm numbers)
+    summary = figure_rows(s)
+    if summary:
         what = s.get("figures_of") or "residual"
         pupil = s.get("pupil") or {}
         note = (f"<p class='muted'>Figures of the {html.escape(what)}"

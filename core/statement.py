@@ -54,9 +54,16 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
     return f"{value:.{d}f} ± {U:.{d}f} {unit} (k = {k:.3g})"
 
 
+#: a summary figure the points cannot give (PVr needs more than 72 points, slope RMS 50 and an area)
+NOT_COMPUTED = "not computed on these points"
+
+
 def figure_rows(summary: dict) -> dict[str, str]:
-    """The summary's figures as display strings: with ``summary['uncertainty']`` each is the
-    bias-corrected value ± U95 and says the plain pipeline figure beside it."""
+    """The summary's figures as display strings in the unit their size asks for ("547.5 nm"): with
+    ``summary['uncertainty']`` each is the bias-corrected value ± U95 and says the plain pipeline
+    figure beside it; {} when the summary has none (no residual), NOT_COMPUTED for one it lacks."""
+    if all(summary.get(key) is None for key, _, _ in SUMMARY_FIGURES):
+        return {}
     unc = summary.get("uncertainty") or {}
     rows = {}
     for key, name, unit in SUMMARY_FIGURES:
@@ -69,6 +76,8 @@ def figure_rows(summary: dict) -> dict[str, str]:
             rows[name] = text
         elif plain is not None:
             rows[name] = with_uncertainty(plain, None, unit)
+        else:
+            rows[name] = NOT_COMPUTED
     return rows
 
 
