@@ -98,8 +98,11 @@ class ExplainPanel(QtWidgets.QWidget):
         self.save.setEnabled(True)
         self.view.setHtml((self.folder / "explain.html").read_text(encoding="utf-8"))
         names = ", ".join(f["effect"] for f in report["found"]) or "nothing"
+        from pointspro.core.units import format_length
+
         self.log.emit(f"explain: {report['verdict']} — found {names}; gap RMS "
-                      f"{report['gap_before']['rms_um']:.4g} → {report['gap_after']['rms_um']:.4g} µm")
+                      f"{format_length(report['gap_before']['rms_um'] * 1e-3, 4)} → "
+                      f"{format_length(report['gap_after']['rms_um'] * 1e-3, 4)}")
 
     def _failed(self, msg):
         self.run.setEnabled(True)

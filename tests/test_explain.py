@@ -4,6 +4,7 @@ time-versus-radius ambiguity; the simulate/explain commands."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -80,6 +81,14 @@ def test_each_hidden_effect_is_named_first_and_closes_the_gap(tmp_path, name):
     assert name in {next(iter(e)) for e in upd["effects"]}
     html = (tmp_path / "out" / "explain.html").read_text(encoding="utf-8")
     assert html.count("data:image/png;base64,") == 2 and name in html
+    # lengths in the unit their size asks for: the gap in nm, a length parameter with its unit
+    assert re.search(r"gap [0-9.]+ (nm|µm) RMS before, [0-9.]+ (nm|µm) after", html)
+    found = html.split("<h2>Found")[1].split("<h2>")[0]
+    assert re.search(r"gap after</th><td>RMS [0-9.]+ (nm|µm), PV", found)
+    from pointspro.core.simulate.effects import LIBRARY
+
+    if "mm" in getattr(LIBRARY[name], "units", ()) or getattr(LIBRARY[name], "unit", "") == "mm":
+        assert re.search(r"<td>-?[0-9.]+ (nm|µm)", found), found  # a length parameter in nm or µm
 
 
 def test_nothing_missing(tmp_path):

@@ -302,14 +302,19 @@ def _html(report: dict, folder: Path) -> str:
 
     from ..report import _CSS, _img
     from ..report import table_html as _table
+    from ..units import format_length
 
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>PointsPro explain</title><style>{_CSS}"
              "</style></head><body><h1>Explain: where simulation and measurement disagree</h1>",
-             f"<p><b>Verdict: {html.escape(report['verdict'])}</b> — gap {report['gap_before']['rms_um']:.4g} µm RMS "
-             f"before, {report['gap_after']['rms_um']:.4g} µm after; noise {report['noise_um']:.3g} µm.</p>",
+             f"<p><b>Verdict: {html.escape(report['verdict'])}</b> — gap "
+             f"{format_length(report['gap_before']['rms_um'] * 1e-3, 4)} RMS before, "
+             f"{format_length(report['gap_after']['rms_um'] * 1e-3, 4)} after; noise "
+             f"{format_length(report['noise_um'] * 1e-3, 3)}.</p>",
              _img(folder, "gap_map.png"), _img(folder, "gap_views.png"), "<h2>Found (in the order added)</h2>"]
     for f in report["found"]:
-        parts.append(f"<h3>{html.escape(f['effect'])}</h3>" + _table({**f["params"], "gap after": f["gap_after"],
+        gap = (f"RMS {format_length(f['gap_after']['rms_um'] * 1e-3, 4)}, "
+               f"PV {format_length(f['gap_after']['pv_um'] * 1e-3, 4)}")
+        parts.append(f"<h3>{html.escape(f['effect'])}</h3>" + _table({**params_for_people(f), "gap after": gap,
                                                                      **{"evidence " + k: v for k, v in f["evidence"].items()}}))
     if not report["found"]:
         parts.append("<p class='muted'>No effect of the library is supported by the gap.</p>")
@@ -322,3 +327,33 @@ def _html(report: dict, folder: Path) -> str:
         parts.append("<h2>Unexplained regions</h2>" + "".join(_table(r) for r in report["unexplained"]["regions"]))
     parts.append("<h2>Checks</h2>" + _table(report["checks"]) + "</body></html>\n")
     return "".join(parts)
+
+
+def params_for_people(found: dict) -> dict[str, str]:
+    """A found effect's parameters as text in their units — lengths in the unit their size asks for
+    ("amplitude 8.01 nm ± 0.2 nm", the report's number 8.01e-06 being mm), the others with the
+    library's unit (core/simulate/effects.py)."""
+    from ..simulate.effects import LIBRARY
+    from ..units import format_length
+
+    eff = LIBRARY.get(found["effect"])
+    units = {}
+    if eff is not None:
+        units = dict(zip(eff.params, eff.units)) if hasattr(eff, "units") else {}
+        units.setdefault("*", getattr(eff, "unit", ""))
+    unc = found.get("uncertainty") or {}
+    out = {}
+    for name, v in found["params"].items():
+        unit = units.get(name, units.get("*", ""))
+        u = unc.get(name)
+        if not isinstance(v, (int, float)):
+            out[name] = str(v)
+        elif unit == "mm":
+            out[name] = format_length(v, 3) + ("" if u is None else f" ± {format_length(u, 2)}")
+        elif unit == "s" and 0 < abs(v) < 1:  # a loop's time constant: µs or ms
+            k, sym = (1e6, "µs") if abs(v) < 1e-3 else (1e3, "ms")
+            out[name] = f"{v * k:.3g} {sym}" + ("" if u is None else f" ± {u * k:.2g} {sym}")
+        else:
+            sym = "" if unit in ("", "1") else f" {unit}"
+            out[name] = f"{v:.4g}{sym}" + ("" if u is None else f" ± {u:.2g}{sym}")
+    return out
