@@ -194,3 +194,24 @@ def test_commands_and_simulated_file(tmp_path, run_cli):
                       (tmp_path / "base.yaml", "is the model file itself")):
         code, _, err = run_cli("simulate", tmp_path / "base.yaml", "--out", out)
         assert code == 2 and want in err and "internal error" not in err, err
+
+
+def test_zdot_is_taken_in_time_order_whatever_the_rows_order_and_with_repeated_time_stamps():
+    """In row order, a shuffled or x-sorted file lost the dynamic lag (a 'vibration at 0.335 Hz'
+    named instead); a repeated time stamp made the rate NaN."""
+    from pointspro.core.simulate.effects import ScanContext
+
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 10.0, 2001)
+    f = 0.3 * np.sin(0.7 * t) + 0.01 * t**2
+    ones = np.ones_like(t)
+    ref = ScanContext(ones, ones, f, ones, ones, t, ones).zdot
+    assert ref == pytest.approx(np.gradient(f, t), abs=0)  # time order: as before, bit for bit
+    p = rng.permutation(t.size)
+    shuffled = ScanContext(ones, ones, f[p], ones, ones, t[p], ones).zdot
+    assert np.array_equal(shuffled, ref[p])
+    tr = np.round(t, 1)  # 10 points a time stamp
+    dup = ScanContext(ones, ones, f, ones, ones, tr, ones).zdot
+    assert np.all(np.isfinite(dup))
+    inner = slice(100, -100)  # one-sided differences at the ends
+    assert dup[inner] == pytest.approx((0.3 * 0.7 * np.cos(0.7 * t) + 0.02 * t)[inner], abs=0.02)

@@ -54,10 +54,19 @@ class ScanContext:
 
     @property
     def zdot(self):
-        """df/dt along the scan order (mm/s)."""
+        """df/dt along the scan (mm/s): in time order, whatever the rows' order in the file (in row
+        order a shuffled or x-sorted file lost the dynamic lag and named a vibration instead), points
+        measured at one same time stamp sharing their group's rate (a zero time step gave NaN)."""
         if self.t.size < 2 or np.ptp(self.t) == 0:
             return np.zeros_like(self.f)
-        return np.gradient(self.f, self.t)
+        order = np.argsort(self.t, kind="stable")
+        ts, fs = self.t[order], self.f[order]
+        tu, first, counts = np.unique(ts, return_index=True, return_counts=True)
+        fu = np.add.reduceat(fs, first) / counts  # one height per time stamp (their mean)
+        rate = np.gradient(fu, tu) if tu.size > 1 else np.zeros(1)
+        out = np.empty_like(self.f)
+        out[order] = np.repeat(rate, counts)
+        return out
 
     @classmethod
     def from_surface(cls, surface, x, y, t, c):
