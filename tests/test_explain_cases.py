@@ -229,3 +229,13 @@ def test_a_catch_all_is_never_named_before_a_physical_effect_that_fits_as_well()
     vib = S.Candidate("vibration@0", 1e-6 - sigma**2, 9.0, 1e-30, -100.0, 10, 3, False)
     named, _ = S._choose(None, [vib, harm], sigma)
     assert named is harm
+
+
+def test_a_z_offset_is_the_piston_s_never_half_of_it_reported_as_the_pose_s_dz(tmp_path):
+    """The pose's dz column is a constant, the piston the design always holds: the two split an
+    offset evenly (dz 2.5e-5 ± 1e-8 mm for a true 5e-5). A constant column is the piston's now — the
+    pose is fitted without dz, its tilt still found."""
+    rep = run(tmp_path, STEEP, SPIRAL, [{"pose": {"alpha_deg": 2e-5, "dz": 5e-5}}], seed=26)
+    pose = next(f for f in rep["found"] if f["effect"] == "pose")
+    assert "dz" not in pose["params"] and "dz" not in pose["uncertainty"]
+    assert abs(pose["params"]["alpha_deg"] - 2e-5) < 4 * pose["uncertainty"]["alpha_deg"] + 1e-7

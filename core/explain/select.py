@@ -156,9 +156,13 @@ def _independent(S: np.ndarray) -> np.ndarray:
 
 def _group(name, effect, params, S, **kw) -> Group | None:
     """Columns S scaled to unit RMS, those that vanish or repeat others within the group dropped (e.g.
-    a cos lobe that is constant on this scan); None when none is left."""
+    a cos lobe that is constant on this scan), and those that are a constant: the design always
+    holds the piston (``design``), which such a column repeats — the pose's dz was split evenly with
+    it (half its value, with an uncertainty of 10⁻⁸ mm that meant nothing); a constant offset is the
+    piston's. None when none is left."""
     s = np.sqrt(np.mean(S * S, axis=0))
-    keep = np.flatnonzero(s > 1e-18)
+    spread = np.std(S, axis=0)
+    keep = np.flatnonzero((s > 1e-18) & (spread > 1e-9 * s))
     if keep.size == 0:
         return None
     S = S[:, keep] / s[keep]
