@@ -672,6 +672,7 @@ def cmd_simulate(args) -> int:
         raise RecipeError(f"{args.model}: {e}") from None
     extra = {"fiducial": sim["fiducial"]} if "fiducial" in sim else {}
     cloud = PointCloud.from_xyz(sim["x"], sim["y"], sim["z"], t=sim["t"], c=sim["c"], xd=sim["xd"], **extra)
+    cloud.meta["channel_units"] = {"t": "s", "c": "deg"}  # written `t [s]`, `c [deg]` (docs/formats.md)
     _check_simulate_out(Path(args.out), Path(args.model))
     write_cloud(cloud, args.out)
     print(f"{args.out}: {cloud.n} simulated points")
@@ -710,8 +711,11 @@ def cmd_explain(args) -> int:
     rep = explain(Path(args.measured), out, Path(args.model) if args.model else None,
                   Path(args.simulated) if args.simulated else None, bootstrap=args.bootstrap)
     names = ", ".join(f["effect"] for f in rep["found"]) or "none"
-    print(f"{out}: verdict {rep['verdict']}; found {names}; gap {rep['gap_before']['rms_um']:.4g} → "
-          f"{rep['gap_after']['rms_um']:.4g} µm RMS (noise {rep['noise_um']:.3g} µm)")
+    from .units import format_length
+
+    print(f"{out}: verdict {rep['verdict']}; found {names}; gap {format_length(rep['gap_before']['rms_um'] * 1e-3, 4)}"
+          f" → {format_length(rep['gap_after']['rms_um'] * 1e-3, 4)} RMS "
+          f"(noise {format_length(rep['noise_um'] * 1e-3, 3)})")
     return EXIT_OK
 
 

@@ -215,3 +215,24 @@ def test_zdot_is_taken_in_time_order_whatever_the_rows_order_and_with_repeated_t
     assert np.all(np.isfinite(dup))
     inner = slice(100, -100)  # one-sided differences at the ends
     assert dup[inner] == pytest.approx((0.3 * 0.7 * np.cos(0.7 * t) + 0.02 * t)[inner], abs=0.02)
+
+
+def test_explain_reads_t_and_c_in_the_units_their_header_states(tmp_path):
+    """`t [ms]` and `c [rad]` were used as s and degrees (a 23.3 Hz vibration read 0.0233 Hz); they
+    are converted, an unknown unit refused naming the column; simulate writes `t [s]`, `c [deg]`."""
+    from pointspro.core.errors import InputError
+    from pointspro.core.explain.workflow import clock_of
+    from pointspro.core.io import read_cloud
+
+    t = np.linspace(0.0, 2.0, 50)
+    c = np.linspace(0.0, 350.0, 50)
+    for head, tv, cv in (("t [ms],c [rad]", t * 1000, np.radians(c)), ("t,c", t, c), ("t [s],c [deg]", t, c),
+                         ("t [min],c [gon]", t / 60, c / 0.9)):
+        p = tmp_path / "m.csv"
+        p.write_text(f"x,y,z,{head}\n" + "\n".join(f"{i},{i},0,{a!r},{b!r}" for i, (a, b) in
+                                                     enumerate(zip(tv.tolist(), cv.tolist()))), encoding="utf-8")
+        ts, cs = clock_of(read_cloud(p), p)
+        assert ts == pytest.approx(t, rel=1e-12, abs=1e-12) and cs == pytest.approx(c, rel=1e-12, abs=1e-9), head
+    p.write_text("x,y,z,t [fortnight],c\n0,0,0,1,2\n1,1,0,2,3\n", encoding="utf-8")
+    with pytest.raises(InputError, match=r"column 't \[fortnight\]'"):
+        clock_of(read_cloud(p), p)

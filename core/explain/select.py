@@ -609,7 +609,16 @@ def _raw_params(gr: Group, beta: np.ndarray, sd: np.ndarray) -> tuple[dict, dict
     deviations."""
     raw, raw_sd = beta / gr.scale, sd / gr.scale
     if gr.effect == "vibration":
-        return Vibration.from_columns(gr.frequency, raw), {"amplitude": float(np.hypot(*raw_sd))}
+        # A = √(a² + b²), φ = atan2 of them: first-order propagation of the cos and sin coefficients'
+        # deviations (nearly uncorrelated: the columns are near-orthogonal). hypot(σa, σb), as before,
+        # is √2 too large (review: u 1.15e-7 against a scatter of 7.3e-8 over 40 seeds).
+        (a, b), (sa, sb) = raw[:2], raw_sd[:2]
+        A = float(np.hypot(a, b))
+        if A > 0:
+            uA = float(np.hypot(a * sa, b * sb) / A)
+            uphi = float(np.degrees(np.hypot(b * sa, a * sb) / (A * A)))
+            return Vibration.from_columns(gr.frequency, raw), {"amplitude": uA, "phase_deg": uphi}
+        return Vibration.from_columns(gr.frequency, raw), {"amplitude": float(np.hypot(sa, sb))}
     return ({n: float(v) for n, v in zip(gr.params, raw)}, {n: float(v) for n, v in zip(gr.params, raw_sd)})
 
 

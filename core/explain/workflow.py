@@ -89,7 +89,7 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     model = None
     if model_path is not None:
         model = load_model(model_path)
-        ctx, z_sim, match = against_model(meas, model, Path(model_path).parent)
+        ctx, z_sim, match = against_model(meas, model, Path(model_path).parent, measured)
     elif simulated is not None:
         ctx, z_sim, match = against_simulation(meas, simulated)
     else:
@@ -118,14 +118,43 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     return report
 
 
-def against_model(meas, model, base: Path):
+#: the units a file may state for the scan's clock (t, to seconds) and spindle angle (c, to degrees)
+_TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "min": 60.0, "h": 3600.0}
+_ANGLE_UNITS = {"deg": 1.0, "°": 1.0, "degree": 1.0, "degrees": 1.0, "rad": 180.0 / np.pi,
+                "mrad": 0.18 / np.pi, "gon": 0.9, "grad": 0.9}
+
+
+def clock_of(cloud, path) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(t in s, c in degrees) of a cloud, None where it has no such channel. A unit its header
+    states (``t [ms]``, ``c [rad]``: core.io.text keeps it in meta["channel_units"]) is converted; a
+    column without one is read as s and degrees (docs/formats.md); an unknown unit is refused naming
+    the file and the column. The numbers were taken as s and degrees whatever the header said: a
+    23.3 Hz vibration read 0.0233 Hz from ``t [ms]`` (issue 16's review)."""
+    stated = cloud.meta.get("channel_units") or {}
+    out = []
+    for ch, table, what in (("t", _TIME_UNITS, "seconds"), ("c", _ANGLE_UNITS, "degrees")):
+        if ch not in cloud.channels:
+            out.append(None)
+            continue
+        v = np.asarray(cloud[ch], dtype=np.float64)
+        unit = stated.get(ch) if isinstance(stated, dict) else None
+        if unit is None or table.get(unit, table.get(str(unit).lower())) == 1.0:
+            out.append(v)
+        elif str(unit).lower() in table or unit in table:
+            out.append(v * table.get(unit, table.get(str(unit).lower())))
+        else:
+            raise InputError(f"{path}: column '{ch} [{unit}]': explain reads the {what[:-1]} in {what}; "
+                             f"'{unit}' is not a unit it knows ({', '.join(table)})")
+    return out[0], out[1]
+
+
+def against_model(meas, model, base: Path, measured="the measurement"):
     """The model simulated at the measured positions, noise-free: (ScanContext, simulated z, how the
     points were matched). Time and spindle angle come from the measurement, or else from the nearest
     point of the model's scan path."""
     from ..simulate.model import simulate
 
-    t = meas["t"] if "t" in meas.channels else None
-    c = meas["c"] if "c" in meas.channels else None
+    t, c = clock_of(meas, measured)
     if t is None or c is None:
         from scipy.spatial import cKDTree
 
@@ -163,11 +192,12 @@ def against_simulation(meas, simulated: Path):
         d, j = cKDTree(simc.xyz[:, :2]).query(meas.xyz[:, :2])
         match = f"by position (nearest simulated point, up to {float(d.max()):.3g} mm away)"
     z_sim = simc.z[j]
-    fx, fy, how = cloud_slopes(simc.x, simc.y, simc.z, np.argsort(simc["t"], kind="stable"))
+    t_sim, c_sim = clock_of(simc, simulated)
+    fx, fy, how = cloud_slopes(simc.x, simc.y, simc.z, np.argsort(t_sim, kind="stable"))
     match += (f"; slopes from a degree-{how['degree']} polynomial through the simulation ({how['rest_rms_um'] * 1e3:.3g} "
               f"nm RMS left, its noise {how['noise_um'] * 1e3:.3g} nm"
               + ("; the rest by a smoothing spline)" if how["spline"] else ")"))
-    ctx = ScanContext(meas.x, meas.y, z_sim, fx[j], fy[j], simc["t"][j], simc["c"][j])
+    ctx = ScanContext(meas.x, meas.y, z_sim, fx[j], fy[j], t_sim[j], c_sim[j])
     return ctx, z_sim, match
 
 
