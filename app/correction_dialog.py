@@ -205,12 +205,15 @@ def summary_text(report: dict, files) -> str:
 
     lines = ["dz is the height to ADD to the programmed surface (docs/conventions.md, Correction)"]
     if um("error_rms_um") and um("predicted_rms_um"):
-        lines.append(f"form error {um('error_rms_um')} RMS → predicted after correction "
-                     f"{um('predicted_rms_um')} RMS")
+        # of the correction's gridded map (not the points' residual RMS of the status bar)
+        over = f" over Ø{report['diameter_mm']:g} mm" if isinstance(report.get("diameter_mm"), (int, float)) else ""
+        lines.append(f"form error of the gridded map{over} {um('error_rms_um')} RMS → predicted after "
+                     f"correction {um('predicted_rms_um')} RMS")
     cs = report.get("corrected_surface")
     if isinstance(cs, dict) and cs.get("type"):
         fit = cs.get("fit_rms_nm")
-        lines.append(f"corrected surface: {cs['type']}" + (f", within {fit:.3g} nm RMS" if fit is not None else ""))
+        lines.append(f"corrected surface: {cs['type']}"
+                     + (f", within {format_length(fit * 1e-6)} RMS" if fit is not None else ""))
     rem = report.get("removal")
     if isinstance(rem, dict) and rem.get("max_depth_um") is not None:
         lines.append(f"removal (polishing): {format_length(rem['max_depth_um'] * 1e-3)} deep, "

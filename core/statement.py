@@ -119,9 +119,10 @@ def verdict_banner_html(tolerance: dict | None) -> str:
         c = VERDICT_COLOURS.get(i.get("verdict"), "#777")
         rows.append(
             f"<tr><td>{html.escape(str(i.get('name')))}</td>"
-            f"<td class='num'>{_num(i.get('value'))} {unit}</td>"
-            f"<td class='num'>{'—' if u is None else _num(u) + ' ' + unit}</td>"
-            f"<td class='num'>{_num(i.get('limit'))} {unit}</td>"
+            # nowrap: a narrow panel broke "0.1548 fr" into "0.15 / 48 / fr" (read as 0.15)
+            f"<td class='num' nowrap style='white-space:nowrap'>{_num(i.get('value'))} {unit}</td>"
+            f"<td class='num' nowrap style='white-space:nowrap'>{'—' if u is None else _num(u) + ' ' + unit}</td>"
+            f"<td class='num' nowrap style='white-space:nowrap'>{_num(i.get('limit'))} {unit}</td>"
             f"<td style='color:{c};font-weight:bold'>{html.escape(str(i.get('verdict')))}</td></tr>")
     return head + "<table>" + "".join(rows) + "</table>"
 
