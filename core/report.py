@@ -202,7 +202,7 @@ def render_html(report: dict, folder=None) -> str:
 def uncertainty_html(block: dict, folder=None) -> list[str]:
     """report.html's uncertainty section: how it was obtained, every figure's value ± U95 with its
     95 % interval, and the Monte Carlo histograms (uncertainty.png)."""
-    from .statement import with_uncertainty
+    from .statement import _decimals, with_uncertainty
 
     meta = {k: v for k, v in block.items() if not _is_figure(v)}
     rows = []
@@ -210,10 +210,20 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
         if not _is_figure(e):
             continue
         lo, hi = (e.get("interval95") or [None, None])[:2]
-        rows.append({"figure": name, "unit": _unit_of_key(name), "value": e.get("value"),
-                     "as measured": e.get("measured"),
-                     "bias": e.get("bias"), "u": e.get("u"), "U95": e.get("U95"),
-                     "95 % interval": "—" if lo is None else f"[{lo:.6g}, {hi:.6g}]"})
+        # GUM §7.2.6: u and U95 to two significant digits, the value, the measured value and the
+        # interval's ends to the same decimal place — a pose's dz read "12.4998, u 2.50919e-05,
+        # interval [12.4997, 12.4998]" (six digits cannot show a 0.1 µm interval)
+        dec = min(_decimals(e.get("U95") or 0.0), 12)
+
+        def fixed(v):
+            return "—" if v is None else f"{v:.{dec}f}"
+
+        def two(v):  # two significant digits, trailing zeros kept ("0.050", "1.0")
+            return "—" if v is None else f"{v:.{min(_decimals(abs(v)), 12)}f}" if v else "0"
+        rows.append({"figure": name, "unit": _unit_of_key(name), "value": fixed(e.get("value")),
+                     "as measured": fixed(e.get("measured")), "bias": two(e.get("bias")),
+                     "u": two(e.get("u")), "U95": two(e.get("U95")),
+                     "95 % interval": "—" if lo is None else f"[{fixed(lo)}, {fixed(hi)}]"})
     out = ["<h2>Uncertainty (Monte Carlo through the steps, JCGM 101)</h2>",
            "<p class='muted'>Each figure: the value with the noise's bias removed, its standard "
            "uncertainty u, the expanded uncertainty U95 and the 95 % coverage interval of the Monte "

@@ -65,3 +65,15 @@ def test_the_batch_table_says_its_rms_is_corrected_when_it_is_and_the_uncertaint
     assert "RMS µm (corrected ± U95)" in head and "0.0730 ± 0.0029" in row
     assert [_unit_of_key(k) for k in ("rms_um", "slope_rms_urad", "alpha_deg", "Z4_nm", "n")] == \
         ["µm", "µrad", "°", "nm", ""]
+
+
+def test_the_uncertainty_table_rounds_every_column_to_u95_s_place():
+    """GUM §7.2.6: u, U95, bias to two significant digits, value and interval to U95's decimal place
+    — a pose's dz read '12.4998, u 2.50919e-05, interval [12.4997, 12.4998]'."""
+    from pointspro.core.report import uncertainty_html
+
+    block = {"pose.dz_mm": {"value": 12.49981234, "measured": 12.49981234, "bias": 0.0, "u": 2.50919e-05,
+                            "U95": 5.75013e-05, "interval95": [12.4997548, 12.4998698], "k": 2.3}}
+    page = "".join(p for p in uncertainty_html(block) if p)
+    assert "<td>12.499812</td>" in page and "<td>0.000025</td>" in page and "<td>0.000058</td>" in page
+    assert "[12.499755, 12.499870]" in page and "e-05" not in page
