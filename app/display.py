@@ -11,7 +11,10 @@ import threading
 
 import numpy as np
 
-from pointspro.core.units import display_unit  # noqa: F401  (the views' unit rule; tests import it here)
+from pointspro.core.units import (
+    display_unit,  # noqa: F401  (the views' unit rule; tests import it here)
+    format_length,
+)
 
 # Signed deviations (mm): shown in the unit their spread asks for on a diverging map centred on zero
 # (the steps' error channels too: core.units.LENGTH_CHANNELS lists what the steps make in mm).
@@ -62,6 +65,14 @@ def channel_display(cloud, name: str, unit: str | None = None, rows=None):
             unit = display_unit(src)  # of all points, whatever is drawn
         return v / _DISPLAY_UNITS[unit], f"{label} ({unit})", unit, name in DEVIATION_CHANNELS
     return v, name, None, False
+
+
+def shown_length(v: float, unit: str) -> str:
+    """A readout of ``v`` in a view's unit: a length in the unit its own size asks for ("1.001 mm",
+    not "1001 µm": core.units.format_length); anything else with 4 significant digits and its unit."""
+    if unit in _DISPLAY_UNITS:
+        return format_length(float(v) * _DISPLAY_UNITS[unit], 4)
+    return f"{float(v):.4g} {unit}".rstrip()
 
 
 def channel_values(cloud, name: str, unit: str | None = None) -> tuple[np.ndarray, str, bool]:

@@ -229,7 +229,7 @@ class MapView(QtWidgets.QWidget):
             order = np.argsort(p.s, kind="stable")
             curves.append((p, p.s[order], self.values[p.rows][order]))
         self.profile = (np.concatenate([c[1] for c in curves]), np.concatenate([c[2] for c in curves]))
-        pv = ", ".join(f"{p.angle_deg:g}°: PV {np.ptp(v):.4g} {unit}".rstrip() for p, _, v in curves)
+        pv = ", ".join(f"{p.angle_deg:g}°: PV {display.shown_length(np.ptp(v), unit)}" for p, _, v in curves)
         self.profile_info.setText(f"{len(curves)} stylus profile(s) — {pv}")
         if fast and len(self._profile_artists) == len(curves):
             for art, (_, s_, v) in zip(self._profile_artists, curves):
@@ -345,7 +345,7 @@ class MapView(QtWidgets.QWidget):
             mean_s, mean_v = centres[ok], m[ok] / n[ok]
         label = self.cbar.ax.get_ylabel() if self.cbar else ""
         unit = label[label.rfind("(") + 1:-1] if label.endswith(")") else ""
-        self.profile_info.setText(f"profile: {s.size:,} points, PV {np.ptp(v):.4g} {unit}".rstrip()
+        self.profile_info.setText(f"profile: {s.size:,} points, PV {display.shown_length(np.ptp(v), unit)}"
                                   if s.size else "profile: no points near the cut")
         drawn = display.envelope_rows(s, v)  # dots: a level of detail with all points' envelope
         ds, dv = (s, v) if drawn is None else (s[drawn], v[drawn])
@@ -457,7 +457,8 @@ class MapView(QtWidgets.QWidget):
         vals, title, _ = display.channel_values(self.cloud, name)
         value = float(np.quantile(vals if self.keep is None else vals[self.keep], pos / 1000.0))
         mask = vals > value if self.keep is None else (vals > value) & self.keep
-        return mask, f"{title.split(' (')[0]} > {value:.4g}{title[len(title.split(' (')[0]):]}"
+        unit = title[title.rfind("(") + 1:-1] if title.endswith(")") else ""
+        return mask, f"{title.split(' (')[0]} > {display.shown_length(value, unit)}"
 
     def _threshold(self, pos):
         name = self.th_channel.currentText()

@@ -73,3 +73,13 @@ def test_the_steps_error_and_position_channels_are_shown_as_lengths():
         v, title, unit, div = display.channel_display(c, name)
         assert unit == "µm" and title.endswith("(µm)") and div == diverging, (name, title)
         assert abs(np.mean(v)) < 50  # positions about their mean, in µm
+
+
+def test_readouts_show_a_length_in_the_unit_its_own_size_asks_for():
+    """The profile's PV and the threshold read "1.001 mm", not "1001 µm" (the colour bar's unit)."""
+    from pointspro.app.display import shown_length
+
+    assert shown_length(1001.0, "µm") == "1.001 mm"
+    assert shown_length(2.53, "µm") == "2.53 µm"
+    assert shown_length(43.9, "nm") == "43.9 nm"
+    assert shown_length(5.0, "Hz") == "5 Hz" and shown_length(3.0, "") == "3"
