@@ -610,6 +610,7 @@ class NullableWidget(ParamWidget):
 
     def _toggled(self, on):
         self.inner.setEnabled(not on)
+        self.inner.setHidden(on)  # a greyed "1 mm" read as the value used (the step computes it)
         self._emit()
 
     def value(self):
@@ -618,6 +619,7 @@ class NullableWidget(ParamWidget):
     def set_value(self, v):
         _set_quietly(self.auto, self.auto.setChecked, v is None)
         self.inner.setEnabled(v is not None)
+        self.inner.setHidden(v is None)  # the step's own value is in its report, not a placeholder
         if v is not None:
             self.inner.set_value(v)
 

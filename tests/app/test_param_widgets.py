@@ -221,8 +221,9 @@ def test_bool_auto_box_union_and_group(dock):
     assert not spacing.auto.isChecked() and spacing.inner.spin.value() == 10.0
     spacing.auto.click()
     assert "spacing" not in _step(dock, 6)["bspline_map"] and not spacing.inner.isEnabled()
+    assert spacing.inner.isHidden()  # no placeholder number that reads as the value the step used
     spacing.auto.click()  # back: the value it had
-    assert _step(dock, 6)["bspline_map"]["spacing"] == 10.0
+    assert _step(dock, 6)["bspline_map"]["spacing"] == 10.0 and not spacing.inner.isHidden()
     centre = dock.fields["centre"]
     centre.auto.click()
     centre.inner.spins[0].setValue(-2.5)
