@@ -68,6 +68,8 @@ class MapView(QtWidgets.QWidget):
         self.slider.setValue(1000)
         self.slider.setToolTip("quantile of the channel: move left to select more points")
         self.slider.valueChanged.connect(self._threshold)
+        # another channel re-selects at the slider's position (the box did nothing until it moved)
+        self.th_channel.currentTextChanged.connect(lambda _name: self._threshold(self.slider.value()))
         th.addWidget(self.slider, 1)
         self.th_info = QtWidgets.QLabel("")
         th.addWidget(self.th_info)

@@ -249,6 +249,9 @@ def test_map_rectangle_lasso_threshold_and_profile(qtbot, tmp_path):
     m.slider.setValue(900)
     assert win.selection.sum() == pytest.approx(0.1 * c.n, abs=2)
     assert "points: residual > " in m.th_info.text() and "nm" in m.th_info.text()
+    m.th_channel.setCurrentText("z")  # another channel re-selects at the slider's position
+    assert "points: z" in m.th_info.text() and win.selection.sum() == pytest.approx(0.1 * c.n, abs=2)
+    m.th_channel.setCurrentText("residual")
     # a profile cut along x through y = 0: the points near the line, in nm, sorted along the cut
     s, v = m.cut((-50, 0), (50, 0))
     near = np.abs(c.y) <= 1.5 * (m.ext[1] - m.ext[0]) / m._bins
