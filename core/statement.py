@@ -45,8 +45,9 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
     value's size asks for; other units as given. "—" for no value."""
     if value is None or not math.isfinite(value):
         return "—"
-    if unit == "µm":
-        scale, unit = _unit_for(value if value else (U or 0.0))
+    if unit == "µm":  # the unit of the larger of the two: "0.46 ± 1.00 µm", not "463 ± 1002 nm"
+        scale, unit = _unit_for(max(abs(value), abs(U)) if U is not None and math.isfinite(U) else value
+                                if value else (U or 0.0))
         value, U = value / scale, (None if U is None else U / scale)
     if U is None or not math.isfinite(U):
         return f"{value:.4g} {unit}"

@@ -77,3 +77,12 @@ def test_the_uncertainty_table_rounds_every_column_to_u95_s_place():
     page = "".join(p for p in uncertainty_html(block) if p)
     assert "<td>12.499812</td>" in page and "<td>0.000025</td>" in page and "<td>0.000058</td>" in page
     assert "[12.499755, 12.499870]" in page and "e-05" not in page
+
+
+def test_a_u95_larger_than_its_value_picks_the_unit_and_keeps_two_digits():
+    """'463 ± 1002 nm (k = 1.7)' showed U95 with four digits (the unit was the value's); the unit of
+    the larger of the two keeps GUM's two: '0.5 ± 1.0 µm'."""
+    from pointspro.core.statement import with_uncertainty
+
+    assert with_uncertainty(0.4629, 1.0016, "µm", 1.7) == "0.5 ± 1.0 µm (k = 1.7)"
+    assert with_uncertainty(0.4643, 0.0112, "µm", 2.06) == "464 ± 11 nm (k = 2.06)"
