@@ -95,7 +95,6 @@ def share_out(tasks, *, workers: int, fork: bool = True) -> dict[str, float]:
     is raised here as an OSError naming the task (after the other processes have finished); an error
     here stops the children first. The tasks run in list order when nothing is forked (``fork`` False,
     one core, threads running), with the same files as a result."""
-    import gc
     import json
     import time
 
@@ -132,7 +131,6 @@ def share_out(tasks, *, workers: int, fork: bool = True) -> dict[str, float]:
             pid = os.fork()
             if pid == 0:  # a child: its share of the queue; its seconds or its error back; never return
                 code, mine = 0, {}
-                gc.freeze()  # the inherited objects: not walked by its collections, pages left shared
                 try:
                     os.close(r)
                     drain(mine, True)
