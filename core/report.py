@@ -203,6 +203,7 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
     """report.html's uncertainty section: how it was obtained, every figure's value ± U95 with its
     95 % interval, and the Monte Carlo histograms (uncertainty.png)."""
     from .statement import _decimals, with_uncertainty
+    from .units import unit_of_key
 
     meta = {k: v for k, v in block.items() if not _is_figure(v)}
     rows = []
@@ -220,7 +221,7 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
 
         def two(v):  # two significant digits, trailing zeros kept ("0.050", "1.0")
             return "—" if v is None else f"{v:.{min(_decimals(abs(v)), 12)}f}" if v else "0"
-        rows.append({"figure": name, "unit": _unit_of_key(name), "value": fixed(e.get("value")),
+        rows.append({"figure": name, "unit": unit_of_key(name), "value": fixed(e.get("value")),
                      "as measured": fixed(e.get("measured")), "bias": two(e.get("bias")),
                      "u": two(e.get("u")), "U95": two(e.get("U95")),
                      "95 % interval": "—" if lo is None else f"[{fixed(lo)}, {fixed(hi)}]"})
@@ -240,15 +241,6 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
         out.append(_records(rows))
     out.append(_img(folder, "uncertainty.png"))
     return out
-
-
-#: a figure's unit from its key's suffix (report.json's convention: rms_um, slope_rms_urad, alpha_deg)
-_KEY_UNITS = (("_um", "µm"), ("_nm", "nm"), ("_mm", "mm"), ("_urad", "µrad"), ("_deg", "°"),
-              ("_arcsec", "″"), ("_s", "s"))
-
-
-def _unit_of_key(name: str) -> str:
-    return next((u for suffix, u in _KEY_UNITS if name.endswith(suffix)), "")
 
 
 def _is_figure(e) -> bool:

@@ -114,3 +114,14 @@ def channel_unit(name: str, stated: str | None = None) -> str | None:
     if name in UNITLESS_CHANNELS or not stated:
         return None
     return "mm" if is_length_unit(stated) else stated
+
+
+#: a figure's unit from its key's suffix (report.json's convention: rms_um, slope_rms_urad, alpha_deg)
+KEY_UNITS = (("_um", "µm"), ("_nm", "nm"), ("_mm", "mm"), ("_urad", "µrad"), ("_deg", "°"),
+             ("_arcsec", "″"), ("_s", "s"))
+
+
+def unit_of_key(name: str) -> str:
+    """The unit a report key's suffix names ("" for none): the report's tables and the Monte Carlo's
+    histograms label figures by it."""
+    return next((u for suffix, u in KEY_UNITS if name.endswith(suffix)), "")

@@ -54,8 +54,8 @@ def test_batch_table_gets_a_verdict_column_only_when_a_tolerance_was_asked():
 
 
 def test_the_batch_table_says_its_rms_is_corrected_when_it_is_and_the_uncertainty_table_has_units():
-    from pointspro.core.report import _unit_of_key
     from pointspro.core.summary import table
+    from pointspro.core.units import unit_of_key
 
     plain = {"input": "a.csv", "status": "ok", "points_in": 10, "points_out": 10, "rms_um": 0.0754,
              "pv_um": 0.39, "seconds": 1.0}
@@ -63,7 +63,7 @@ def test_the_batch_table_says_its_rms_is_corrected_when_it_is_and_the_uncertaint
     corrected = plain | {"rms_U95_um": 0.00286, "rms_corrected_um": 0.07298}
     head, _, row = table([corrected]).splitlines()
     assert "RMS µm (corrected ± U95)" in head and "0.0730 ± 0.0029" in row
-    assert [_unit_of_key(k) for k in ("rms_um", "slope_rms_urad", "alpha_deg", "Z4_nm", "n")] == \
+    assert [unit_of_key(k) for k in ("rms_um", "slope_rms_urad", "alpha_deg", "Z4_nm", "n")] == \
         ["µm", "µrad", "°", "nm", ""]
 
 

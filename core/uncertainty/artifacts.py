@@ -6,14 +6,10 @@ import math
 import numpy as np
 
 HISTOGRAM_FIGURES = ("rms_um", "pv_um", "pvr_um", "slope_rms_urad")
-UNITS = {"_um": "µm", "_nm": "nm", "_urad": "µrad", "_deg": "°", "_mm": "mm"}
-
-
 def _unit(name: str) -> str:
-    for suffix, unit in UNITS.items():
-        if name.endswith(suffix):
-            return unit
-    return ""
+    from ..units import unit_of_key
+
+    return unit_of_key(name)
 
 
 def placed(res, name: str) -> np.ndarray:
