@@ -66,6 +66,8 @@ def main():
     ap.add_argument("--inputs", type=int, default=200)
     ap.add_argument("--points", type=int, default=50_000)
     ap.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)))
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="run the N-worker batch this many times (each listed: a short run varies)")
     ap.add_argument("--no-dask", action="store_true", help="skip the Dask LocalCluster run")
     ap.add_argument("--no-shared", action="store_true",
                     help="skip the one-worker run that shares its figures out on the free cores")
@@ -84,7 +86,7 @@ def main():
     # cores too (core/io/background.py share_out), which is not the scaling asked about
     t1 = run(args, files, tmp / "w1", ["--workers", "1"], {"OMP_NUM_THREADS": "1"})
     t1s = None if args.no_shared else run(args, files, tmp / "w1s", ["--workers", "1"])
-    tn = run(args, files, tmp / "wn", ["--workers", str(args.workers)])
+    tns = [run(args, files, tmp / f"wn{i}", ["--workers", str(args.workers)]) for i in range(max(1, args.repeat))]
     td = None if args.no_dask else run(args, files, tmp / "dask",
                                        ["--scheduler", "local", "--workers", str(args.workers)])
     print(f"{args.inputs} inputs of {n_pts:,} points, example recipe, {args.workers} workers\n")
@@ -92,7 +94,8 @@ def main():
     rows = [("--workers 1, one core (OMP_NUM_THREADS=1)", t1, 1)]
     if t1s is not None:
         rows.append(("--workers 1, its figures shared out on the free cores", t1s, 1))
-    rows.append((f"--workers {args.workers}", tn, args.workers))
+    for i, tn in enumerate(tns):
+        rows.append((f"--workers {args.workers}" + (f" (run {i + 1})" if len(tns) > 1 else ""), tn, args.workers))
     if td is not None:
         rows.append((f"--scheduler local (LocalCluster, {args.workers} processes)", td, args.workers))
     for label, t, w in rows:  # efficiency: speed-up per worker (1 = perfect scaling)
@@ -104,7 +107,7 @@ def main():
         even = sum(p) / w
         print(f"| {label} | {p[0]:.2f} / {p[len(p) // 2]:.2f} / {p[-1]:.2f} | {even:.1f} | {t - even:.1f} |")
     if td is not None:
-        print(f"\nDask overhead per input against the process pool: {(td - tn) / args.inputs * 1e3:+.0f} ms "
+        print(f"\nDask overhead per input against the process pool: {(td - min(tns)) / args.inputs * 1e3:+.0f} ms "
               f"(cluster start-up included)")
 
 
