@@ -81,13 +81,27 @@ def channel_values(cloud, name: str, unit: str | None = None) -> tuple[np.ndarra
     return v, title, diverging
 
 
-def colour_limits(v: np.ndarray, diverging: bool) -> tuple[float, float]:
+def colour_limits(v: np.ndarray, diverging: bool, keep=None) -> tuple[float, float]:
     """The reports' robust limits (0.5–99.5 percentiles: a few spikes saturate instead of washing
-    the map out), symmetric about zero for signed deviations."""
-    from pointspro.core.figures import robust_limits
+    the map out), symmetric about zero for signed deviations — of the values ``v`` of every point
+    (less those ``keep`` hides), sampled as the report's form_error.png samples them
+    (core.figures.limits_sample): the map, the 3D view and the report show one residual alike."""
+    from pointspro.core.figures import limits_sample, robust_limits
 
-    lo, hi = robust_limits(v, symmetric=diverging)
+    lo, hi = robust_limits(limits_sample(v, keep), symmetric=diverging)
     return float(lo), float(hi)
+
+
+def channel_limits(cloud, name: str, unit: str | None, diverging: bool, keep=None) -> tuple[float, float]:
+    """``colour_limits`` of channel ``name`` of all of ``cloud``'s points (less those ``keep``
+    hides) in ``unit``, whatever part of them a view draws (the 3D view's level of detail)."""
+    from pointspro.core.units import UNIT_SAMPLE
+
+    rows = np.arange(cloud.n) if keep is None else np.flatnonzero(keep)
+    if rows.size > 2 * UNIT_SAMPLE:  # limits_sample's rows, taken before the values are formed
+        rows = rows[:: rows.size // UNIT_SAMPLE]
+    v, _, _, _ = channel_display(cloud, name, unit, rows=rows)
+    return colour_limits(v, diverging)
 
 
 def display_subset(index: np.ndarray, n_input: int, budget: int) -> np.ndarray:

@@ -150,7 +150,7 @@ class MapView(QtWidgets.QWidget):
                 self.cut(*self.profile_line, draw=False, fast=True)
             self._blit()
             return
-        lo, hi = display.colour_limits(img, diverging)
+        lo, hi = display.colour_limits(self.values, diverging, keep)  # of the points, as 3D and report
         cmap = "RdBu_r" if diverging else "viridis"
         if self.im is None:
             self.im = self.ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,

@@ -128,8 +128,8 @@ class View3D(QtWidgets.QWidget):
         keep = self._keep and self._clim is not None
         vals, title, self._unit, diverging = display.channel_display(
             c, self.channel, self._unit if keep else None, rows=idx)  # an edit keeps the unit
-        if not keep:
-            self._clim = display.colour_limits(vals, diverging)  # of the drawn points: 5× fewer
+        if not keep:  # of all shown points, not the drawn ones: the map's and the report's limits
+            self._clim = display.channel_limits(c, self.channel, self._unit, diverging, self.shown_mask)
         clim = self._clim
         # display only: VTK draws in float32, about the input's centre so mm detail survives
         poly = pv.PolyData((c.xyz[idx] - self.origin).astype(np.float32))

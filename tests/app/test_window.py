@@ -79,6 +79,41 @@ def test_residual_opens_diverging_in_the_unit_its_size_asks_for(qtbot, tmp_path)
     assert win.map.cbar.ax.get_ylabel().startswith("z − mean (") and win.map.im.get_cmap().name == "viridis"
 
 
+def test_one_residual_gets_one_colour_range_in_map_3d_view_and_report(qtbot, tmp_path):
+    """The map (binned means), the 3D view (a level of detail of the points) and the report's
+    form_error.png used to take their limits from what each drew: ±1.70, ±1.76 and ±1.67 µm for the
+    example's residual. Now all three from the points (core.figures.limits_sample), hidden ones out."""
+    from pointspro.core import PointCloud
+    from pointspro.core.figures import scattered_map
+    from pointspro.core.io import write_csv
+
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-50, 50, (2, 6000))
+    r = 1e-4 * np.sin(x / 10) + rng.normal(0, 3e-5, x.size)
+    r[:5] += 2e-3  # spikes: the limits are robust, not the extremes
+    write_csv(PointCloud.from_xyz(x, y, (x * x + y * y) / 2000, residual=r), tmp_path / "c.csv")
+    win = _window(qtbot, [tmp_path / "c.csv"])
+    assert win.channel.currentText() == "residual"
+    cloud = win.map.cloud
+    win.view3d.budget = 700  # the 3D view draws ~700 of the 6000 points
+    win.view3d.set_cloud(cloud, "residual", new_input=True)
+    assert len(win.view3d._shown_idx) < 1000
+    lo2, hi2 = win.map.im.get_clim()
+    lo3, hi3 = win.view3d._clim
+    fig = scattered_map(cloud.x, cloud.y, cloud["residual"])
+    lor, hir = fig.axes[0].images[0].get_clim()
+    assert hi2 == pytest.approx(hi3, rel=1e-12) and hi2 == pytest.approx(hir, rel=1e-12)
+    assert lo2 == -hi2 and lo3 == -hi3 and lor == -hir
+    # nm in all three: 0.5/99.5 percentiles of the points, spikes saturate
+    assert hi2 == pytest.approx(np.percentile(np.abs(np.percentile(r * 1e6, [0.5, 99.5])), 100), rel=1e-9)
+    # points hidden in the views (a lasso's "hide") leave the limits of the points still shown
+    keep = np.abs(x) < 20
+    win.view3d.set_cloud(cloud, "residual", new_input=True, keep=keep)
+    rk = r[keep] * 1e6
+    want = max(np.abs(np.percentile(rk, [0.5, 99.5])))
+    assert win.view3d._clim[1] == pytest.approx(want, rel=1e-9)
+
+
 def test_run_in_worker_keeps_the_window_responsive_and_fills_the_report(qtbot):
     """The pipeline runs in a thread: the event loop keeps turning meanwhile. (How long its longest
     stall is — the 100 ms target — is measured in benchmarks/bench_window.py, not asserted here: a
