@@ -90,6 +90,17 @@ text-align:left;vertical-align:top} td.num{text-align:right;font-variant-numeric
 """
 
 
+def _fmt_keyed(key, v) -> str:
+    """``v`` under report key ``key``: a number with the unit the key names (core.units.format_keyed:
+    "797.536 µm" for a pose's dx in mm, "297.595 nm" for robust_sigma_um), anything else as ``_fmt``."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+        from .units import format_keyed, unit_of_key
+
+        if unit_of_key(str(key)):
+            return html.escape(format_keyed(str(key), v))
+    return _fmt(v)
+
+
 def _fmt(v) -> str:
     if isinstance(v, float):
         return f"{v:.6g}"
@@ -119,11 +130,11 @@ def table_html(d: dict) -> str:
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{_records(v)}</td></tr>")
             continue
         if isinstance(v, dict) and v and all(not isinstance(x, (dict, list)) for x in v.values()):
-            inner = ", ".join(f"{html.escape(str(a))} = {_fmt(b)}" for a, b in v.items())
+            inner = ", ".join(f"{html.escape(str(a))} = {_fmt_keyed(a, b)}" for a, b in v.items())
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{inner}</td></tr>")
         else:
             cls = ' class="num"' if isinstance(v, (int, float)) else ""
-            rows.append(f"<tr><th>{html.escape(k)}</th><td{cls}>{_fmt(v)}</td></tr>")
+            rows.append(f"<tr><th>{html.escape(k)}</th><td{cls}>{_fmt_keyed(k, v)}</td></tr>")
     return "<table>" + "".join(rows) + "</table>"
 
 

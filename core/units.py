@@ -121,7 +121,32 @@ KEY_UNITS = (("_um", "µm"), ("_nm", "nm"), ("_mm", "mm"), ("_urad", "µrad"), (
              ("_arcsec", "″"), ("_s", "s"))
 
 
+#: report keys with no unit suffix that are lengths in mm by the rule of docs/conventions.md, Units
+#: (a pose's translation, a step's window or spacing, an aperture's diameter, a surface's radius)
+BARE_LENGTH_KEYS = frozenset({"dx", "dy", "dz", "tx", "ty", "tz", "diameter", "aperture", "knot_spacing",
+                              "spacing", "window", "norm_radius", "r_max", "radius", "probe_radius"})
+
+
 def unit_of_key(name: str) -> str:
-    """The unit a report key's suffix names ("" for none): the report's tables and the Monte Carlo's
-    histograms label figures by it."""
-    return next((u for suffix, u in KEY_UNITS if name.endswith(suffix)), "")
+    """The unit a report key names ("" for none): its suffix's (``rms_um`` µm, ``alpha_deg`` °), or mm
+    for a bare length (``BARE_LENGTH_KEYS``; "pose.dz" is the pose's dz). The report's tables, the
+    window's step tables and the Monte Carlo's histograms label figures by it."""
+    unit = next((u for suffix, u in KEY_UNITS if name.endswith(suffix)), "")
+    if not unit and name.rsplit(".", 1)[-1] in BARE_LENGTH_KEYS:
+        return "mm"
+    return unit
+
+
+#: the lengths among unit_of_key's units, and their size in mm
+_KEY_LENGTHS = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
+
+
+def format_keyed(name: str, v: float, digits: int = 6) -> str:
+    """A report number for people, with the unit its key names: a length in the unit its size asks
+    for (``robust_sigma_um`` 0.2976 → "297.6 nm", ``dx`` 0.7975 → "797.536 µm"), another unit
+    appended ("0.168275°", "3.8695 µrad"); a key with no unit, the number alone (counts, ratios)."""
+    unit = unit_of_key(name)
+    if unit in _KEY_LENGTHS:
+        return format_length(float(v) * _KEY_LENGTHS[unit], digits)
+    text = f"{v:.{digits}g}" if isinstance(v, float) else str(v)
+    return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")

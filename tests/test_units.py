@@ -70,3 +70,36 @@ def test_format_length_rolls_over_to_the_next_unit_when_rounding_reaches_it():
     assert format_length(9.99e-4) == "999 nm"
     assert format_length(4.39e-5) == "43.9 nm"
     assert format_length(1300.0) == "1300 mm"
+
+
+def test_report_keys_read_with_their_unit():
+    """A step's table (report.html and the window's Report panel) shows every number with the unit
+    its key names: a suffix's, or mm for a bare length (docs/conventions.md, Units) — it printed
+    "dx 0.797536", "robust_sigma_um 0.297595", "knot_spacing 86.5599" with no unit."""
+    from pointspro.core.report import table_html
+    from pointspro.core.units import format_keyed, unit_of_key
+
+    assert unit_of_key("dx") == "mm" and unit_of_key("pose.dz") == "mm" and unit_of_key("rms_um") == "µm"
+    assert unit_of_key("removed") == "" and unit_of_key("condition_number") == ""
+    assert format_keyed("dx", 0.7975361802253842) == "797.536 µm"
+    assert format_keyed("robust_sigma_um", 0.2975945255098518) == "297.595 nm"
+    assert format_keyed("knot_spacing", 86.55986824) == "86.5599 mm"
+    assert format_keyed("alpha_deg", 0.1682747) == "0.168275°"
+    assert format_keyed("normal_correction_rms_urad", 3.869497) == "3.8695 µrad"
+    assert format_keyed("removed", 5) == "5" and format_keyed("separation", 9.895604) == "9.8956"
+    page = table_html({"dx": 0.7975361802253842, "removed": 5, "side": 1, "normals": "refined",
+                       "uncertainty": {"dx": 2.82933e-5, "alpha_deg": 5.335e-4}, "flag": True,
+                       "floor_um": float("nan")})
+    assert "<td class=\"num\">797.536 µm</td>" in page and "<td class=\"num\">5</td>" in page
+    assert "dx = 28.2933 nm" in page and "alpha_deg = 0.0005335°" in page
+    assert ">True<" in page and ">nan<" in page  # not numbers with a unit
+
+
+def test_uncertainty_table_names_the_pose_units():
+    """The report's uncertainty table: a pose's dz in mm (its unit column was empty)."""
+    from pointspro.core.report import uncertainty_html
+
+    block = {"pose.dz": {"value": 12.4998, "measured": 12.4998, "bias": 0.0, "u": 4.2e-5, "U95": 8.4e-5,
+                         "k": 2.0, "interval95": [12.49972, 12.49988]}}
+    page = "".join(p for p in uncertainty_html(block) if p)
+    assert "<td>pose.dz</td><td>mm</td>" in page
