@@ -62,7 +62,8 @@ def test_fit_gp_uses_public_api_and_matches_the_previous_results(guarded_sklearn
         assert info["loo_rms"][k] == pytest.approx(v, rel=rel, abs=0)
     mean, std = gp.predict(G, return_std=True)
     np.testing.assert_allclose(mean, REF_MEAN, rtol=1e-12, atol=0)
-    np.testing.assert_allclose(std, REF_STD, rtol=1e-12, atol=0)
+    # 1e-10: scikit-learn 1.9.1 sums the predictive variance in another order (1.6e-12 relative)
+    np.testing.assert_allclose(std, REF_STD, rtol=1e-10, atol=0)
     np.testing.assert_allclose(gp.predict(G), REF_MEAN, rtol=1e-12, atol=0)
     assert loo_rms(gp, X, y) == pytest.approx(REF_LOO[REF_CHOSEN], rel=1e-12, abs=0)
     # the regressor inside is fitted to our normalised targets, not normalising them itself

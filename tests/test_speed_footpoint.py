@@ -110,10 +110,19 @@ def test_probe_radius_contact_points_as_before(monkeypatch, name, seed):
     dev = np.max(np.abs(new.cloud.xyz - old.cloud.xyz))
     assert dev <= 1e-12 * scale, (name, dev)
     e_old, e_new = old.cloud["probe_residual"], new.cloud["probe_residual"]
-    assert np.max(np.abs(e_new - e_old)) <= 1e-12 * ball
+    # the residuals to 1e-11 of the coordinates (3 pm here, against 50 nm of noise): the two fits stop
+    # within the LM's tolerance of each other (the pose below to 1e-9), which moves every residual
+    # alike — held to 1e-12 of the ball (3 fm), the concave asphere's moved by a uniform 0.82 pm
+    # after a numpy/scipy update (numpy 2.4.6, scipy 1.17.1, 2026-11-26)
+    assert np.max(np.abs(e_new - e_old)) <= 1e-11 * scale
     assert new.report["iterations"] == old.report["iterations"]
+    # the pose to a thousandth of its standard uncertainty: held to 1e-9 relative, the concave
+    # asphere's dy (u 5.8 µm: tilt and decentre nearly trade there) moved 0.83 nm = 1.4e-4 u after
+    # the numpy/scipy update above — where LM stops along a flat valley is not a property of the
+    # foot-point solver
     for key in set(old.report) & {"alpha_deg", "beta_deg", "dx", "dy", "dz"}:
-        assert new.report[key] == pytest.approx(old.report[key], rel=1e-9, abs=1e-12), key
+        u = old.report["uncertainty"][key]
+        assert abs(new.report[key] - old.report[key]) <= max(1e-3 * u, 1e-12), (key, u)
     # the work: warm starts and per-point convergence cut the fused profile evaluations by ≥ 30 %
     # (measured 40 %; the separate sag/slope passes of the old start and finish, not counted here,
     # are gone too)
