@@ -407,7 +407,8 @@ def _trim_rounds(win, d, w, max_rounds, progress, offset):
         with np.errstate(invalid="ignore", divide="ignore"):
             sl = np.sqrt(np.clip(c1, 0, None) / c0 / TRUNCATED_VAR)
         sig = np.fmax(sg, np.where(c0 >= 8, sl, 0.0))
-        trimmed = fin & ~(np.abs(zf) < TRIM * sig)  # an unjudged point keeps its weight
+        trimmed = fin & ~(np.abs(zf) < TRIM * sig)
+        trimmed |= ~fin & (w == 0)  # an unjudged point keeps its weight (a dig's emptied windows)
         if prev is not None and np.count_nonzero(trimmed != prev) <= max(0, n // 100_000):
             break
         prev = trimmed
