@@ -601,8 +601,21 @@ class NullableWidget(ParamWidget):
         inner.edited.connect(self._inner_edited)
         inner.marked.connect(self.marked)
         self.auto.toggled.connect(self._toggled)
+        # what the step computed in the last run ("last run: 86.6 mm"), shown while "auto" is ticked
+        self.used = QtWidgets.QLabel()
+        self.used.setStyleSheet("color:#555")
+        self.used.setToolTip("the value the step computed in the last run (its report)")
+        self.used.hide()
+        self._used_text = ""
         self.lay.addWidget(inner, 1)
+        self.lay.addWidget(self.used, 1)
         self.lay.addWidget(self.auto, 0, QtCore.Qt.AlignTop)
+
+    def show_used(self, text: str | None) -> None:
+        """The value the step used in the last run, as text (None: no run, or nothing reported)."""
+        self._used_text = text or ""
+        self.used.setText(f"last run: {self._used_text}" if self._used_text else "")
+        self.used.setVisible(bool(self._used_text) and self.auto.isChecked())
 
     def _inner_edited(self, v):
         if not self.auto.isChecked():
@@ -611,6 +624,7 @@ class NullableWidget(ParamWidget):
     def _toggled(self, on):
         self.inner.setEnabled(not on)
         self.inner.setHidden(on)  # a greyed "1 mm" read as the value used (the step computes it)
+        self.used.setVisible(on and bool(self._used_text))
         self._emit()
 
     def value(self):
@@ -620,6 +634,7 @@ class NullableWidget(ParamWidget):
         _set_quietly(self.auto, self.auto.setChecked, v is None)
         self.inner.setEnabled(v is not None)
         self.inner.setHidden(v is None)  # the step's own value is in its report, not a placeholder
+        self.used.setVisible(v is None and bool(self._used_text))
         if v is not None:
             self.inner.set_value(v)
 

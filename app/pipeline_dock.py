@@ -19,7 +19,7 @@ from PySide6 import QtCore, QtWidgets
 
 from pointspro.core.errors import PointsProError
 
-from .param_widgets import ParamWidget, build_widget, fits
+from .param_widgets import NullableWidget, ParamWidget, build_widget, fits
 
 
 class PipelineDock(QtWidgets.QDockWidget):
@@ -140,6 +140,28 @@ class PipelineDock(QtWidgets.QDockWidget):
             self.form.addRow(label, w)
             self.fields[f.key] = w
         self._form_of = self._key(i)
+        self.show_used()
+
+    def show_used(self) -> None:
+        """Beside each "auto" field of the form, the value its step computed in the last run (read
+        from the step's report: the key itself, or with ``_mm``), so "auto" is not a blank."""
+        i = -1 if self._form_of is None else self._form_of[0]
+        report = self._last_report_of(i)
+        for key, w in self.fields.items():
+            if isinstance(w, NullableWidget):
+                v = report.get(key, report.get(f"{key}_mm"))
+                w.show_used(used_text(v, w.field.unit))
+
+    def _last_report_of(self, i: int) -> dict:
+        """The report of recipe step ``i`` in the last run ({} when it did not run there)."""
+        res = getattr(self.win, "last_report", None)
+        steps = self.win.session.recipe.steps
+        if res is None or not 0 <= i < len(steps) or not steps[i].enabled:
+            return {}
+        k = sum(1 for s in steps[:i] if s.enabled)  # the run's steps are the enabled ones, in order
+        if k >= len(res.steps) or res.steps[k].id != steps[i].id:
+            return {}
+        return res.steps[k].report
 
     def _fill(self, step) -> bool:
         """Show the recipe's values in the form's widgets (not those holding a refused value);
@@ -201,3 +223,24 @@ class PipelineDock(QtWidgets.QDockWidget):
     def _toggled(self, item):
         i = self.list.row(item)
         self.win.act(lambda: self.win.session.set_enabled(i, item.checkState() == QtCore.Qt.Checked))
+
+
+def used_text(v, unit: str | None) -> str | None:
+    """A reported value for the "last run" readout: a length (the field's unit mm or µm) in the unit
+    its size asks for, a pair of lengths as "(x, y)", other numbers as they are; None for nothing."""
+    from pointspro.core.units import format_length
+
+    scale = {"mm": 1.0, "µm": 1e-3}.get(unit or "")
+
+    def one(x):
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            return str(x)
+        return format_length(x * scale, 4) if scale is not None else f"{x:.4g}"
+
+    if v is None:
+        return None
+    if isinstance(v, (list, tuple)) and 0 < len(v) <= 3:
+        return "(" + ", ".join(one(x) for x in v) + ")"
+    if isinstance(v, (list, tuple, dict)):
+        return None
+    return one(v)

@@ -297,6 +297,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session.accept(res)  # back in the GUI thread: the model changes and the views follow
         self.last_report = res
         self.report.set_result(res)
+        self.pipeline.show_used()  # the "auto" fields: the values the steps computed
         s = res.summary()
         rms = (f", {_what(s)} RMS {format_length(s['rms_um'] * 1e-3, 4)}, PV {format_length(s['pv_um'] * 1e-3, 4)}"
                if s["rms_um"] is not None else "")

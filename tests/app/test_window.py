@@ -114,6 +114,28 @@ def test_one_residual_gets_one_colour_range_in_map_3d_view_and_report(qtbot, tmp
     assert win.view3d._clim[1] == pytest.approx(want, rel=1e-9)
 
 
+def test_auto_fields_show_the_value_the_last_run_computed(qtbot):
+    """An "auto" parameter hides its editor (a greyed default read as the value used); after a run it
+    shows what the step computed, from the step's report — bspline_map's knot spacing, 86.56 mm on
+    the example — and nothing for a step that did not run."""
+    from pointspro.app.pipeline_dock import used_text
+
+    win = _example_window(qtbot, steps=7)
+    win.pipeline.list.setCurrentRow(6)
+    w = win.pipeline.fields["knot_spacing"]
+    assert w.auto.isChecked() and not w.used.isVisible() and w.used.text() == ""
+    win.pipeline.run_all.click()
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
+    w = win.pipeline.fields["knot_spacing"]
+    knots = win.last_report.steps[6].report["knot_spacing"]
+    assert w.used.text() == f"last run: {used_text(knots, 'mm')}" == "last run: 86.56 mm"
+    assert not w.used.isHidden()
+    w.auto.setChecked(False)  # a value of one's own: the editor, not the readout
+    assert w.used.isHidden() and not w.inner.isHidden()
+    assert used_text(2.5e-4, "mm") == "250 nm" and used_text([1.0, -2.0], "mm") == "(1 mm, -2 mm)"
+    assert used_text(5.0, None) == "5" and used_text(None, "mm") is None
+
+
 def test_run_in_worker_keeps_the_window_responsive_and_fills_the_report(qtbot):
     """The pipeline runs in a thread: the event loop keeps turning meanwhile. (How long its longest
     stall is — the 100 ms target — is measured in benchmarks/bench_window.py, not asserted here: a
