@@ -55,10 +55,20 @@ def run_window(files: list[Path], screenshot: str | None = None, run: bool = Fal
     app.processEvents()
     screen = win.screen() or app.primaryScreen()
     img = screen.grabWindow(win.winId())
-    if img.isNull() or not img.save(str(screenshot)):
-        win.grab().save(str(screenshot))
+    if img.isNull():
+        img = win.grab()
+    # through a temporary file in the same folder, renamed into place: a failed save leaves no
+    # empty or half-written picture (the CLI checked the name: an image suffix, never an input)
+    target = Path(screenshot)
+    tmp = target.with_name(f".{target.stem}.partial{target.suffix}")
+    saved = img.save(str(tmp))
     win.close()
     win.deleteLater()
     app.sendPostedEvents(None, 0)
     app.processEvents()
+    if not saved:
+        tmp.unlink(missing_ok=True)
+        print(f"pointspro: --screenshot {screenshot}: the picture could not be written", file=sys.stderr)
+        return 2
+    tmp.replace(target)
     return 0

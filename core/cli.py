@@ -191,6 +191,7 @@ def _with_logging(args, fn):
     handlers.append(err)
     level = shown
     if args.log_file:
+        _check_log_file(args)
         try:
             fh = logging.FileHandler(args.log_file, mode="a", encoding="utf-8")
         except OSError as e:
@@ -324,6 +325,51 @@ def _batch(args, recipe_path: Path, pool) -> int:
     if not args.quiet or interrupted:
         print(table(entries), file=sys.stdout if not interrupted else sys.stderr)
     return _batch_exit_code(entries, interrupted)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and a.samefile(b)
+    except OSError:
+        return False
+
+
+def _check_log_file(args) -> None:
+    """--log-file is appended to: never a file this run reads (the recipe, an input — a log line
+    at the end of a CSV made its next read fail, of a recipe made it invalid YAML), nor a file in
+    --out, whose folders the batch replaces and whose summary.json it writes."""
+    from .errors import RecipeError
+
+    log = Path(args.log_file)
+    for i, f in enumerate(args.files or []):
+        if _same_file(log, Path(f)):
+            what = "the recipe" if args.batch and i == 0 else "an input"
+            raise RecipeError(f"--log-file {log}: is {what} ({f}); the log would be appended to it — "
+                              "choose another file")
+    if args.batch and args.out:
+        out, target = Path(args.out).resolve(), log.resolve()
+        if target == out or out in target.parents:
+            raise RecipeError(f"--log-file {log}: is inside --out {args.out}, whose folders the batch "
+                              "replaces and whose summary.json it writes — put the log beside it")
+
+
+#: what --screenshot writes (Qt's image writers by suffix)
+SCREENSHOT_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
+
+
+def _check_screenshot(args) -> None:
+    """--screenshot PNG: an image suffix, a folder that exists, and never a file the window opens
+    (Qt's save truncated the file first — an input given as the picture's name was emptied)."""
+    from .errors import RecipeError
+
+    shot = Path(args.screenshot)
+    for f in args.files:
+        if _same_file(shot, Path(f)):
+            raise RecipeError(f"--screenshot {shot}: is a file the window opens ({f}); choose another name")
+    if shot.suffix.lower() not in SCREENSHOT_SUFFIXES:
+        raise RecipeError(f"--screenshot {shot}: give an image file name ({', '.join(SCREENSHOT_SUFFIXES)})")
+    if not shot.parent.is_dir():
+        raise RecipeError(f"--screenshot {shot}: folder {shot.parent} does not exist")
 
 
 def _check_batch_args(args) -> None:
@@ -771,6 +817,8 @@ def cmd_window(args) -> int:
     for f in args.files:
         if not Path(f).exists():
             raise InputError(f"{f}: file not found")
+    if args.screenshot:
+        _check_screenshot(args)
     _check_display(args)
     from pointspro.app.main import run_window  # the only path that imports Qt
 

@@ -318,3 +318,33 @@ def test_workers_send_their_log_records_to_the_parent(run_cli, tmp_path):
     for name in ("a.csv", "b.csv"):
         assert re.search(rf"pointspro\.knn_denoise: {name}: \d+ of 4680 points removed", err)
         assert f"INFO pointspro.misalignment: {name}: pose" in log.read_text(encoding="utf-8")
+
+
+def test_log_file_never_appends_to_what_the_run_reads_or_writes(run_cli, tmp_path):
+    """--log-file appended its lines to the input or the recipe it was pointed at (the next read of
+    the CSV then failed on a log line; the recipe became invalid YAML), and inside --out it vanished
+    with the folder the batch replaced: refused, nothing changed, nothing written (review 2026-11-26)."""
+    import hashlib
+
+    recipe = write(tmp_path / "r.yaml", LOG_RECIPE)
+    data = shutil.copy(DATA, tmp_path / "part.csv")
+    before = {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in (recipe, data)}
+    for log, says in ((data, "is an input"), (recipe, "is the recipe"),
+                      (tmp_path / "o" / "part" / "run.log", "is inside --out")):
+        code, _, err = run_cli("--batch", recipe, data, "--out", tmp_path / "o", "--quiet", "--figures", "none",
+                               "--log-file", log)
+        assert code == 2 and says in err and err.count("\n") == 1, err
+        assert {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in (recipe, data)} == before
+        assert not (tmp_path / "o").exists()
+
+
+def test_screenshot_never_overwrites_an_input_and_needs_an_image_name(run_cli, tmp_path):
+    """--screenshot part.csv part.csv emptied the input (Qt truncates, then fails on the suffix) and
+    exited 0; a .txt name or a missing folder wrote nothing and said nothing."""
+    data = shutil.copy(DATA, tmp_path / "part.csv")
+    size = data.stat().st_size
+    for shot, says in ((data, "is a file the window opens"), (tmp_path / "shot.txt", "give an image file name"),
+                       (tmp_path / "no" / "shot.png", "does not exist")):
+        code, _, err = run_cli("--screenshot", shot, data)
+        assert code == 2 and says in err, err
+    assert data.stat().st_size == size and not (tmp_path / "shot.txt").exists()
