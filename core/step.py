@@ -29,7 +29,9 @@ class Params(BaseModel):
     a field changes meaning and teach ``migrate`` to rewrite the old form.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    # allow_inf_nan=False: NaN and ±inf are never a parameter (a pose dx of .inf wrote a cloud of
+    # inf and NaN with exit 0; a NaN conic reached LAPACK as "SVD did not converge")
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False)
     schema_version: ClassVar[int] = 1
 
     @field_validator("*", mode="before")

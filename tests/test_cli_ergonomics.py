@@ -348,3 +348,34 @@ def test_screenshot_never_overwrites_an_input_and_needs_an_image_name(run_cli, t
         code, _, err = run_cli("--screenshot", shot, data)
         assert code == 2 and says in err, err
     assert data.stat().st_size == size and not (tmp_path / "shot.txt").exists()
+
+
+@pytest.mark.parametrize("recipe,key", [
+    ("steps:\n  - transform: {pose: {dx: .inf}}\n", "key 'pose.dx': Input should be a finite number"),
+    ("steps:\n  - misalignment: {initial: {alpha_deg: .nan}}\n", "key 'initial.alpha_deg'"),
+    ("surface: {type: even_asphere, c: .nan, k: -0.98}\nsteps:\n  - misalignment: {}\n", "surface: key"),
+    ("surface: {type: even_asphere, c: 0.0003, k: 0, A: {4: .inf}}\nsteps:\n  - misalignment: {}\n",
+     "surface: key"),
+    ("steps:\n  - zernike: {norm_radius: .inf}\n", "key 'norm_radius'"),
+])
+def test_nan_and_inf_parameters_are_refused_at_load(run_cli, tmp_path, recipe, key):
+    """A pose dx of .inf wrote a cloud of inf/NaN with exit 0; a NaN conic or initial tilt reached
+    LAPACK ("SVD did not converge — please report"); norm_radius .inf gave 4.8e16 nm uncertainties:
+    NaN and ±inf are never a parameter (review 2026-11-26)."""
+    r = write(tmp_path / "r.yaml", "pointspro: 1\n" + recipe)
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--quiet")
+    assert code == 2 and key in err and "line" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_simulate_refuses_non_finite_effect_values(run_cli, tmp_path):
+    """A NaN vibration frequency simulated 20,000 NaN heights with exit 0; a list was an internal error."""
+    for value, says in ((".nan", "frequency_hz = nan is not a finite number"),
+                        ("true", "frequency_hz = True is not a finite number"),
+                        ("[1, 2]", "frequency_hz = [1, 2] is not a finite number")):
+        m = write(tmp_path / "m.yaml", "pointspro_model: 1\nsurface: {type: sphere, R: 100}\n"
+                  "scan: {type: raster, radius: 10, pitch: 1}\n"
+                  f"effects:\n  - vibration: {{frequency_hz: {value}, amplitude: 8.0e-6}}\n")
+        code, _, err = run_cli("simulate", m, "--out", tmp_path / "s.csv")
+        assert code == 2 and says in err and "line 4" in err, err
+        assert not (tmp_path / "s.csv").exists()

@@ -341,3 +341,18 @@ def test_a_patch_of_a_large_part_is_mapped_at_its_own_sampling(tmp_path, run_cli
                            str(tmp_path / "o"), "--quiet", "--figures", "none")
     assert code == 0, err
     assert (tmp_path / "o" / "patch" / "psd.csv").stat().st_size > 100
+
+
+def test_map_spacing_beyond_the_region_or_absurdly_fine_is_refused():
+    """spacing 700 mm over a 1290 mm part gave a 1 × 1 map with RMS and PV 0 and exit 0; 1e-9 mm
+    asked numpy for 9.5 TiB (MemoryError, "please report") — both one clear message now."""
+    from pointspro.core.maps import fit_bspline, grid_map
+
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-645, 645, (2, 4000))
+    spline = fit_bspline(x, y, 1e-4 * np.sin(x / 200))
+    with pytest.raises(ValueError, match=r"spacing 700 mm leaves 1 × 1 map nodes"):
+        grid_map(spline, 700.0, x, y)
+    with pytest.raises(ValueError, match="too large"):
+        grid_map(spline, 1e-9, x, y)
+    assert grid_map(spline, 300.0, x, y).z.shape == (5, 5)  # ≤ span / 4: ≥ 3 nodes across

@@ -23,7 +23,7 @@ FORMAT = 1
 
 
 class GPSpec(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)  # NaN, ±inf: a damaged model file
     kind: Literal["spectral_mixture", "rbf", "matern52", "none"]   # none: no GP (zero, σ = sqrt(noise))
     params: dict[str, list[float] | float]
     noise: float
@@ -32,7 +32,7 @@ class GPSpec(BaseModel):
 
 
 class VolumetricModelSpec(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)  # NaN, ±inf: a damaged model file
     pointspro_volumetric_model: int
     transform: dict
     workspace: list[list[float]]          # [[xmin, xmax], [ymin, ymax], [zmin, zmax]]

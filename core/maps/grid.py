@@ -157,13 +157,18 @@ def grid_map(spline: TensorBSpline, spacing: float, px, py, *, diameter: float |
     if not extrapolate:  # nodes beyond the spline's box are masked below: the grid need not hold
         bx0, bx1, by0, by1 = spline.bounds  # them (a 100 mm patch of a 1300 mm part: 1 % of the nodes)
         lo_x, hi_x, lo_y, hi_y = max(lo_x, bx0), min(hi_x, bx1), max(lo_y, by0), min(hi_y, by1)
+    # the node counts before the nodes: spacing 1e-9 mm asked numpy for 9.5 TiB (MemoryError)
+    nx = np.floor(hi_x / spacing + 1e-9) - np.ceil(lo_x / spacing - 1e-9) + 1
+    ny = np.floor(hi_y / spacing + 1e-9) - np.ceil(lo_y / spacing - 1e-9) + 1
+    if nx * ny > 25_000_000:
+        raise ValueError(f"a {nx:.0f} × {ny:.0f} map at spacing {spacing:g} mm is too large; "
+                         "use a larger spacing")
+    if nx < 2 or ny < 2:  # a spacing beyond the region's size: one node, RMS and PV 0, exit 0
+        span = max(hi_x - lo_x, hi_y - lo_y)
+        raise ValueError(f"spacing {spacing:g} mm leaves {max(nx, 0):.0f} × {max(ny, 0):.0f} map nodes over "
+                         f"the {span:.4g} mm region; use a smaller spacing (≤ {span / 4:.4g} mm puts ≥ 3 across)")
     xs = node_axis(lo_x, hi_x, spacing)
     ys = node_axis(lo_y, hi_y, spacing)
-    if xs.size * ys.size > 25_000_000:
-        raise ValueError(f"a {xs.size} × {ys.size} map at spacing {spacing:g} mm is too large; "
-                         "use a larger spacing")
-    if xs.size == 0 or ys.size == 0:
-        raise ValueError("no map node lies inside the aperture at this spacing")
     z = spline.grid(xs, ys)
     keep = np.ones(z.shape, dtype=bool)
     if diameter is not None:

@@ -26,7 +26,7 @@ def validate_dof(names: list[str], aspheric_allowed: bool = True) -> list[str]:
 class InitialPose(BaseModel):
     """Starting values (also the values of DOF left out of `dof`); missing ones start at 0 (dz: data)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     alpha_deg: float | None = param(None, unit="deg", help="tilt about x")
     beta_deg: float | None = param(None, unit="deg", help="tilt about y")
     dx: float | None = param(None, unit="mm", help="decenter in x")

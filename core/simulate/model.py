@@ -14,6 +14,7 @@ follows the nominal) — z = f(x, y) + Σ effects + noise.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -25,14 +26,14 @@ from .scan import ScanSpec, scan_points
 
 
 class ProbeSpec(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     noise: float = Field(0.0, ge=0, description="RMS noise of the reading (mm)")
     radius: float = Field(0.0, ge=0, description="tip radius (mm); an uncompensated radius is the "
                           "probe_radius effect")
 
 
 class ModelSpec(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     pointspro_model: int = Field(1, description="model format version")
     surface: dict = Field(description="nominal surface, as in recipes")
     scan: ScanSpec
@@ -54,6 +55,9 @@ class ModelSpec(BaseModel):
             if bad:
                 raise ValueError(f"effect {i + 1} '{name}': unknown parameter(s) {sorted(bad)}; it has "
                                  f"{LIBRARY[name].params_text()}")
+            for key, value in (params or {}).items():  # a NaN amplitude simulated 20,000 NaN heights
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                    raise ValueError(f"effect {i + 1} '{name}': {key} = {value!r} is not a finite number")
         return v
 
     def build_surface(self, base_dir=None):

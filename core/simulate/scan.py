@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 
 class ScanSpec(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     type: Literal["raster", "star", "spiral", "fiducials"] = Field(description="path shape")
     radius: float = Field(gt=0, description="radius of the scanned disk (mm)")
     spacing: float = Field(1.0, gt=0, description="raster/star: point spacing along a line (mm)")

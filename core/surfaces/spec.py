@@ -29,7 +29,7 @@ _INT = TypeAdapter(int)
 
 
 class _Spec(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     aperture: float | None = Field(None, gt=0, description="clear-aperture diameter (mm)")
 
     @model_validator(mode="before")

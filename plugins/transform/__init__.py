@@ -19,7 +19,7 @@ from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
 class PoseParams(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     alpha_deg: float = param(0.0, unit="deg", help="rotation about x")
     beta_deg: float = param(0.0, unit="deg", help="rotation about y")
     dx: float = param(0.0, unit="mm", help="shift along x")
