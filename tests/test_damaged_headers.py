@@ -437,3 +437,18 @@ def test_spip_pixels_that_disagree_name_the_file(tmp_path):
     with pytest.raises(InputError, match=r"sp.txt, line 3: the header's y-pixels = 7 but the matrix "
                                          r"has 4 rows"):
         read_cloud(p)
+
+
+def test_headerless_bytes_are_not_an_srtm_elevation_map(tmp_path):
+    """SRTM has no header, and SurfaceTopography's detection took any 2·n² bytes for one: 5,000 random
+    bytes named .dat read as "the NASA SRTM file" — and, with height_unit and pixel_size_um in a
+    recipe, as a 50 × 50 map processed with exit 0. Only a .hgt file is SRTM."""
+    from pointspro.core.errors import InputError
+    from pointspro.core.io import read_cloud
+
+    p = tmp_path / "rnd.dat"
+    p.write_bytes(np.random.default_rng(0).bytes(5000))
+    for opts in ({}, {"height_unit": "nm", "pixel_size_um": 1.0}):
+        with pytest.raises(InputError, match="nor any format PointsPro or SurfaceTopography recognises") as e:
+            read_cloud(p, **opts)
+        assert "SRTM" not in str(e.value)

@@ -427,6 +427,11 @@ def _read_surface_topography(path: Path, opts, head: bytes):
             except Exception as e:  # noqa: BLE001
                 raise InputError(f"{path}: a damaged or truncated {magic[0].name()} file "
                                  f"({_short(e)})") from None
+        if reader.format() == "hgt" and path.suffix.lower() != ".hgt":
+            # SRTM has no header: its reader takes any file of 2·n² bytes (5,000 random bytes read
+            # as a 50 × 50 elevation map); only a .hgt file is one (review 2026-11-26)
+            reader.close()
+            raise _not_readable(path, head, _no_format())
         try:
             if reader.format() in ("h5", "datx") and _is_datx(path) and (
                     reader.format() == "h5" or not _datx_lateral_in_length(path)):
@@ -437,6 +442,12 @@ def _read_surface_topography(path: Path, opts, head: bytes):
                 reader.close()
             except Exception:  # noqa: BLE001
                 pass
+
+
+def _no_format() -> Exception:
+    from SurfaceTopography.Exceptions import CannotDetectFileFormat
+
+    return CannotDetectFileFormat("no reader recognises the content")
 
 
 def _not_readable(path: Path, head: bytes, e: BaseException) -> InputError:
