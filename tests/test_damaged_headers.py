@@ -452,3 +452,18 @@ def test_headerless_bytes_are_not_an_srtm_elevation_map(tmp_path):
         with pytest.raises(InputError, match="nor any format PointsPro or SurfaceTopography recognises") as e:
             read_cloud(p, **opts)
         assert "SRTM" not in str(e.value)
+
+
+def test_height_unit_is_refused_where_the_file_has_its_own(tmp_path):
+    """`input: {height_unit: um}` was ignored silently on an x y z CSV (z read as mm) and on a
+    MetroPro map (heights in the file's m), while pixel_size_um was refused there."""
+    from pointspro.core.errors import InputError
+    from pointspro.core.io import read_cloud
+
+    from .conftest import EXAMPLE, ROOT
+
+    with pytest.raises(InputError, match=r"reader option height_unit is for instrument maps .*`x \[mm\],y \[mm\],z \[um\]`"):
+        read_cloud(EXAMPLE / "asphere_cmm.csv", height_unit="um")
+    with pytest.raises(InputError, match=r"metropro-1.dat: the file gives its own height unit \(m\); remove"):
+        read_cloud(ROOT / "tests/data/realdata/metropro-1.dat", height_unit="um")
+    assert read_cloud(EXAMPLE / "asphere_cmm.csv").n == 4680  # without it, as before

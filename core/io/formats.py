@@ -295,7 +295,7 @@ def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOpti
     from .text import read_text
 
     try:
-        return read_text(path, invalid=opts.invalid, profile_angle_deg=opts.profile_angle_deg)
+        got = read_text(path, invalid=opts.invalid, profile_angle_deg=opts.profile_angle_deg)
     except InputError as e:
         what = foreign_kind(head)
         if what:
@@ -307,6 +307,12 @@ def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOpti
             raise InputError(f"{e} — the content is text, not a {claimed} file as the extension "
                              f"'{suffix}' says") from None
         raise
+    given = [k for k in ("height_unit", "pixel_size_um", "wavelength_nm") if getattr(opts, k) is not None]
+    if given:  # an x, y, z text file: height_unit was ignored silently (z taken as mm)
+        raise InputError(f"{path}: reader option {', '.join(given)} is for instrument maps that state no "
+                         "unit; an x y z text file states its units in its header (`x [mm],y [mm],z [um]`) "
+                         "or is in mm — remove the option")
+    return got
 
 
 def _format_column(a: np.ndarray) -> list[str]:

@@ -521,6 +521,9 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
                              "(nm, µm, mm or m)")
         unit = "µm" if opts.height_unit in ("um", "μm") else opts.height_unit
         kwargs["unit"] = unit
+    elif opts.height_unit is not None:  # was ignored silently, while pixel_size_um was refused
+        raise InputError(f"{path}: the file gives its own height unit ({unit}); remove the reader "
+                         "option height_unit")
     if ch.physical_sizes is None:
         if opts.pixel_size_um is None:
             raise InputError(f"{path}: the {reader.name()} file gives no lateral calibration (pixel "
@@ -630,6 +633,9 @@ def _read_datx_own(path: Path, opts):
 
     u = mangle_length_unit_utf8(unit) if unit else None
     if u in _LENGTH_TO_MM:
+        if opts.height_unit is not None:
+            raise InputError(f"{path}: the file gives its own height unit ({unit}); remove the reader "
+                             "option height_unit")
         scale = _LENGTH_TO_MM[u]
     elif unit.lower() in ("fringes", "waves", "wave", "fringe"):
         if opts.wavelength_nm is None:

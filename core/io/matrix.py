@@ -228,7 +228,12 @@ def read_matrix(path: Path, opts):
             text = raw.decode("utf-8")
         except UnicodeDecodeError:
             text = raw.decode("latin-1")
+        given = text
         text = _check_header(path, text, opts, ny, nx)
+        if text is not given and opts.height_unit is not None and text.startswith("# Value units:"):
+            import dataclasses  # height_unit is now the file's stated unit: used, not given twice
+
+            opts = dataclasses.replace(opts, height_unit=None)
         try:
             reader = open_topography(io.StringIO(text), format="asc")
         except Exception as e:  # noqa: BLE001
