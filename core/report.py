@@ -171,10 +171,10 @@ def render_html(report: dict, folder=None) -> str:
     if summary:
         what = s.get("figures_of") or "residual"
         pupil = s.get("pupil") or {}
-        note = (f"<p class='muted'>Figures of the {html.escape(what)}"
-                + (f"; PVr's pupil: centre ({pupil['centre_mm'][0]:.6g}, {pupil['centre_mm'][1]:.6g}) mm, "
-                   f"radius {pupil['norm_radius_mm']:.6g} mm — {html.escape(pupil['centre_from'])}"
-                   if pupil else "") + ".</p>")
+        from .statement import pupil_text
+
+        note = (f"<p class='muted'>Figures of the {html.escape(what)}" + html.escape(pupil_text(pupil))
+                + (f" — {html.escape(str(pupil.get('centre_from', '')))}" if pupil else "") + ".</p>")
         parts += ["<h2>Form error</h2>", note, table_html(summary), _img(folder, "form_error.png")]
     if s.get("uncertainty"):
         parts += uncertainty_html(s["uncertainty"], folder)

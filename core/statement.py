@@ -130,3 +130,16 @@ def verdict_banner_html(tolerance: dict | None) -> str:
 
 def _num(v) -> str:
     return "—" if v is None else f"{v:.4g}"
+
+
+def pupil_text(pupil: dict | None) -> str:
+    """"; PVr's pupil: centre (x, y) mm, radius r mm" for the report and the window, or "" without a
+    pupil; a number the report could not hold (non-finite: None in report.json) reads "—"."""
+    if not pupil:
+        return ""
+
+    def num(v):
+        return "—" if v is None else f"{v:.6g}"
+
+    c = pupil.get("centre_mm") or [None, None]
+    return f"; PVr's pupil: centre ({num(c[0])}, {num(c[1])}) mm, radius {num(pupil.get('norm_radius_mm'))} mm"

@@ -86,3 +86,28 @@ def test_a_u95_larger_than_its_value_picks_the_unit_and_keeps_two_digits():
 
     assert with_uncertainty(0.4629, 1.0016, "µm", 1.7) == "0.5 ± 1.0 µm (k = 1.7)"
     assert with_uncertainty(0.4643, 0.0112, "µm", 2.06) == "464 ± 11 nm (k = 2.06)"
+
+
+def test_pupil_note_survives_numbers_report_json_cannot_hold():
+    """A centre report.json could not hold (non-finite: null there) ended the whole input in
+    "writing the outputs: internal error TypeError … please report"; it reads "—" now."""
+    from pointspro.core.statement import pupil_text
+
+    assert pupil_text({"centre_mm": [None, 0.0], "norm_radius_mm": None}) == \
+        "; PVr's pupil: centre (—, 0) mm, radius — mm"
+    assert pupil_text({"centre_mm": [1.5, -2.0], "norm_radius_mm": 650.0}) == \
+        "; PVr's pupil: centre (1.5, -2) mm, radius 650 mm"
+    assert pupil_text(None) == "" and pupil_text({}) == ""
+
+
+def test_an_aperture_of_any_finite_size_selects_instead_of_overflowing():
+    """`aperture: {diameter: 1e300}` ended in "internal error OverflowError … please report"."""
+    import numpy as np
+
+    from pointspro.core import PointCloud
+    from pointspro.core.step import Context
+    from pointspro.plugins.aperture import ApertureStep
+
+    c = PointCloud.from_xyz(np.arange(5.0), np.zeros(5), np.zeros(5))
+    r = ApertureStep().run(c, ApertureStep.Params(diameter=1e300), Context())
+    assert r.cloud.n == 5

@@ -63,12 +63,14 @@ class ApertureStep(Step):
             # tolerance kept every rim point of a noise-free synthetic scan and about half of a noisy
             # one's (the pose moves them by more): Zernike Z9 of the two differed beyond its U95
             # (tests/test_uncertainty_coverage.py, radial_mid); measured points are never on it
-            keep = r2 <= (d / 2.0) ** 2
+            with np.errstate(over="ignore"):  # a 1e300 mm diameter: inf, not OverflowError
+                keep = r2 <= np.square(np.float64(d) / 2.0)
             desc = {"shape": params.shape, "diameter": d}
             if params.shape == "annulus":
                 if params.inner_diameter >= d:
                     raise StepError(f"inner_diameter {params.inner_diameter} ≥ diameter {d}")
-                keep &= r2 >= (params.inner_diameter / 2.0) ** 2
+                with np.errstate(over="ignore"):
+                    keep &= r2 >= np.square(np.float64(params.inner_diameter) / 2.0)
                 desc["inner_diameter"] = params.inner_diameter
         ctx.progress.update(0.5, "selecting")
         kept = int(keep.sum())
