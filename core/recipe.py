@@ -43,6 +43,10 @@ def format_validation_error(e: ValidationError, prefix: str = "") -> str:
             msg = "unknown key"
         elif err["type"] == "missing":
             msg = "required key is missing"
+        elif err["type"] in ("union_tag_not_found", "union_tag_invalid"):  # a surface's `type`
+            tags = (err.get("ctx") or {}).get("expected_tags")
+            msg = ("key 'type' is missing" if err["type"] == "union_tag_not_found" else
+                   f"unknown type {err.get('ctx', {}).get('tag')!r}") + (f"; one of {tags}" if tags else "")
         got = err.get("input")
         text = yaml_word(got) if isinstance(got, bool) else repr(got)  # true, as the recipe says
         text = text if len(text) <= 80 else text[:79] + "…"
@@ -204,7 +208,11 @@ def load_recipe(path, registry: Registry | None = None) -> Recipe:
                                          else "recipe file not found"))
     try:
         text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
+    except UnicodeDecodeError as e:  # the line, not the byte offset
+        line = path.read_bytes()[:e.start].count(b"\n") + 1
+        raise RecipeError(f"{path}, line {line}: not UTF-8 text (byte 0x{e.object[e.start]:02x}); save the "
+                          "recipe as UTF-8") from None
+    except OSError as e:
         raise RecipeError(f"{path}: cannot read the recipe ({e})") from None
     return parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
 

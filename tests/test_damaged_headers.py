@@ -467,3 +467,37 @@ def test_height_unit_is_refused_where_the_file_has_its_own(tmp_path):
     with pytest.raises(InputError, match=r"metropro-1.dat: the file gives its own height unit \(m\); remove"):
         read_cloud(ROOT / "tests/data/realdata/metropro-1.dat", height_unit="um")
     assert read_cloud(EXAMPLE / "asphere_cmm.csv").n == 4680  # without it, as before
+
+
+def test_a_cut_pointspro_npz_is_named_damaged(tmp_path):
+    """A .npz PointsPro wrote, cut short (a full disk, a stopped copy), read as "unknown file type
+    '.npz' — no reader recognises its content"."""
+    from pointspro.core import PointCloud
+    from pointspro.core.errors import InputError
+    from pointspro.core.io import read_cloud
+    from pointspro.core.io.npz import write_npz_cloud
+
+    p = tmp_path / "c.npz"
+    write_npz_cloud(PointCloud.from_xyz(np.arange(5000.0), np.zeros(5000), np.ones(5000)), p)
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
+    with pytest.raises(InputError, match=r"cut.npz: a damaged or truncated \.npz"):
+        read_cloud(cut)
+
+
+def test_recipe_messages_name_the_line_and_the_surface_type(tmp_path):
+    """A non-UTF-8 byte was a byte offset ("position 46"); a surface without `type` pydantic's
+    "Unable to extract tag using discriminator 'type'"."""
+    from pointspro.core.errors import RecipeError
+    from pointspro.core.recipe import load_recipe
+
+    p = tmp_path / "r.yaml"
+    p.write_bytes(b"pointspro: 1\nsteps:\n  - zernike: {terms: 4}\n# \xb5m\n")
+    with pytest.raises(RecipeError, match=r"r.yaml, line 4: not UTF-8 text \(byte 0xb5\)"):
+        load_recipe(p)
+    p.write_text("pointspro: 1\nsurface: {c: 0.001}\nsteps:\n  - zernike: {terms: 4}\n", encoding="utf-8")
+    with pytest.raises(RecipeError, match=r"line 2: surface: key 'type' is missing"):
+        load_recipe(p)
+    p.write_text("pointspro: 1\nsurface: {type: torus}\nsteps:\n  - zernike: {terms: 4}\n", encoding="utf-8")
+    with pytest.raises(RecipeError, match=r"surface: unknown type 'torus'; one of .*'even_asphere'"):
+        load_recipe(p)

@@ -277,7 +277,8 @@ def _zip_has(path: Path, name: str) -> bool:
         with zipfile.ZipFile(path) as zf:
             return name in zf.namelist()
     except (zipfile.BadZipFile, OSError, ValueError):
-        return name == "main.xml" and path.suffix.lower() == ".x3p"  # a damaged X3P: its reader names it
+        # a damaged X3P or PointsPro .npz: its own reader names the damage
+        return (name, path.suffix.lower()) in (("main.xml", ".x3p"), ("pointspro_meta.npy", ".npz"))
 
 
 def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOptions):

@@ -66,7 +66,9 @@ def read_npz(path: Path, invalid: str = "drop"):
             cols = {n: np.array(z[n]) for n in names}
     except InputError:
         raise
-    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as e:
+    except zipfile.BadZipFile as e:  # a zip's directory is at its end: a cut file loses it first
+        raise InputError(f"{path}: a damaged or truncated .npz ({e})") from None
+    except (OSError, ValueError, KeyError, TypeError, EOFError) as e:
         raise InputError(f"{path}: not a PointsPro cloud .npz ({type(e).__name__}: {e})") from None
     if meta.get("units", "mm") != "mm":
         raise InputError(f"{path}: units {meta.get('units')!r}, PointsPro reads mm")
