@@ -244,14 +244,30 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
     alone (one line naming the input and the step or stage; the traceback kept for summary.json and
     --debug); Cancelled propagates. The steps' log records carry the input's name
     (``record.input``, see ``InputLogFilter``)."""
+    import warnings
+
     token_input = CURRENT_INPUT.set(Path(path).name)
     try:
-        return _process_input(path, recipe, out_dir, stem, sink=sink, token=token, surface=surface,
-                              log=log, allowed_dirs=allowed_dirs, figures=figures, fork_csv=fork_csv,
-                              cloud_format=cloud_format, overrides=overrides,
-                              shown=str(path) if shown is None else str(shown), paths=paths)
+        # a library's warning (numpy's "invalid value encountered in divide") is one log line
+        # naming the input, as the steps' own lines — not two lines of file path and source text
+        # on stderr, nor lost in a pool worker's
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            warnings.showwarning = log_warning
+            return _process_input(path, recipe, out_dir, stem, sink=sink, token=token, surface=surface,
+                                  log=log, allowed_dirs=allowed_dirs, figures=figures, fork_csv=fork_csv,
+                                  cloud_format=cloud_format, overrides=overrides,
+                                  shown=str(path) if shown is None else str(shown), paths=paths)
     finally:
         CURRENT_INPUT.reset(token_input)
+
+
+def log_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` while an input runs: a WARNING of the ``pointspro.warnings`` logger,
+    "RuntimeWarning: invalid value encountered in divide (core/metrics/profiles.py:104)"."""
+    parts = Path(filename).parts
+    where = "/".join(parts[-3:]) if len(parts) > 3 else filename
+    logging.getLogger("pointspro.warnings").warning("%s: %s (%s:%d)", category.__name__, message, where, lineno)
 
 
 def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, allowed_dirs, figures,
