@@ -802,10 +802,14 @@ def _check_display(args) -> None:
 
     from .errors import PointsProError
 
-    if not sys.platform.startswith("linux") or os.environ.get("QT_QPA_PLATFORM") or args.screenshot:
+    if not sys.platform.startswith("linux") or os.environ.get("QT_QPA_PLATFORM"):
         return
     if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
         return
+    if args.screenshot:  # Qt aborted here (exit 134, plugin noise); offscreen draws no 3D view
+        raise PointsProError("no display to render the window on (DISPLAY and WAYLAND_DISPLAY are "
+                             "unset): run it under a virtual one, `xvfb-run -a pointspro --screenshot "
+                             f"{args.screenshot} …`")
     raise PointsProError("no display to open the window on (DISPLAY and WAYLAND_DISPLAY are unset): "
                          "process files with `pointspro --batch RECIPE INPUT… --out DIR`, or run the "
                          "window under xvfb-run or with QT_QPA_PLATFORM=offscreen")

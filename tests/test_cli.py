@@ -321,6 +321,9 @@ def test_the_window_without_a_display_says_what_to_do(run_cli, monkeypatch):
         monkeypatch.delenv(k, raising=False)
     code, _, err = run_cli(EXAMPLE / "asphere_cmm.csv")
     assert code == 2 and "no display to open the window on" in err and "xvfb-run" in err
+    # --screenshot too (it was let through: Qt's abort, exit 134)
+    code, _, err = run_cli("--screenshot", "/tmp/pointspro-never-written.png", EXAMPLE / "asphere_cmm.csv")
+    assert code == 2 and "no display to render the window on" in err and "xvfb-run -a" in err
 
 
 def test_explain_bootstrap_out_of_range(run_cli, tmp_path):
