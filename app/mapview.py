@@ -131,10 +131,13 @@ class MapView(QtWidgets.QWidget):
             if new_input:
                 self.ext = None  # else the input's extent, kept through deletions: the map stays put
                 self.profile_line = None
-            self._bins = self._bins if same else int(np.clip(1.2 * np.sqrt(n), 60, 400))
             if self.ext is None:
                 self.ext = _extent(cloud.x if keep is None else cloud.x[keep],
                                    cloud.y if keep is None else cloud.y[keep])
+            if not same:  # never finer than an instrument grid's pixel (a white grid over the map)
+                from pointspro.core.figures import default_bins
+
+                self._bins = default_bins(n, self.ext[1] - self.ext[0], cloud.meta.get("pixel_mm"))
             self._k = _bin_of(cloud.x, cloud.y, self.ext, self._bins)
             self._count(keep)
         img, ext = self._image(), self.ext
@@ -168,6 +171,8 @@ class MapView(QtWidgets.QWidget):
         self.cbar.set_label(title)
         self.ax.set_xlim(ext[0], ext[1])
         self.ax.set_ylim(ext[2], ext[3])
+        position_axis(self.ax, "x", "x", self._span())  # µm for a field under 1 mm
+        position_axis(self.ax, "y", "y", self._span())
         self.ax.set_title(title, fontsize=9)
         self._fill_threshold_channels()
         self.stylus = _stylus_profiles(cloud)
@@ -242,7 +247,7 @@ class MapView(QtWidgets.QWidget):
             self._line_artist = None
         pax = self.pax
         pax.clear()
-        pax.set_xlabel("along the profile (mm)")
+        position_axis(pax, "x", "along the profile", self._span())
         pax.set_ylabel(label)
         self._profile_artists = [pax.plot(s_, v, lw=1.0, label=f"{p.angle_deg:g}°", animated=True)[0]
                                  for p, s_, v in curves]
@@ -322,6 +327,10 @@ class MapView(QtWidgets.QWidget):
         self._blit(profile=False)
 
     # -- profile cuts -------------------------------------------------------------------------------
+    def _span(self) -> float:
+        """The map's width (mm): its axes read µm below 1 mm (core.figures.position_axis)."""
+        return float(self.ext[1] - self.ext[0]) if self.ext is not None else float("nan")
+
     def cut(self, p0, p1, draw: bool = True, fast: bool = False):
         """Profile of the shown channel along p0→p1 (mm): the points within 1.5 map bins of the line,
         their values against the distance along the cut, and their mean per bin. ``fast`` (an edit
@@ -361,7 +370,7 @@ class MapView(QtWidgets.QWidget):
                                             animated=True)
         pax = self.pax
         pax.clear()
-        pax.set_xlabel("along the cut (mm)")
+        position_axis(pax, "x", "along the cut", self._span())
         pax.set_ylabel(label)
         dots, = pax.plot(ds, dv, ".", ms=2, color="#999999", animated=True)
         mean, = pax.plot(mean_s, mean_v, color="#2c6fbb", lw=1.2, animated=True)
@@ -496,6 +505,12 @@ def _is_stylus(cloud) -> bool:
         _STYLUS[:] = [cloud, "profile" in cloud.channels or "angle" in cloud.channels or (
             cloud.n >= 2 and bool(np.ptp(cloud.y) == 0) != bool(np.ptp(cloud.x) == 0))]
     return _STYLUS[1]
+
+
+def position_axis(ax, which, label, span_mm):  # core.figures', imported when a view draws
+    from pointspro.core.figures import position_axis as axis
+
+    axis(ax, which, label, span_mm)
 
 
 def _extent(x, y):

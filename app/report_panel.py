@@ -19,14 +19,23 @@ class ReportPanel(QtWidgets.QWidget):
         super().__init__(parent)
         lay = QtWidgets.QHBoxLayout(self)
         lay.setContentsMargins(2, 2, 2, 2)
+        # a splitter, the list narrow: at the window's default size the dock is ~430 px wide, and a
+        # 230 px list left the tables ~170 px — values off to the right or wrapped a letter a line
+        split = QtWidgets.QSplitter(QtCore.Qt.Horizontal)
         self.list = QtWidgets.QListWidget()
-        self.list.setMaximumWidth(230)
-        lay.addWidget(self.list)
+        self.list.setMinimumWidth(60)
+        self.list.setTextElideMode(QtCore.Qt.ElideRight)
+        split.addWidget(self.list)
         self.view = QtWidgets.QTextBrowser()
         self.view.setOpenExternalLinks(True)
+        self.view.setLineWrapMode(QtWidgets.QTextEdit.NoWrap)  # a table scrolls sideways, never wraps
         self.view.document().setDefaultStyleSheet(
-            "th{white-space:nowrap;text-align:left;padding-right:8px} td{padding-right:8px}")
-        lay.addWidget(self.view, 1)
+            "th{white-space:nowrap;text-align:left;padding-right:8px} td{white-space:nowrap;padding-right:8px}")
+        split.addWidget(self.view)
+        split.setStretchFactor(0, 0)
+        split.setStretchFactor(1, 1)
+        split.setSizes([120, 400])
+        lay.addWidget(split)
         self.result = None
         self._dir = QtCore.QTemporaryDir()
         self._drawn: set = set()

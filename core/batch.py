@@ -229,7 +229,8 @@ def _summary_figure(cloud, path: Path) -> None:
     from .figures import save_png, scattered_map
 
     save_png(scattered_map(cloud.x, cloud.y, cloud["residual"],
-                           title="Form error (residual) after all steps"), path)
+                           title="Form error (residual) after all steps",
+                           pixel_mm=cloud.meta.get("pixel_mm")), path)
 
 
 def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,

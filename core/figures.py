@@ -134,6 +134,20 @@ def robust_limits(v, symmetric=True):
     return (lo, hi) if hi > lo else (lo - 1e-12, hi + 1e-12)
 
 
+def default_bins(n: int, span_mm: float | None = None, pixel_mm=None) -> int:
+    """Bins across a map of ``n`` points: ~1.2 √n (60…400), so sparse patterns still read as a
+    surface — but never finer than an instrument grid's pixel (``pixel_mm``, the reader's
+    meta["pixel_mm"], over a map ``span_mm`` wide): 307 bins over a 256-pixel map left every sixth
+    bin empty, a white grid over the map."""
+    bins = int(np.clip(1.2 * np.sqrt(max(n, 1)), 60, 400))
+    if pixel_mm is not None and span_mm is not None and span_mm > 0:
+        pitch = float(np.max(np.asarray(pixel_mm, dtype=np.float64)))
+        if pitch > 0:
+            # a bin wider than the pitch holds a pixel wherever it lies (one as wide, by rounding, not)
+            bins = min(bins, max(1, int(np.floor(span_mm / pitch * (1 - 1e-9)))))
+    return bins
+
+
 def binned_image(x, y, v, bins=None, ext=None, return_bins: bool = True):
     """Mean of v in square bins: the image of a scattered map (fast for millions of points). By
     default ~1.2 √N bins across (60…400), so sparse patterns still read as a surface. Returns
@@ -142,7 +156,7 @@ def binned_image(x, y, v, bins=None, ext=None, return_bins: bool = True):
     (12.6 M points 1.4 → ~0.3 s; issue 26)."""
     x, y, v = (np.asarray(a, dtype=np.float64) for a in (x, y, v))
     if bins is None:
-        bins = int(np.clip(1.2 * np.sqrt(len(x)), 60, 400))
+        bins = default_bins(len(x))
     if ext is None:
         span = (max(np.ptp(x), np.ptp(y)) or 1.0) if len(x) else 1.0
         cx, cy = (0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())) if len(x) else (0.0, 0.0)
@@ -184,8 +198,9 @@ def _map_axes(fig, ax, img_mm, ext, quantity, title, symmetric=True, cmap=DIVERG
     lo, hi = robust_limits(limits_sample(own) * scale, symmetric)
     im = ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,
                    interpolation="nearest")
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("y (mm)")
+    span = max(ext[1] - ext[0], ext[3] - ext[2])
+    position_axis(ax, "x", "x", span)
+    position_axis(ax, "y", "y", span)
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=10)
     v = img[np.isfinite(img)]
@@ -196,11 +211,15 @@ def _map_axes(fig, ax, img_mm, ext, quantity, title, symmetric=True, cmap=DIVERG
     fig.colorbar(im, ax=ax, label=label, extend=extend)
 
 
-def scattered_map(x, y, r_mm, title="Form error"):
-    """Residual (mm) at scattered points, binned, in the unit its size asks for."""
+def scattered_map(x, y, r_mm, title="Form error", pixel_mm=None):
+    """Residual (mm) at scattered points, binned, in the unit its size asks for; ``pixel_mm``: an
+    instrument grid's pixel, which the bins are never finer than (``default_bins``)."""
     fig = _figure()
     ax = fig.add_subplot()
-    img, ext = _binned(x, y, np.asarray(r_mm))
+    bins = None
+    if pixel_mm is not None and len(x):
+        bins = default_bins(len(x), max(np.ptp(x), np.ptp(y)), pixel_mm)
+    img, ext = _binned(x, y, np.asarray(r_mm), bins)
     _map_axes(fig, ax, img, ext, "", title, points_mm=r_mm)
     return fig
 
@@ -252,14 +271,15 @@ def profiles_figure(grid, angles=(0.0, 90.0), center=(0.0, 0.0)):
     for a in angles:
         s, z = profile(grid, a, center)
         ax1.plot(s, z * scale, lw=1, label=f"{a:g}°")
-    ax1.set_xlabel("position along the cut (mm)")
+    span = max(np.ptp(grid.xs) if grid.xs.size else 0.0, np.ptp(grid.ys) if grid.ys.size else 0.0)
+    position_axis(ax1, "x", "position along the cut", span)
     ax1.set_ylabel(f"form error ({unit})")
     ax1.legend(fontsize=8)
     ax1.set_title("profiles through the centre", fontsize=10)
     r, m, sd = radial_profile(grid, center)
     ax2.plot(r, m * scale, color="#2c6fbb", lw=1)
     ax2.fill_between(r, (m - sd) * scale, (m + sd) * scale, color="#2c6fbb", alpha=0.2, lw=0)
-    ax2.set_xlabel("radius (mm)")
+    position_axis(ax2, "x", "radius", span)
     ax2.set_ylabel(f"form error ({unit})")
     ax2.set_title("radial profile: ring mean ± std", fontsize=10)
     return fig
@@ -308,6 +328,22 @@ def omega_map(x, y, omega_mm, removed_mask, title="ω after denoising"):
                 label=f"removed ({int((~keep).sum())})")
         ax.legend(fontsize=8, loc="upper right")
     return fig
+
+
+def position_axis(ax, which: str, label: str, span_mm: float) -> None:
+    """Label axis ``which`` ("x" or "y") of positions in mm: "label (mm)", or "label (µm)" with the
+    tick labels × 1000 where the field is under 1 mm across (a 20 µm field read 0.000 … 0.020 mm, its
+    ticks running together). Only the labels change: the data stay in mm, so the window's
+    selections and cuts keep their coordinates."""
+    from matplotlib.ticker import FuncFormatter, ScalarFormatter
+
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    if np.isfinite(span_mm) and 0 < span_mm < 1.0:
+        axis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v * 1e3:.6g}"))
+        axis.set_label_text(f"{label} (µm)")
+    else:
+        axis.set_major_formatter(ScalarFormatter())
+        axis.set_label_text(f"{label} (mm)")
 
 
 def length_axis(values_mm) -> tuple[float, str]:

@@ -101,11 +101,28 @@ def _fmt_keyed(key, v) -> str:
     return _fmt(v)
 
 
+def _label(key, v) -> str:
+    """A table's key as shown: without its unit suffix where the number beside it says the unit
+    ("rms_after 13.335 nm", not "rms_after_um 13.335 nm")."""
+    k = str(key)
+    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+        from .units import KEY_UNITS
+
+        for suffix, _ in KEY_UNITS:
+            if k.endswith(suffix) and len(k) > len(suffix):
+                return k[: -len(suffix)]
+    return k
+
+
 def _fmt(v) -> str:
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 10_000:
+        return f"{v:,}"  # "307,200 points", as the step list writes them
     if isinstance(v, float):
         return f"{v:.6g}"
     if isinstance(v, list) and len(v) > 12:  # the items are escaped by _fmt already
         return f"[{len(v)} values: {', '.join(_fmt(x) for x in v[:6])}, …]"
+    if isinstance(v, list) and v and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"  # 6 digits, as a number alone (not 17)
     if isinstance(v, (list, dict)):
         return html.escape(json.dumps(v))
     return html.escape(str(v))
@@ -121,6 +138,7 @@ def _records(v: list) -> str:
 
 def table_html(d: dict) -> str:
     rows = []
+    keys = set(map(str, d))
     for k, v in d.items():
         if k in ("warnings",):
             continue
@@ -130,11 +148,13 @@ def table_html(d: dict) -> str:
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{_records(v)}</td></tr>")
             continue
         if isinstance(v, dict) and v and all(not isinstance(x, (dict, list)) for x in v.values()):
-            inner = ", ".join(f"{html.escape(str(a))} = {_fmt_keyed(a, b)}" for a, b in v.items())
+            inner = ", ".join(f"{html.escape(_label(a, b))} = {_fmt_keyed(a, b)}" for a, b in v.items())
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{inner}</td></tr>")
         else:
             cls = ' class="num"' if isinstance(v, (int, float)) else ""
-            rows.append(f"<tr><th>{html.escape(k)}</th><td{cls}>{_fmt_keyed(k, v)}</td></tr>")
+            label = _label(k, v)
+            label = str(k) if label != str(k) and label in keys else label  # norm_radius beside norm_radius_mm
+            rows.append(f"<tr><th>{html.escape(label)}</th><td{cls}>{_fmt_keyed(k, v)}</td></tr>")
     return "<table>" + "".join(rows) + "</table>"
 
 

@@ -49,6 +49,10 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
         scale, unit = _unit_for(max(abs(value), abs(U)) if U is not None and math.isfinite(U) else value
                                 if value else (U or 0.0))
         value, U = value / scale, (None if U is None else U / scale)
+    elif unit == "µrad":  # a slope of 1.4e4 µrad reads "14.01 mrad" (an interferometer's steep map)
+        big = max(abs(value), abs(U)) if U is not None and math.isfinite(U) else abs(value)
+        scale, unit = (1e6, "rad") if big >= 1e6 else (1e3, "mrad") if big >= 1e3 else (1.0, "µrad")
+        value, U = value / scale, (None if U is None else U / scale)
     if U is None or not math.isfinite(U):
         return f"{value:.4g} {unit}"
     d = _decimals(U)

@@ -356,3 +356,17 @@ def test_map_spacing_beyond_the_region_or_absurdly_fine_is_refused():
     with pytest.raises(ValueError, match="too large"):
         grid_map(spline, 1e-9, x, y)
     assert grid_map(spline, 300.0, x, y).z.shape == (5, 5)  # ≤ span / 4: ≥ 3 nodes across
+
+
+def test_form_error_png_of_a_grid_has_no_empty_bins():
+    """The report's form_error.png of a 256 × 256 map: 307 bins across left empty rows and columns."""
+    from pointspro.core.figures import default_bins, scattered_map
+
+    g = np.arange(256) * 0.04  # mm
+    X, Y = np.meshgrid(g, g)
+    r = 1e-5 * np.sin(X)
+    assert default_bins(X.size) == 307 and default_bins(X.size, np.ptp(g), [0.04, 0.04]) == 254
+    img = scattered_map(X.ravel(), Y.ravel(), r.ravel(), pixel_mm=[0.04, 0.04]).axes[0].images[0].get_array()
+    assert not np.isnan(np.asarray(img, dtype=float)).any()
+    img = scattered_map(X.ravel(), Y.ravel(), r.ravel()).axes[0].images[0].get_array()
+    assert np.isnan(np.asarray(img, dtype=float)).any()  # without the pixel, as before: the gaps

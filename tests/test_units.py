@@ -91,8 +91,23 @@ def test_report_keys_read_with_their_unit():
                        "uncertainty": {"dx": 2.82933e-5, "alpha_deg": 5.335e-4}, "flag": True,
                        "floor_um": float("nan")})
     assert "<td class=\"num\">797.536 µm</td>" in page and "<td class=\"num\">5</td>" in page
-    assert "dx = 28.2933 nm" in page and "alpha_deg = 0.0005335°" in page
+    assert "dx = 28.2933 nm" in page and "alpha = 0.0005335°" in page  # the unit said once
     assert ">True<" in page and ">nan<" in page  # not numbers with a unit
+    page = table_html({"rms_after_um": 0.013335, "points": 307200, "centre_mm": [0.35, 0.26]})
+    assert "<th>rms_after</th><td class=\"num\">13.335 nm</td>" in page  # not "rms_after_um 13.335 nm"
+    assert ">307,200<" in page and "<th>centre_mm</th>" in page  # a list: its key keeps the unit
+    assert ">[0.35, 0.26]<" in table_html({"centre_mm": [0.3500000000000001, 0.26]})  # 6 digits, not 17
+    page = table_html({"norm_radius": 0.0140869, "norm_radius_mm": 0.0140869})
+    assert "<th>norm_radius</th>" in page and "<th>norm_radius_mm</th>" in page  # never two alike
+
+
+def test_slopes_read_in_mrad_when_steep():
+    """An interferometer's steep map: slope RMS "1.401e+04 µrad" reads "14.01 mrad"."""
+    from pointspro.core.statement import with_uncertainty
+
+    assert with_uncertainty(14010.0, None, "µrad") == "14.01 mrad"
+    assert with_uncertainty(5.908, None, "µrad") == "5.908 µrad"
+    assert with_uncertainty(1331.0, 12.0, "µrad") == "1.331 ± 0.012 mrad (k = 2)"
 
 
 def test_uncertainty_table_names_the_pose_units():

@@ -401,3 +401,18 @@ def test_explain_panel_names_the_missing_effects(qtbot, tmp_path, run_cli):
     assert "Verdict" in win.explain.view.toHtml() and "explain:" in win.log_widget.toPlainText()
     win.explain.save_model(tmp_path / "updated.yaml")
     assert "spindle_tilt" in (tmp_path / "updated.yaml").read_text(encoding="utf-8")
+
+
+def test_an_instrument_grid_map_has_no_empty_bins_and_a_micrometre_field_reads_in_um(qtbot):
+    """A 256 × 256 map (matrix-3, a 10 µm field) was binned 307 across: every sixth bin empty, a
+    white grid over the map; and its axes read 0.000 … 0.010 mm. Now the bins are never finer than
+    the pixel, and the axes read µm (the data stay in mm: selections keep their coordinates)."""
+    from .. import conftest
+
+    win = _window(qtbot, [conftest.ROOT / "tests/data/realdata/matrix-3.txt"])
+    img = np.asarray(win.map.im.get_array(), dtype=float)
+    assert img.shape[0] <= 254 and not np.isnan(img).any()
+    assert win.map.ax.get_xlabel() == "x (µm)" and win.map.ax.get_ylabel() == "y (µm)"
+    lo, hi = win.map.ax.get_xlim()
+    assert hi - lo < 0.02  # mm: the data's own unit
+    assert win.map.ax.xaxis.get_major_formatter()(0.005, 0) == "5"
