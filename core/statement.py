@@ -142,8 +142,10 @@ def pupil_text(pupil: dict | None) -> str:
     if not pupil:
         return ""
 
-    def num(v):
-        return "—" if v is None else f"{v:.6g}"
+    from .units import format_length
+
+    def num(v):  # a length in the unit its size asks for: a 20 µm field's pupil is "14.0869 µm"
+        return "—" if v is None else format_length(v, 6)
 
     c = pupil.get("centre_mm") or [None, None]
-    return f"; PVr's pupil: centre ({num(c[0])}, {num(c[1])}) mm, radius {num(pupil.get('norm_radius_mm'))} mm"
+    return f"; PVr's pupil: centre ({num(c[0])}, {num(c[1])}), radius {num(pupil.get('norm_radius_mm'))}"

@@ -94,9 +94,11 @@ def test_pupil_note_survives_numbers_report_json_cannot_hold():
     from pointspro.core.statement import pupil_text
 
     assert pupil_text({"centre_mm": [None, 0.0], "norm_radius_mm": None}) == \
-        "; PVr's pupil: centre (—, 0) mm, radius — mm"
+        "; PVr's pupil: centre (—, 0 mm), radius —"
     assert pupil_text({"centre_mm": [1.5, -2.0], "norm_radius_mm": 650.0}) == \
-        "; PVr's pupil: centre (1.5, -2) mm, radius 650 mm"
+        "; PVr's pupil: centre (1.5 mm, -2 mm), radius 650 mm"
+    assert pupil_text({"centre_mm": [0.00996094, 0.00996094], "norm_radius_mm": 0.0140869}) == \
+        "; PVr's pupil: centre (9.96094 µm, 9.96094 µm), radius 14.0869 µm"  # a 20 µm field
     assert pupil_text(None) == "" and pupil_text({}) == ""
 
 
