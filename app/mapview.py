@@ -179,8 +179,11 @@ class MapView(QtWidgets.QWidget):
         if self.stylus is not None:  # a stylus profile: the curves themselves, not a cut of a map
             self._draw_stylus()
         else:
-            if self.profile_line is None:  # the opening cut: along x through the middle of the part
-                cy = 0.5 * (ext[2] + ext[3])
+            if self.profile_line is None:  # the opening cut: along x through the middle of the part,
+                cy = 0.5 * (ext[2] + ext[3])  # on the row of points nearest to it (the middle of an
+                ys = cloud.y if keep is None else cloud.y[keep]  # even number of rows has none: an
+                if ys.size:  # empty profile, "no points near the cut", on a 4 × 4 file)
+                    cy = float(ys[np.argmin(np.abs(ys - cy))])
                 self.profile_line = ((ext[0], cy), (ext[1], cy))
             self.cut(*self.profile_line, draw=False)
         self.canvas.draw_idle()

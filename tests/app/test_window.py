@@ -416,3 +416,14 @@ def test_an_instrument_grid_map_has_no_empty_bins_and_a_micrometre_field_reads_i
     lo, hi = win.map.ax.get_xlim()
     assert hi - lo < 0.02  # mm: the data's own unit
     assert win.map.ax.xaxis.get_major_formatter()(0.005, 0) == "5"
+
+
+def test_the_opening_cut_lies_on_a_row_of_a_small_grid(qtbot):
+    """xyz-1 (4 × 4 points, 1 mm apart): the opening cut through the middle y fell between rows and
+    the profile said "no points near the cut"; it lies on the nearest row now."""
+    from .. import conftest
+
+    win = _window(qtbot, [conftest.ROOT / "tests/data/realdata/xyz-1.txt"])
+    (x0, y0), (x1, y1) = win.map.profile_line
+    assert y0 == y1 and np.min(np.abs(win.map.cloud.y - y0)) == 0
+    assert win.map.profile[0].size >= 4
