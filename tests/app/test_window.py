@@ -427,3 +427,19 @@ def test_the_opening_cut_lies_on_a_row_of_a_small_grid(qtbot):
     (x0, y0), (x1, y1) = win.map.profile_line
     assert y0 == y1 and np.min(np.abs(win.map.cloud.y - y0)) == 0
     assert win.map.profile[0].size >= 4
+
+
+def test_the_map_colour_bar_shows_values_beyond_its_range(qtbot, tmp_path):
+    """The robust limits saturate spikes; the bar's ends now say so (it showed no sign of them)."""
+    from pointspro.core import PointCloud
+    from pointspro.core.io import write_csv
+
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(-50, 50, (2, 3000))
+    r = 1e-4 * np.sign(np.sin(x / 10))  # ±0.1 µm and nothing else: the limits hold every value
+    write_csv(PointCloud.from_xyz(x, y, (x * x + y * y) / 2000, residual=r), tmp_path / "a.csv")
+    assert _window(qtbot, [tmp_path / "a.csv"]).map.cbar.extend == "neither"
+    r = r.copy()
+    r[:3] = 5e-3  # three 5 µm spikes beyond the robust limits
+    write_csv(PointCloud.from_xyz(x, y, (x * x + y * y) / 2000, residual=r), tmp_path / "s.csv")
+    assert _window(qtbot, [tmp_path / "s.csv"]).map.cbar.extend == "max"
