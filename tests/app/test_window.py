@@ -260,7 +260,14 @@ def test_rectangle_and_lasso_through_the_3d_view(qtbot, tmp_path):
     win.show()
     qtbot.waitExposed(win)
     w = win.view3d.plotter.interactor
-    cx, cy = w.width() // 2, w.height() // 2
+    # where the cloud's centre is drawn (left of the view's centre: the colour bar has the right)
+    from pointspro.app import display
+
+    matrix, width, height = win.view3d._camera()
+    centre = np.array([[win.session.shown.x.mean(), win.session.shown.y.mean(), win.session.shown.z.mean()]])
+    sx, sy = display.to_screen(centre - win.view3d.origin, matrix, width, height)
+    cx, cy = int(round(float(sx[0]))), int(round(float(sy[0])))
+    assert cx < w.width() // 2 < w.width() * 0.82  # the data left of the colour bar
     win.view3d.mode.setCurrentText("select rectangle")
     qtbot.mousePress(w, QtCore.Qt.LeftButton, pos=QtCore.QPoint(cx - 30, cy - 30))
     qtbot.mouseMove(w, QtCore.QPoint(cx + 30, cy + 30))
