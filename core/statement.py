@@ -137,8 +137,9 @@ def _num(v) -> str:
 
 
 def pupil_text(pupil: dict | None) -> str:
-    """"; PVr's pupil: centre (x, y) mm, radius r mm" for the report and the window, or "" without a
-    pupil; a number the report could not hold (non-finite: None in report.json) reads "—"."""
+    """"; PVr's pupil: centre (1.5 mm, -2 mm), radius 650 mm" for the report and the window, each
+    length in the unit its size asks for; "" without a pupil; a number the report could not hold
+    (non-finite: None in report.json) reads "—"."""
     if not pupil:
         return ""
 
