@@ -52,8 +52,8 @@ def format_length(v_mm: float, digits: int = 3) -> str:
     # the unit of the value as rounded: 9.9996e-4 mm reads "1 µm", not "1e+03 nm"
     scale, unit = length_unit(float(f"{v:.{digits}g}"))
     w = v / scale
-    if abs(w) >= 10 ** digits:  # 1300 mm reads "1300 mm" (a drawing's figure), never "1.3e+03 mm"
-        return f"{w:.0f} {unit}"
+    if 10 ** digits <= abs(w) < 1e9:  # 1300 mm reads "1300 mm" (a drawing's figure), never "1.3e+03 mm"
+        return f"{w:.0f} {unit}"  # (and 1e300 mm not as 298 digits of metres)
     return f"{w:.{digits}g} {unit}"
 
 

@@ -472,3 +472,11 @@ def test_an_areal_quantity_on_a_stylus_profile_is_one_clear_error():
     res = pp.run({"pointspro": 1, "steps": [], "tolerance": {"pv_um": 50, "rule": "simple"}}, cloud)
     assert res.summary["tolerance"]["verdict"] in ("conforms", "does not conform")
     assert math.isfinite(res.summary["tolerance"]["items"][0]["value"])
+
+
+def test_a_negative_wavelength_is_named_as_a_wavelength():
+    """`wavelength_nm: -1` said "a limit is a finite number ≥ 0"."""
+    from pointspro.core.tolerance import parse_tolerance
+
+    with pytest.raises(RecipeError, match=r"key 'wavelength_nm': a wavelength is a finite number > 0 \(got -1\)"):
+        parse_tolerance({"rms_um": 0.1, "wavelength_nm": -1}, "recipe.yaml")

@@ -248,3 +248,13 @@ def test_a_figure_that_cannot_be_negative_is_floored_at_zero_below_the_noise(kin
     assert e["interval95"][0] == 0.0 and e["interval95"][1] > 0.0
     lin = estimate("sag_um", "linear", -0.02, -0.02 + 0.01 * rng.standard_normal(200), None)
     assert lin["value"] == -0.02 and lin["interval95"][0] < -0.02
+
+
+def test_an_infinite_standard_uncertainty_says_finite():
+    """`probe_radius: "1e999 um"` (inf) said "a standard uncertainty is ≥ 0"."""
+    from pointspro.core.errors import RecipeError
+    from pointspro.core.uncertainty.spec import parse_uncertainty
+
+    with pytest.raises(RecipeError, match=r"a standard uncertainty is a finite number ≥ 0 \(got '1e999 um'\)"):
+        parse_uncertainty({"samples": 200, "sources": {"probe_radius": "1e999 um"}}, "recipe.yaml", "recipe.yaml",
+                          steps=["probe_radius"])

@@ -118,3 +118,11 @@ def test_uncertainty_table_names_the_pose_units():
                          "k": 2.0, "interval95": [12.49972, 12.49988]}}
     page = "".join(p for p in uncertainty_html(block) if p)
     assert "<td>pose.dz</td><td>mm</td>" in page
+
+
+def test_format_length_of_absurd_sizes_stays_short():
+    """`pointspro info` on 1e300 mm coordinates printed a span of 298 digits of metres."""
+    from pointspro.core.units import format_length
+
+    assert format_length(1e300) == "1e+297 m" and format_length(2.5e7) == "25000 m"
+    assert format_length(1300.0) == "1300 mm"

@@ -236,7 +236,8 @@ def _positive(value, key: str, loc: str) -> float:
         raise RecipeError(f"{loc}: tolerance: key '{key}': a number is needed (got {value!r})")
     v = float(value)
     if not (math.isfinite(v) and v >= 0):
-        raise RecipeError(f"{loc}: tolerance: key '{key}': a limit is a finite number ≥ 0 (got {value!r})")
+        what = "a wavelength is a finite number > 0" if key == "wavelength_nm" else "a limit is a finite number ≥ 0"
+        raise RecipeError(f"{loc}: tolerance: key '{key}': {what} (got {value!r})")
     return v
 
 

@@ -119,7 +119,8 @@ def _quantity(value, units: dict, key: str, loc: str, what: str) -> tuple[float,
                           f"({what})")
     v = float(m.group(1)) * units[unit]
     if not math.isfinite(v) or v < 0:
-        raise RecipeError(f"{loc}: uncertainty: key '{key}': a standard uncertainty is ≥ 0 (got {value!r})")
+        raise RecipeError(f"{loc}: uncertainty: key '{key}': a standard uncertainty is a finite number "
+                          f"≥ 0 (got {value!r})")
     return v, f"{m.group(1)} {unit}"
 
 
