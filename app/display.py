@@ -97,9 +97,13 @@ def channel_limits(cloud, name: str, unit: str | None, diverging: bool, keep=Non
     hides) in ``unit``, whatever part of them a view draws (the 3D view's level of detail)."""
     from pointspro.core.units import UNIT_SAMPLE
 
-    rows = np.arange(cloud.n) if keep is None else np.flatnonzero(keep)
-    if rows.size > 2 * UNIT_SAMPLE:  # limits_sample's rows, taken before the values are formed
-        rows = rows[:: rows.size // UNIT_SAMPLE]
+    if keep is None:  # limits_sample's rows, taken before the values are formed
+        n = cloud.n
+        rows = np.arange(0, n, n // UNIT_SAMPLE) if n > 2 * UNIT_SAMPLE else None
+    else:
+        rows = np.flatnonzero(keep)
+        if rows.size > 2 * UNIT_SAMPLE:
+            rows = rows[:: rows.size // UNIT_SAMPLE]
     v, _, _, _ = channel_display(cloud, name, unit, rows=rows)
     return colour_limits(v, diverging)
 
