@@ -501,3 +501,16 @@ def test_recipe_messages_name_the_line_and_the_surface_type(tmp_path):
     p.write_text("pointspro: 1\nsurface: {type: torus}\nsteps:\n  - zernike: {terms: 4}\n", encoding="utf-8")
     with pytest.raises(RecipeError, match=r"surface: unknown type 'torus'; one of .*'even_asphere'"):
         load_recipe(p)
+
+
+def test_digits_python_reads_but_the_readers_do_not_name_their_line(tmp_path):
+    """`1_000` and full-width digits: Python's float() takes them, the fast readers do not, so the
+    message was "could not parse the numeric data" with no line."""
+    from pointspro.core.errors import InputError
+    from pointspro.core.io import read_cloud
+
+    for tok in ("1_000", "\uff11"):
+        p = tmp_path / "u.csv"
+        p.write_text(f"x,y,z\n0,0,0\n1,0,1\n0,{tok},2\n", encoding="utf-8")
+        with pytest.raises(InputError, match=r"u.csv, line 4, column 2: '.*' is not a number"):
+            read_cloud(p)

@@ -97,6 +97,8 @@ def _is_number(tok: str, decimal_comma: bool) -> bool:
     readers take the quotes off)."""
     if len(tok) >= 2 and tok[0] == tok[-1] == '"':
         tok = tok[1:-1]
+    if "_" in tok or not tok.isascii():  # Python's float() takes 1_000 and full-width digits, the
+        return False  # readers do not: "could not parse the numeric data" named no line
     try:
         float(tok.replace(",", ".") if decimal_comma else tok)
         return True
