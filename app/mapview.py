@@ -158,7 +158,9 @@ class MapView(QtWidgets.QWidget):
         # the colour bar's ends say where values go beyond its range (the robust limits saturate a
         # few spikes: a ±29 nm bar on a map whose PV is 1.36 µm showed no sign of them)
         shown = self.values if keep is None else self.values[keep]
-        extend = _extend(shown, lo, hi)
+        from pointspro.core.figures import colour_extend
+
+        extend = colour_extend(shown, lo, hi)
         if self.im is None:
             self.im = self.ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,
                                      interpolation="nearest", animated=True)
@@ -515,15 +517,6 @@ def _is_stylus(cloud) -> bool:
         _STYLUS[:] = [cloud, "profile" in cloud.channels or "angle" in cloud.channels or (
             cloud.n >= 2 and bool(np.ptp(cloud.y) == 0) != bool(np.ptp(cloud.x) == 0))]
     return _STYLUS[1]
-
-
-def _extend(v, lo: float, hi: float) -> str:
-    """A colour bar's ``extend``: which ends the values go beyond."""
-    v = v[np.isfinite(v)] if v.size else v
-    if not v.size:
-        return "neither"
-    return {(False, False): "neither", (True, False): "min", (False, True): "max",
-            (True, True): "both"}[(bool(v.min() < lo), bool(v.max() > hi))]
 
 
 def position_axis(ax, which, label, span_mm):  # core.figures', imported when a view draws

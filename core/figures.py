@@ -121,6 +121,17 @@ def limits_sample(v, keep=None) -> np.ndarray:
     return v[:: v.size // UNIT_SAMPLE] if v.size > 2 * UNIT_SAMPLE else v
 
 
+def colour_extend(v, lo: float, hi: float) -> str:
+    """A colour bar's ``extend``: which ends the finite values ``v`` go beyond (the report's maps and
+    the window's map say it alike)."""
+    v = np.asarray(v, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return "neither"
+    return {(False, False): "neither", (True, False): "min", (False, True): "max",
+            (True, True): "both"}[(bool(v.min() < lo), bool(v.max() > hi))]
+
+
 def robust_limits(v, symmetric=True):
     """(lo, hi): the 0.5 and 99.5 percentiles of the finite values (a few spikes saturate instead of
     washing the map out), symmetric about zero when ``symmetric``."""
@@ -203,11 +214,7 @@ def _map_axes(fig, ax, img_mm, ext, quantity, title, symmetric=True, cmap=DIVERG
     position_axis(ax, "y", "y", span)
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=10)
-    v = img[np.isfinite(img)]
-    extend = "neither"
-    if v.size:
-        extend = {(False, False): "neither", (True, False): "min", (False, True): "max",
-                  (True, True): "both"}[(bool(v.min() < lo), bool(v.max() > hi))]
+    extend = colour_extend(img, lo, hi)
     fig.colorbar(im, ax=ax, label=label, extend=extend)
 
 
