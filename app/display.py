@@ -12,6 +12,7 @@ import threading
 import numpy as np
 
 from pointspro.core.units import (
+    SHOWN_LENGTH_MM,
     display_unit,  # noqa: F401  (the views' unit rule; tests import it here)
     format_length,
 )
@@ -42,7 +43,7 @@ def channel_order(cloud) -> list[str]:
 
 #: units a length channel can be shown in (mm in the cloud): the one its spread asks for
 #: (``display_unit``, core.units: the report's figures choose by the same rule)
-_DISPLAY_UNITS = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
+_DISPLAY_UNITS = SHOWN_LENGTH_MM
 
 
 def channel_display(cloud, name: str, unit: str | None = None, rows=None):

@@ -228,9 +228,9 @@ class PipelineDock(QtWidgets.QDockWidget):
 def used_text(v, unit: str | None) -> str | None:
     """A reported value for the "last run" readout: a length (the field's unit mm or µm) in the unit
     its size asks for, a pair of lengths as "(x, y)", other numbers as they are; None for nothing."""
-    from pointspro.core.units import format_length
+    from pointspro.core.units import SHOWN_LENGTH_MM, format_length
 
-    scale = {"mm": 1.0, "µm": 1e-3}.get(unit or "")
+    scale = SHOWN_LENGTH_MM.get(unit or "")
 
     def one(x):
         if isinstance(x, bool) or not isinstance(x, (int, float)):

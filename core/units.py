@@ -137,8 +137,8 @@ def unit_of_key(name: str) -> str:
     return unit
 
 
-#: the lengths among unit_of_key's units, and their size in mm
-_KEY_LENGTHS = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
+#: the length units numbers are shown in, and their size in mm (report keys, the window's views)
+SHOWN_LENGTH_MM = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
 
 
 def format_keyed(name: str, v: float, digits: int = 6) -> str:
@@ -146,7 +146,7 @@ def format_keyed(name: str, v: float, digits: int = 6) -> str:
     for (``robust_sigma_um`` 0.2976 → "297.6 nm", ``dx`` 0.7975 → "797.536 µm"), another unit
     appended ("0.168275°", "3.8695 µrad"); a key with no unit, the number alone (counts, ratios)."""
     unit = unit_of_key(name)
-    if unit in _KEY_LENGTHS:
-        return format_length(float(v) * _KEY_LENGTHS[unit], digits)
+    if unit in SHOWN_LENGTH_MM:
+        return format_length(float(v) * SHOWN_LENGTH_MM[unit], digits)
     text = f"{v:.{digits}g}" if isinstance(v, float) else str(v)
     return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")
