@@ -129,10 +129,34 @@ def _fmt(v) -> str:
 
 
 def _records(v: list) -> str:
-    """A list of same-keyed mappings (e.g. Zernike coefficients) as a table of its own."""
+    """A list of same-keyed mappings (e.g. Zernike coefficients) as a table of its own. A column of
+    lengths (its key names the unit: ``coefficient_nm``) is shown in one unit, the one its largest
+    value asks for (core.units.column_unit): "coefficient (µm)" with 50.7318 for a 50731.8 nm
+    piston. report.json keeps the key's own unit."""
+    from .units import SHOWN_LENGTH_MM, column_unit, unit_of_key
+
     keys = list(v[0])
-    head = "".join(f"<th>{html.escape(str(k))}</th>" for k in keys)
-    body = "".join("<tr>" + "".join(f"<td>{_fmt(r.get(k))}</td>" for k in keys) + "</tr>" for r in v)
+    heads, scales = [], []
+    for k in keys:
+        unit = unit_of_key(str(k))
+        if unit in SHOWN_LENGTH_MM and str(k) != _label(k, 1.0):
+            shown = column_unit([r.get(k) * SHOWN_LENGTH_MM[unit] for r in v
+                                 if isinstance(r.get(k), (int, float)) and not isinstance(r.get(k), bool)],
+                                default=unit)
+            heads.append(f"{_label(k, 1.0)} ({shown})")
+            scales.append(SHOWN_LENGTH_MM[unit] / SHOWN_LENGTH_MM[shown])
+        else:
+            heads.append(str(k))
+            scales.append(None)
+
+    def cell(x, scale):
+        if scale is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
+            return _fmt(float(x) * scale)
+        return _fmt(x)
+
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in heads)
+    body = "".join("<tr>" + "".join(f"<td>{cell(r.get(k), s)}</td>" for k, s in zip(keys, scales)) + "</tr>"
+                   for r in v)
     return f"<table><tr>{head}</tr>{body}</table>"
 
 

@@ -141,6 +141,19 @@ def unit_of_key(name: str) -> str:
 SHOWN_LENGTH_MM = {"mm": 1.0, "µm": 1e-3, "nm": 1e-6}
 
 
+def column_unit(values_mm, default: str = "mm") -> str:
+    """The one unit ("mm", "µm" or "nm") a table column of lengths (mm) is shown in: that of its
+    largest finite magnitude, so a 50.7 µm piston reads "50.7318" under "coefficient (µm)" and the
+    column's rows compare at a glance (its smaller rows keep 6 significant digits). ``default`` when
+    no value is finite and non-zero."""
+    big = max((abs(float(v)) for v in values_mm
+               if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)), default=0.0)
+    if big == 0.0:
+        return default
+    unit = length_unit(float(f"{big:.6g}"))[1]
+    return unit if unit in SHOWN_LENGTH_MM else ("mm" if unit == "m" else "nm")
+
+
 def format_keyed(name: str, v: float, digits: int = 6) -> str:
     """A report number for people, with the unit its key names: a length in the unit its size asks
     for (``robust_sigma_um`` 0.2976 → "297.6 nm", ``dx`` 0.7975 → "797.536 µm"), another unit

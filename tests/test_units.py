@@ -126,3 +126,20 @@ def test_format_length_of_absurd_sizes_stays_short():
 
     assert format_length(1e300) == "1e+297 m" and format_length(2.5e7) == "25000 m"
     assert format_length(1300.0) == "1300 mm"
+
+
+def test_a_column_of_lengths_reads_in_the_unit_of_its_largest_value():
+    """Zernike coefficients of a part with 50 µm of piston read "50.7318" under "coefficient (µm)",
+    not 50731.8 nm; a column of a few nm stays in nm; report.json keeps coefficient_nm."""
+    from pointspro.core.report import table_html
+    from pointspro.core.units import column_unit
+
+    rows = [{"j": 1, "name": "piston", "coefficient_nm": 50731.8, "uncertainty_nm": 5.5},
+            {"j": 2, "name": "tilt x", "coefficient_nm": -12.3456789, "uncertainty_nm": 0.25}]
+    page = table_html({"coefficients": rows})
+    assert "<th>coefficient (µm)</th>" in page and "<th>uncertainty (nm)</th>" in page
+    assert "<td>50.7318</td>" in page and "<td>-0.0123457</td>" in page and "<td>5.5</td>" in page
+    small = table_html({"coefficients": [{"j": 4, "coefficient_nm": 3.2}, {"j": 5, "coefficient_nm": -0.4}]})
+    assert "<th>coefficient (nm)</th>" in small and "<td>3.2</td>" in small
+    assert column_unit([0.0, float("nan")], default="nm") == "nm"
+    assert column_unit([2e-3, 5e-7]) == "µm" and column_unit([1500.0]) == "mm"
