@@ -122,6 +122,19 @@ def test_centre_given_twice_or_half_is_refused():
     assert p.given_centre == (1.0, 2.0)
 
 
+def test_a_centre_too_far_for_a_finite_pupil_is_refused_by_name():
+    """centre: [1e300, 0] made the normalisation radius inf: the step ran to exit 0 with overflow
+    warnings and a report without a radius; now one message naming the centre."""
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-10, 10, (2, 400))
+    cloud = PointCloud(np.column_stack([x, y, 1e-3 * x * y]))
+    step = ZernikeStep()
+    with pytest.raises(StepError, match=r"centre \(1e\+300, 0\) mm lies so far"):
+        step.run(cloud, step.Params.model_validate({"terms": 4, "centre": [1e300, 0]}), Context())
+    out = step.run(cloud, step.Params.model_validate({"terms": 4, "centre": [1e3, 0]}), Context())
+    assert np.isfinite(out.report["norm_radius_mm"])  # far but finite: fitted (and warned if ill-posed)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_misalignment_on_a_flat_fits_what_a_plane_determines(seed):
     rng = np.random.default_rng(seed)

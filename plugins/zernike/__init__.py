@@ -81,6 +81,10 @@ class ZernikeStep(Step):
         c, R = pupil.center, pupil.radius
         if not R > 0:
             raise StepError("the points have no extent to normalise the Zernike disk by")
+        if not np.isfinite(R):  # a centre ~1e154 mm or more from the points: the radius overflows
+            raise StepError(f"the pupil centre ({c[0]:g}, {c[1]:g}) mm lies so far from the points that "
+                            "the normalisation radius is not a finite number; give a centre near the "
+                            "measured region (or none: docs/conventions.md, Pupil)")
         warnings = []
         outside = _count_outside(x, y, c, R * (1 + 1e-9))
         if outside:
