@@ -94,8 +94,11 @@ def format_text(d: dict) -> str:
         pix = g.get("pixel_mm")
         pix_text = (f", pixel {format_length(pix[0])} × {format_length(pix[1])}" if pix else "")
         lines.append(f"grid       {g['rows']} rows × {g['cols']} cols{pix_text}")
-    elif d.get("spacing_mm") is not None:
+    elif d.get("spacing_mm") is not None and np.isfinite(d["spacing_mm"]):
         lines.append(f"scattered  mean nearest-neighbour spacing {format_length(d['spacing_mm'])}")
+    elif d.get("spacing_mm") is not None:  # distances of ~1e300 mm overflow
+        lines.append("scattered  nearest-neighbour spacing not computable: the coordinates are too "
+                     "large for float64 distances (check the file's unit and columns)")
     z = d.get("z_plane_removed")
     if z:
         lines.append(f"z          RMS {z['rms']}, PV {z['pv']} after piston and tilt removal")

@@ -62,6 +62,15 @@ def test_info_describes_a_scattered_cloud(run_cli, tmp_path):
     assert {"name": "z", "unit": "mm"} in d["channels"]
 
 
+def test_info_says_when_coordinates_are_too_large_for_a_spacing(run_cli, tmp_path):
+    """Coordinates of ~1e300 mm: the spacing was printed as "inf mm"; now the line says why."""
+    p = tmp_path / "absurd.csv"
+    p.write_text("x,y,z\n0,0,0\n1e300,0,1\n0,1e300,2\n-1e300,-1e300,3\n")
+    code, out, err = run_cli("info", p)
+    assert code == 0, err
+    assert "inf mm" not in out and "spacing not computable" in out
+
+
 def test_info_describes_a_map_grid(run_cli):
     code, out, err = run_cli("info", ROOT / "tests" / "data" / "realdata" / "sdf-1.sdf", "--json")
     assert code == 0, err
