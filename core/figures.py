@@ -87,14 +87,49 @@ def decade_label(v, _pos=None) -> str:
     return "10" + str(k).translate(_SUPERSCRIPT) if abs(e - k) < 1e-9 else ""
 
 
+def short_log_label(v) -> str:
+    """A log axis's label between decades in plain text: "0.06", "300", "3×10⁻⁵" (not matplotlib's
+    mathtext "6×10⁻²", which is wider — it pushed a PSD's axis title off the figure — and slower)."""
+    if not (v > 0 and np.isfinite(v)):
+        return ""
+    if 1e-3 <= v < 1e4:
+        return f"{v:.3g}"
+    k = int(np.floor(np.log10(v)))
+    m = v / 10.0 ** k
+    if round(m, 2) >= 10:
+        m, k = m / 10, k + 1
+    return f"{m:.3g}×10" + str(k).translate(_SUPERSCRIPT)
+
+
+def _plain_text_formatter(inner):
+    """A tick formatter that labels the ticks ``inner`` (matplotlib's log formatter) labels — its
+    choice of which minor ticks need a label on a short range — in plain text (short_log_label)."""
+    from matplotlib.ticker import Formatter
+
+    class PlainLogLabels(Formatter):
+        def set_axis(self, axis):
+            super().set_axis(axis)
+            inner.set_axis(axis)
+
+        def format_ticks(self, values):
+            return [short_log_label(v) if text else "" for v, text in zip(values, inner.format_ticks(values))]
+
+        def __call__(self, x, pos=None):
+            return self.format_ticks([x])[0]
+
+    return PlainLogLabels()
+
+
 def plain_log_ticks(axis) -> None:
-    """Label a log axis's decades in plain text (``decade_label``), its minor ticks not at all —
-    when two powers of ten or more lie in its range; a shorter range keeps matplotlib's labels (it
-    needs the minor ones)."""
+    """Label a log axis in plain text, never mathtext: its decades ("10⁻²", ``decade_label``) and
+    no minor tick when two powers of ten or more lie in its range; a shorter range needs labels
+    between decades — those matplotlib would label, written by ``short_log_label``."""
     from matplotlib.ticker import FuncFormatter, NullFormatter
 
     lo, hi = sorted(axis.get_view_interval())
     if not (lo > 0 and np.floor(np.log10(hi) + 1e-9) - np.ceil(np.log10(lo) - 1e-9) >= 1):
+        axis.set_major_formatter(_plain_text_formatter(axis.get_major_formatter()))
+        axis.set_minor_formatter(_plain_text_formatter(axis.get_minor_formatter()))
         return
     axis.set_major_formatter(FuncFormatter(decade_label))
     axis.set_minor_formatter(NullFormatter())

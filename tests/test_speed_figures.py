@@ -49,14 +49,40 @@ def test_decade_label():
     assert figures.decade_label(0.0) == ""
 
 
-def test_short_log_range_keeps_matplotlib_labels():
+def test_short_log_range_labels_matplotlibs_ticks_in_plain_text(tmp_path):
+    """Less than two decades in range: labels between decades are needed. They stand at the ticks
+    matplotlib labels, in plain text ("0.06", not mathtext "6×10⁻²" — wider: the PSD's axis title
+    of a 7 × 4-pixel map was pushed off the figure)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.ticker import FuncFormatter
+    from matplotlib.mathtext import MathTextParser
 
-    ax = Figure().add_subplot()
-    ax.loglog([2.0, 8.0], [2.0, 8.0])  # no two powers of ten in range: minor labels are needed
-    figures.plain_log_ticks(ax.xaxis)
-    assert not isinstance(ax.xaxis.get_major_formatter(), FuncFormatter)
+    def drawn(plain: bool):
+        fig = Figure()
+        FigureCanvasAgg(fig)
+        ax = fig.add_subplot()
+        ax.loglog([1.0, 2.0], [0.015, 0.3])
+        if plain:
+            figures.plain_log_ticks(ax.xaxis)
+            figures.plain_log_ticks(ax.yaxis)
+            with mock.patch.object(MathTextParser, "parse", side_effect=AssertionError("mathtext used")):
+                figures.save_png(fig, tmp_path / "short.png")
+        else:
+            fig.canvas.draw()
+        return {round(t.get_loc(), 12): t.label1.get_text()
+                for t in [*ax.yaxis.get_major_ticks(), *ax.yaxis.get_minor_ticks()] if t.label1.get_text()}
+
+    mpl, plain = drawn(False), drawn(True)
+    assert mpl.keys() == plain.keys() and len(plain) >= 4  # the same ticks labelled
+    assert all(t.startswith("$") for t in mpl.values())  # matplotlib's: mathtext
+    assert plain[0.1] == "0.1" and plain[0.02] == "0.02"
+    assert not any("$" in t for t in plain.values())
+
+
+def test_short_log_label():
+    assert figures.short_log_label(0.06) == "0.06" and figures.short_log_label(300.0) == "300"
+    assert figures.short_log_label(3e-5) == "3×10⁻⁵" and figures.short_log_label(2e6) == "2×10⁶"
+    assert figures.short_log_label(9.999e-6) == "1×10⁻⁵" and figures.short_log_label(0.0) == ""
 
 
 def test_psd_image_data_unchanged():

@@ -42,10 +42,11 @@ class DynamicParams(Params):
 def _figure(t, z_raw, z, x, y, fs):
     from pointspro.core.dynamics.vibration import psd_space, psd_time
     from pointspro.core.figures import _figure as new
-    from pointspro.core.figures import length_axis
+    from pointspro.core.figures import length_axis, plain_log_ticks
     from pointspro.core.units import format_length
 
     fig = new(11, 4.2)
+    fig.subplots_adjust(top=1 - 0.6 / 4.2)  # room for the spatial-frequency axis along the top
     ax1, ax2 = fig.subplots(1, 2)
     n = len(t)
     w = slice(n // 2, min(n // 2 + int(5 * fs), n))
@@ -62,8 +63,12 @@ def _figure(t, z_raw, z, x, y, fs):
     ax3 = ax2.twiny()
     ax3.loglog(fs_[1:], ps[1:] * 1e6, lw=1, color="#c0392b", label="along the surface (µm²·mm)")
     ax3.set_xlabel("spatial frequency (1/mm)", color="#c0392b")
-    ax2.set_title("PSD of the corrected height", fontsize=10)
-    ax2.legend(fontsize=8, loc="lower left")
+    # the title as the legend's (the top axis's labels stand where a title would), with both PSDs
+    handles = ax2.get_legend_handles_labels()[0] + ax3.get_legend_handles_labels()[0]
+    ax2.legend(handles=handles, fontsize=8, loc="upper right", title="PSD of the corrected height",
+               title_fontsize=8)
+    for axis in (ax2.xaxis, ax2.yaxis, ax3.xaxis):  # plain text, no mathtext (core/figures.py)
+        plain_log_ticks(axis)
     return fig
 
 
