@@ -1,4 +1,4 @@
-"""The one entry point `pointspro` (DESIGN "Command line").
+"""The one entry point `pointspro` (README "Batch"; docs/conventions.md "Errors").
 
     pointspro [FILE…]                                   open the window with the files
     pointspro [--run] --screenshot PNG [FILE…]          render the window to PNG and exit (--run:

@@ -1,6 +1,6 @@
 """The point cloud: float64 xyz (mm) plus named per-point channels, metadata and provenance.
 
-DESIGN "Data model": clouds are never mutated in place. Every array a cloud holds is made
+The data model: clouds are never mutated in place. Every array a cloud holds is made
 read-only, so a step that tries to write into its input fails loudly instead of corrupting it;
 a step returns a new cloud (sharing unchanged arrays is fine and cheap).
 """

@@ -1,4 +1,4 @@
-"""Progress and cancellation handed to steps as ``ctx.progress`` (DESIGN "Step contract").
+"""Progress and cancellation handed to steps as ``ctx.progress`` (core/step.py).
 
 A step calls ``update(fraction, message)``, ``sub(start, end)`` for a slice of the bar given to a
 sub-task, and ``check()`` wherever stopping is safe; ``check()`` raises `Cancelled` once the user

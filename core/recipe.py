@@ -1,4 +1,4 @@
-"""Recipes: the YAML that names a nominal surface and the steps to run (DESIGN "Recipe").
+"""Recipes: the YAML that names a nominal surface and the steps to run (README "Recipes").
 
     pointspro: 1
     surface: {type: even_asphere, c: 3.3333333e-4, k: -0.98, A: {4: 7.0e-13}, aperture: 1300}

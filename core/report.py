@@ -1,4 +1,4 @@
-"""report.json (DESIGN "report.json") and a readable report.html of one processed input."""
+"""report.json (README "A tour", the report; units by key suffix: docs/conventions.md "Units") and a readable report.html of one processed input."""
 from __future__ import annotations
 
 import html

@@ -1,4 +1,4 @@
-"""The step contract (DESIGN "Step contract").
+"""The step contract (this module documents it; README "Steps" lists the built-in ones).
 
 A step is a class with a stable ``id`` (what recipes name; never renamed), a ``title``, a ``Params``
 pydantic model (extra keys forbidden, frozen, typed, with units, bounds and help) and

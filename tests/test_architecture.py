@@ -1,4 +1,4 @@
-"""Core and plugins stay headless (DESIGN "Lessons from the anchors": napari's import-linter rule)."""
+"""Core and plugins stay headless (README "Layout": napari's import-linter rule)."""
 from __future__ import annotations
 
 import re

@@ -1,4 +1,4 @@
-"""The one contract every registered step keeps (DESIGN "Step contract"), built-in or third-party."""
+"""The one contract every registered step keeps (core/step.py), built-in or third-party."""
 from __future__ import annotations
 
 import numpy as np

@@ -361,7 +361,13 @@ def test_decide_in_fringes_with_the_monte_carlo_value_and_U95():
     assert by["rmsi_um"]["verdict"] == "conforms" and by["rmsi_um"]["unit"] == "fr"
     assert by["irr_um"]["value_um"] == pytest.approx(0.62 * fr) and by["irr_um"]["limit_um"] == pytest.approx(0.5 * fr)
     assert out["verdict"] == "does not conform" and out["wavelength_nm"] == DEFAULT_WAVELENGTH_NM
-    assert out["text"] == "does not conform: irregularity B 0.62 ± 0.05 fr > 0.5 fr"
+    assert out["text"] == "does not conform: irregularity B 0.620 ± 0.050 fr > 0.5 fr"  # GUM: U95 2 digits
+    assert "interval" in out["rule_text"] and "value − U95" not in out["rule_text"]
+    # an interval that is not value ± U95 (an RMS's): the text shows the ends the verdict compares
+    skew = dict(block, irr_um={"value": 0.62 * fr, "U95": 0.2 * fr, "interval95": [0.52 * fr, 0.95 * fr]})
+    out = spec.decide(values, skew)
+    assert out["text"] == ("does not conform: irregularity B 0.62 ± 0.20 (95 % interval 0.52 … 0.95) "
+                           "fr > 0.5 fr")  # 0.62 − 0.20 < 0.5, yet the interval's lower end 0.52 > 0.5
     none = spec.decide(values, None)
     assert none["verdict"] == "undecided" and all(i["U95"] is None for i in none["items"])
     assert NO_UNCERTAINTY in none["text"]

@@ -1,4 +1,4 @@
-"""The rigid pose of the part in the measuring frame (DESIGN "Conventions"; paper 002 §4).
+"""The rigid pose of the part in the measuring frame (docs/conventions.md "Frames and signs"; paper 002 §4).
 
     p_measuring = Rx(alpha) · Ry(beta) · p_part + (dx, dy, dz)
 

@@ -1,6 +1,6 @@
 """Fit of a nominal surface posed in the measuring frame to measured points (paper 002 §3–4).
 
-Model (DESIGN "Conventions"): a measured point q and its part-frame coordinates p are related by
+Model (docs/conventions.md "Frames and signs"): a measured point q and its part-frame coordinates p are related by
     q = R p + t,  R = Rx(α) Ry(β),  t = (dx, dy, dz)   ⇒   p = Rᵀ (q − t).
 Two residuals:
   * ``vertical`` (the `misalignment` step):  rᵢ = p_z − f(p_x, p_y), the form error sent to polishing;

@@ -1,6 +1,6 @@
 """Atomic writes: write under a temporary name in the same folder, then rename into place.
 
-A crash or kill never leaves a half-written file that looks complete (DESIGN "Command line").
+A crash or kill never leaves a half-written file that looks complete (README "Batch"; docs/conventions.md "Errors").
 
 The temporary file or folder is created with the modes any other tool's output gets — 0o666 for a
 file, 0o777 for a folder, less the process umask (``-rw-r--r--`` and ``drwxr-xr-x`` under the usual

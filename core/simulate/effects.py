@@ -5,7 +5,7 @@ around zero (the first-order physics of small errors), so its *signature* — �
 column per parameter — is the same function the simulator evaluates: Δz = S·p. Only `vibration` has
 a non-linear parameter (its frequency), found from the gap's spectrum before its amplitude is fitted.
 
-Names are DESIGN's contract. Point context: x, y (mm), nominal sag f and slopes f_x, f_y, radius r,
+Names are the model file's contract (README "Simulate, then explain the difference"). Point context: x, y (mm), nominal sag f and slopes f_x, f_y, radius r,
 spindle angle c (deg), time t (s), ż = df/dt along the scan (mm/s).
 
   pose           α, β (deg), dx, dy, dz (mm): p_meas = Rx(α)Ry(β)p + d to first order, measured against

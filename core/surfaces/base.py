@@ -1,7 +1,7 @@
 """What every nominal surface offers: sag, gradient, unit normal and the signed distance of points.
 
 A nominal is a height function z = f(x, y) over its domain (all optics here are measured along z).
-The unit normal is the one with positive z (DESIGN "Conventions"):
+The unit normal is the one with positive z (docs/conventions.md "Frames and signs"):
     n̂ = (−∂f/∂x, −∂f/∂y, 1) / sqrt(1 + (∂f/∂x)² + (∂f/∂y)²).
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Even asphere (ISO 10110-12; paper 002 eq 1; DESIGN "Conventions").
+"""Even asphere (ISO 10110-12; paper 002 eq 1; docs/conventions.md "Frames and signs").
 
     z(r) = c r² / (1 + sqrt(1 − (1+k) c² r²)) + Σ_n A_n rⁿ,     r² = x² + y²,  c = 1/R.
 

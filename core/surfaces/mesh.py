@@ -70,7 +70,7 @@ class MeshSurface(NominalSurface):
         if v.ndim != 2 or v.shape[1] != 3 or t.ndim != 2 or t.shape[1] != 3 or len(t) == 0:
             raise InputError(f"{source or 'mesh'}: a nominal mesh needs vertices and triangles")
         n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-        flip = n[:, 2] < 0  # orient every face so its normal has positive z (DESIGN "Conventions")
+        flip = n[:, 2] < 0  # orient every face so its normal has positive z (docs/conventions.md "Frames and signs")
         t = t.copy()
         t[flip] = t[flip][:, [0, 2, 1]]
         n[flip] *= -1

@@ -3,9 +3,10 @@
 Every limit of ISO 10110-5 is an upper limit (a PV or an RMS; for the sagitta deviation a bound on
 |A|, i.e. −L ≤ A ≤ L, which for an interval symmetric about A is the same comparison on |A|).
 
-- ``guarded`` (the default; ISO 14253-1:2017, guard band = U95 on both sides):
-  ``conforms`` only when value + U95 ≤ limit, ``does not conform`` only when value − U95 > limit,
-  else ``undecided``. An item with no uncertainty (the recipe has no ``uncertainty:`` block) cannot be
+- ``guarded`` (the default; ISO 14253-1:2017, guard band = the expanded uncertainty): ``conforms``
+  only when the upper end of the value's 95 % coverage interval ≤ limit, ``does not conform`` only
+  when its lower end > limit, else ``undecided``. The interval is the Monte Carlo's (not centred on
+  the value for an RMS, a PV or PVr); value ± U95 where no interval is given. An item with no uncertainty (the recipe has no ``uncertainty:`` block) cannot be
   proved either way: ``undecided``, with the note NO_UNCERTAINTY — an accredited laboratory states
   conformity with its uncertainty or says which rule it used (ISO/IEC 17025:2017 §7.8.6).
 - ``simple`` (simple acceptance, ILAC-G8:09/2019 §4.2.1, "binary statement, w = 0"): the value alone
@@ -19,8 +20,9 @@ import math
 
 CONFORMS, NOT, UNDECIDED = "conforms", "does not conform", "undecided"
 RULES = {
-    "guarded": "ISO 14253-1:2017 decision rule with guard band U95: conforms when value + U95 ≤ limit, "
-               "does not conform when value − U95 > limit, else undecided",
+    "guarded": "ISO 14253-1:2017 decision rule with the expanded uncertainty as guard band: conforms "
+               "when the upper end of the value's 95 % coverage interval ≤ limit, does not conform when "
+               "its lower end > limit, else undecided (the interval is value ± U95 when symmetric)",
     "simple": "simple acceptance (ILAC-G8:09/2019 §4.2.1): the value alone against the limit; the "
               "measurement uncertainty is not taken into account",
 }
@@ -67,11 +69,25 @@ def _g(v: float, digits: int = 3) -> str:
 
 
 def item_text(item: dict) -> str:
-    """"irregularity B 0.62 ± 0.05 fr > 0.5 fr"."""
+    """"irregularity B 0.620 ± 0.050 fr > 0.5 fr": U95 with two significant digits and the value to
+    the same decimal place (GUM §7.2.6, as core.statement.with_uncertainty); the 95 % interval too
+    when it is not value ± U95 to that rounding — it is what the verdict compares (module doc)."""
+    from ..statement import _decimals
+
     unit = UNIT_LABELS.get(item["unit"], item["unit"])
     if item.get("value") is None:
         return f"{item['name']} not computed (limit {_g(item['limit'])} {unit})"
-    val = _g(item["value"]) + (f" ± {_g(item['U95'], 2)}" if item.get("U95") is not None else "")
+    U = item.get("U95")
+    if U is not None and math.isfinite(U):
+        d = _decimals(U)
+        val = f"{item['value']:.{d}f} ± {U:.{d}f}"
+        iv = item.get("interval95")
+        if iv is not None and all(math.isfinite(b) for b in iv):
+            lo, hi = (f"{b:.{d}f}" for b in iv)
+            if (lo, hi) != (f"{item['value'] - U:.{d}f}", f"{item['value'] + U:.{d}f}"):
+                val += f" (95 % interval {lo} … {hi})"
+    else:
+        val = _g(item["value"])
     rel = {CONFORMS: "≤", NOT: ">"}.get(item["verdict"], "vs")
     return f"{item['name']} {val} {unit} {rel} {_g(item['limit'])} {unit}"
 
@@ -80,8 +96,9 @@ def summary_text(verdict: str, items: list[dict]) -> str:
     """One line for a terminal or a status bar: the verdict and the items that decided it."""
     if verdict == CONFORMS:
         # the item nearest its limit says how much room there is
-        def share(i):
-            return (i["value"] + (i.get("U95") or 0.0)) / i["limit"] if i["limit"] > 0 else math.inf
+        def share(i):  # the interval's upper end (what the guarded rule compares) over the limit
+            top = i["interval95"][1] if i.get("interval95") else i["value"] + (i.get("U95") or 0.0)
+            return top / i["limit"] if i["limit"] > 0 else math.inf
         worst = max(items, key=share)
         return f"conforms: {len(items)} of {len(items)} items, nearest its limit {item_text(worst)}"
     deciding = [i for i in items if i["verdict"] == verdict]

@@ -2,7 +2,7 @@
 
 The measured points carry a tilt about x and y and shifts in x, y, z relative to the design equation
 (rotation about the optical axis is not observable on a surface of revolution). With the design
-surface fixed, the pose (DESIGN "Conventions": q = Rx(α) Ry(β) p + t) is fitted by least squares on
+surface fixed, the pose (docs/conventions.md "Frames and signs": q = Rx(α) Ry(β) p + t) is fitted by least squares on
 the vertical residual in the part frame,
 
     rᵢ = p_z,i − f(p_x,i, p_y,i),   pᵢ = Rᵀ (qᵢ − t),

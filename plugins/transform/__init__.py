@@ -1,4 +1,4 @@
-"""`transform`: apply a pose (DESIGN "Conventions") or a 4 × 4 affine matrix to the cloud.
+"""`transform`: apply a pose (docs/conventions.md "Frames and signs") or a 4 × 4 affine matrix to the cloud.
 
     pose, direction to_measuring:  p' = Rx(alpha) · Ry(beta) · p + (dx, dy, dz)
     pose, direction to_part:       p' = (Rx(alpha) · Ry(beta))ᵀ · (p − (dx, dy, dz))
@@ -28,7 +28,7 @@ class PoseParams(BaseModel):
 
 
 class TransformParams(Params):
-    pose: PoseParams | None = param(None, help="part pose in the measuring frame (DESIGN Conventions)")
+    pose: PoseParams | None = param(None, help="part pose in the measuring frame (docs/conventions.md, Frames and signs)")
     direction: Literal["to_part", "to_measuring"] = param(
         "to_part", help="to_part removes the pose from measured points; to_measuring applies it")
     matrix: list[list[float]] | None = param(

@@ -57,7 +57,7 @@ def make(seed: int = 2020):
     ey = (form_error(x, y + h) - form_error(x, y - h)) / (2 * h)
     m = np.column_stack([-(fx + ex), -(fy + ey), np.ones_like(x)])
     normal = m / np.linalg.norm(m, axis=1)[:, None]
-    centre = contact + SIDE * PROBE_RADIUS * normal  # DESIGN: contact = centre − s·R·n̂
+    centre = contact + SIDE * PROBE_RADIUS * normal  # docs/conventions.md: contact = centre − s·R·n̂
     centre[:, 2] += rng.normal(0.0, NOISE, len(x))
     outliers = {}
     for i, h in zip(rng.choice(len(x), 3, replace=False), (12e-3, 15e-3, 16e-3)):  # spikes, mm
