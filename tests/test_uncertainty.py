@@ -184,8 +184,27 @@ def test_a_type_b_source_adds_what_its_sensitivity_predicts():
     share = e["budget"]
     assert share["z_scale"] == pytest.approx(predicted, rel=0.15)
     assert share["noise"] == pytest.approx(e0["u"], rel=0.25)
-    rms_budget = with_src.summary()["uncertainty"]["rms_um"]["budget"]
-    assert "z_scale" in rms_budget and "noise" in rms_budget
+    rms = with_src.summary()["uncertainty"]["rms_um"]
+    assert "z_scale" in rms["budget"] and "noise" in rms["budget"]
+    for entry in (e, rms):  # the shares add up to u (root sum of squares)
+        assert np.sqrt(sum(v * v for v in entry["budget"].values())) == pytest.approx(entry["u"], rel=0.1)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_budget_adds_up_to_the_samples_spread(seed):
+    """Each source's share counts its quadratic action too (Var = b² + 2c² for a standard normal
+    draw): the shares' root sum of squares is the samples' standard deviation. With only the linear
+    slope, a source acting through Z² (z_scale on an RMS) got ~0 and the budget named the noise."""
+    from pointspro.core.uncertainty.estimate import budget
+
+    rng = np.random.default_rng(seed)
+    Z = rng.standard_normal((400, 3))
+    F = 1.0 + 0.3 * Z[:, 0] + 0.5 * Z[:, 1] ** 2 + 0.05 * Z[:, 2] + rng.normal(0, 0.1, 400)
+    share = budget(F, Z, ["linear", "quadratic", "small"])
+    assert share["linear"] == pytest.approx(0.3, rel=0.15)
+    assert share["quadratic"] == pytest.approx(0.5 * np.sqrt(2.0), rel=0.3)  # Var Z² = 2 in expectation
+    assert share["noise"] == pytest.approx(0.1, rel=0.2)
+    assert np.sqrt(sum(v * v for v in share.values())) == pytest.approx(F.std(ddof=1), rel=0.05)
 
 
 def test_cancel_stops_the_samples(issue_run):

@@ -152,7 +152,8 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
                 parts = None  # no levels (the rows changed): the fixed extrapolant
         entries[name] = est.estimate(name, kind, f0[name], S[:, j], Z, parts, u_rel)
         if src_names or name in SUMMARY_ORDER or kinds and name in kinds:  # each source's share
-            budgets[name] = est.budget(S[:, j], Z, src_names)
+            e = entries[name]  # the shares of its u: of the samples placed about the value
+            budgets[name] = est.budget(e["_placed"], Z[np.isfinite(S[:, j])], src_names, e["_se"])
     for key in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad"):
         if key in entries and summary.get(key) is not None:
             entries[key]["measured"] = summary[key]
