@@ -558,7 +558,7 @@ class MainWindow(QtWidgets.QMainWindow):
         vm = mb.addMenu("&View")
         lod = vm.addMenu("Points drawn in 3D")
         group = QtGui.QActionGroup(self)
-        for n in (200_000, 500_000, 1_000_000, 10**9):
+        for n in sorted({display.DEFAULT_3D_BUDGET, 200_000, 500_000, 1_000_000, 10**9}):  # default ticked
             a = lod.addAction("all" if n == 10**9 else f"{n:,}")
             a.setCheckable(True)
             a.setChecked(n == self.view3d.budget)

@@ -51,6 +51,21 @@ def test_window_shows_example_and_switches_channels(qtbot):
     assert "4,680 points" in win.view3d.info.text()
 
 
+def test_the_3d_point_budget_menu_ticks_the_default_and_can_return_to_it(qtbot):
+    """The view draws 150,000 points by default; the menu offered 200,000… only, none ticked."""
+    from pointspro.app.display import DEFAULT_3D_BUDGET
+
+    win = _window(qtbot)
+    view = next(a.menu() for a in win.menuBar().actions() if a.text() == "&View")
+    lod = next(a.menu() for a in view.actions() if a.text() == "Points drawn in 3D")
+    ticked = [a.text() for a in lod.actions() if a.isChecked()]
+    assert ticked == [f"{DEFAULT_3D_BUDGET:,}"] and win.view3d.budget == DEFAULT_3D_BUDGET
+    next(a for a in lod.actions() if a.text() == "500,000").trigger()
+    assert win.view3d.budget == 500_000
+    next(a for a in lod.actions() if a.text() == f"{DEFAULT_3D_BUDGET:,}").trigger()
+    assert win.view3d.budget == DEFAULT_3D_BUDGET
+
+
 def test_screenshot_command_writes_png(tmp_path, run_cli):
     from PySide6.QtGui import QImage
 
