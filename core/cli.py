@@ -53,7 +53,8 @@ inputs (chosen by content, not by extension; docs/formats.md):
   x y z text columns (.csv .txt .xyz .asc .dat), .ply, .pcd/.pts, a PointsPro cloud.npz,
   Zygo .datx / MetroPro .dat, Digital Surf .sur, ISO 25178 .sdf and .x3p, Wyko .opd, Sensofar
   .plu/.plux, Keyence .vk4/.zon, Gwyddion .gwy and the other SurfaceTopography formats, text
-  height matrices (Gwyddion, SPIP, Wyko, Nova headers)
+  height matrices (Gwyddion, SPIP, Wyko, Nova headers), laser scanners' LAS/LAZ and E57
+  (with the `scanners` extra: pip install 'pointspro[scanners]')
 
 exit codes:
   0    all done
@@ -114,7 +115,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--log-file", metavar="FILE", help="append the steps' log (INFO, or DEBUG with "
                    "-vv) to FILE, each line with its time, step and input")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--quiet", action="store_true", help="no progress output and no table at the end (summary.json has it)")
     p.add_argument("--version", action="store_true", help="print the version and exit")
     return p
 
@@ -769,6 +770,16 @@ def cmd_steps(argv) -> int:
     from .forms import form_fields
     from .registry import Registry
 
+    if "-h" in argv or "--help" in argv:
+        print("usage: pointspro steps [STEP_ID …]\n\nEvery installed step (or the ones named) with its\n"
+              "parameters: unit, default, bounds and help — what a recipe may write under it.")
+        return EXIT_OK
+    unknown_options = [a for a in argv if a.startswith("-") and a != "--debug"]
+    if unknown_options:
+        from .errors import PointsProError
+
+        raise PointsProError(f"steps: unknown option {unknown_options[0]} (usage: pointspro steps "
+                         "[STEP_ID …])")
     reg = Registry()
     wanted = [a for a in argv if not a.startswith("-")]
     for step_id in reg.ids():

@@ -233,6 +233,10 @@ def test_steps_command_lists_parameters_with_units(run_cli):
     assert "manual_edit" in out and "transform" in out and "alpha" not in out.split("transform")[0][:0]
     code, _, err = run_cli("steps", "nope")
     assert code == 2 and "unknown step(s) nope" in err
+    code, out, _ = run_cli("steps", "--help")  # a usage, not the whole catalogue
+    assert code == 0 and out.startswith("usage: pointspro steps") and "aperture —" not in out
+    code, _, err = run_cli("steps", "--bogus")
+    assert code == 2 and "unknown option --bogus" in err
 
 
 def test_usage_errors(run_cli):

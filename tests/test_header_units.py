@@ -48,6 +48,21 @@ def test_cloud_csv_states_units_and_reads_back_bit_exact(tmp_path):
     assert back.meta["channel_units"] == {"residual": "mm", "omega": "mm", "t": "s"}
 
 
+def test_stated_units_of_x_y_z_are_kept_for_the_report(tmp_path):
+    """x, y, z in µm are read as mm; the unit the file stated them in was lost (docs/formats.md said
+    channel_units held it): now meta["xyz_units_stated"], listed in report.json's input_file."""
+    from pointspro.core.report import input_description
+
+    p = tmp_path / "u.csv"
+    p.write_text("X [µm],Y [µm],Z [µm],residual [nm]\n0,0,0,1\n1000,0,1,2\n0,1000,2,3\n", encoding="utf-8")
+    c = read_cloud(p)
+    assert c.xyz[1, 0] == 1.0 and c.meta["channel_units"] == {"residual": "nm"}
+    assert c.meta["xyz_units_stated"] == {"x": "µm", "y": "µm", "z": "µm"}
+    assert input_description(c)["xyz_units_stated"] == {"x": "µm", "y": "µm", "z": "µm"}
+    write_cloud(c, tmp_path / "out.csv")  # the written cloud states mm, as its numbers are
+    assert (tmp_path / "out.csv").read_text(encoding="utf-8").startswith("x [mm],y [mm],z [mm]")
+
+
 def test_map_csv_round_trip(tmp_path):
     g = _grid()
     g.write_csv(tmp_path / "map.csv")

@@ -270,3 +270,15 @@ def test_batch_passes_the_recipe_input_block_to_the_reader(tmp_path):
     bare = parse_recipe({"pointspro": 1, "steps": []})
     out = process_input(tmp_path / "fr.datx", bare, tmp_path / "out", "fr2")
     assert not out.ok and "wavelength_nm" in out.error
+
+
+@pytest.mark.parametrize("name", ["metropro-1.dat", "sur-2.sur"])
+def test_wavelength_on_a_map_in_a_length_unit_is_refused(name):
+    """wavelength_nm is for heights in fringes or waves (Zygo .datx): a MetroPro or .sur map states
+    its heights in a length unit, and the option was ignored silently (height_unit was refused)."""
+    from pathlib import Path
+
+    path = Path(__file__).parent / "data" / "realdata" / name
+    with pytest.raises(InputError, match=r"wavelength_nm is for maps whose heights are in fringes"):
+        read_cloud(path, wavelength_nm=1000.0)
+    assert read_cloud(path).n > 0

@@ -262,6 +262,12 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
         from .instruments import read_surface_topography
 
         xyz, cols, meta = read_surface_topography(path, opts, head=head)
+    if opts.wavelength_nm is not None and str(meta.get("instrument_unit", "")).lower() not in \
+            ("fringe", "fringes", "wave", "waves"):  # was ignored silently (MetroPro, .sur: own unit)
+        what = meta.get("instrument_reader") or meta.get("format") or "this"
+        raise InputError(f"{path}: reader option wavelength_nm is for maps whose heights are in fringes "
+                         f"or waves (Zygo .datx); the {what} file states its heights in a length unit "
+                         f"({meta.get('instrument_unit') or 'mm'}) — remove the option")
     meta = {**meta, "source": str(path), "frame": "measuring", "units": "mm"}
     meta.setdefault("invalid_dropped", 0)
     try:

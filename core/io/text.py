@@ -221,6 +221,9 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
         names, lengths, units = _plain_columns(path, lay)
     xyz, cols = _xyz_in_mm(path, lay, data, names, lengths, units)
     meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in ("x", "y", "z")}
+    stated = {n: u for n, u in zip(names, units) if u and n in ("x", "y", "z")}
+    if stated:  # x, y, z are mm once read; the units the file stated them in, for the report
+        meta["xyz_units_stated"] = stated
     keep = _rows_to_keep(path, lines, lay.first_data, data, names, invalid, quote)
     meta["invalid_dropped"] = 0 if keep is None else int((~keep).sum())
     rows = np.arange(len(data))
