@@ -25,7 +25,7 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 _logging.getLogger("pointspro").addHandler(_logging.NullHandler())
 
 from .cloud import PointCloud  # noqa: E402
-from .errors import Cancelled, DomainError, InputError, PointsProError, RecipeError  # noqa: E402
+from .errors import Cancelled, DomainError, InputError, PointsProError, RecipeError, StepError  # noqa: E402
 from .progress import CancelToken  # noqa: E402
 
 #: the Python API, imported from core.api on first use
@@ -47,4 +47,4 @@ def __dir__():
 
 __all__ = ["read", "write", "run", "step", "steps", "load", "Result", "StepRunner", "StepInfo",
            "StepCatalog", "PointCloud", "CancelToken", "PointsProError", "InputError", "RecipeError",
-           "DomainError", "Cancelled", "__version__"]
+           "DomainError", "StepError", "Cancelled", "__version__"]

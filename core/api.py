@@ -172,7 +172,12 @@ class Result:
     """What a run gives back: the processed cloud, each step's record, the summary and the report.
 
     ``summary`` and ``report`` are the dicts `--batch` writes (report.json's content); ``write(out)``
-    writes ``out/<stem>/`` exactly as ``pointspro --batch … --out out`` does for this input."""
+    writes ``out/<stem>/`` exactly as ``pointspro --batch … --out out`` does for this input.
+
+    Attributes besides the properties below: ``recipe`` (the Recipe run), ``input`` (the input's name,
+    "(in memory)" for a cloud given in code), ``warnings`` (Python warnings the libraries raised during
+    the run, deduplicated; each step's own warnings are in its report) and ``input_sha256`` (the input
+    file's SHA-256 as read, report.json's ``input_sha256``; None for a cloud in memory)."""
 
     recipe: Recipe
     _run: Any = field(repr=False)  # core.pipeline.PipelineResult

@@ -21,11 +21,27 @@ unit (docs/conventions.md).
 """
 
 
+class _Raw(str):
+    """An annotation written as its text: ``figures: str = 'all'`` (the annotations are strings under
+    ``from __future__ import annotations``; their quotes go, a default's stay)."""
+
+    def __repr__(self):
+        text = str(self)  # a forward reference written "PointCloud" in the source: its name
+        return text[1:-1] if len(text) > 1 and text[0] == text[-1] and text[0] in "'\"" else text
+
+
 def _sig(obj) -> str:
     try:
-        return str(inspect.signature(obj)).replace("'", "")
+        sig = inspect.signature(obj)
     except (TypeError, ValueError):
         return "(…)"
+    empty = inspect.Parameter.empty
+    params = [p.replace(annotation=_Raw(p.annotation)) if isinstance(p.annotation, str) else p
+              for p in sig.parameters.values()]
+    ret = sig.return_annotation
+    return str(sig.replace(parameters=params,
+                           return_annotation=_Raw(ret) if isinstance(ret, str) else ret if ret is not empty
+                           else empty))
 
 
 def _doc(obj) -> str:

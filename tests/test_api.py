@@ -235,6 +235,9 @@ def test_api_reference_page_is_current():
     r = subprocess.run([sys.executable, str(ROOT / "docs" / "make_api.py"), "--check"],
                        capture_output=True, text=True, encoding="utf-8")
     assert r.returncode == 0, r.stderr
+    page = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    assert "figures: str = 'all'" in page  # a default keeps its quotes: the signature is Python
+    assert "-> Result`" in page and "**`StepError`**" in page and "``warnings``" in page
 
 
 def test_importing_the_package_stays_light():
