@@ -75,7 +75,7 @@ def figure_rows(summary: dict) -> dict[str, str]:
         e = unc.get(key)
         plain = summary.get(key)
         if isinstance(e, dict) and e.get("value") is not None:
-            text = with_uncertainty(e["value"], e.get("U95"), unit, e.get("k", 2.0))
+            text = with_uncertainty(e["value"], e.get("U95"), unit, e.get("k") or 2.0)  # k None: u = 0
             if plain is not None and e.get("bias"):
                 text += f" (as measured {with_uncertainty(plain, None, unit)}, noise bias removed)"
             rows[name] = text

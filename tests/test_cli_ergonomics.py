@@ -388,14 +388,3 @@ def test_simulate_refuses_non_finite_effect_values(run_cli, tmp_path):
         code, _, err = run_cli("simulate", m, "--out", tmp_path / "s.csv")
         assert code == 2 and says in err and "line 4" in err, err
         assert not (tmp_path / "s.csv").exists()
-
-
-def test_a_library_warning_is_one_log_line_naming_the_input(run_cli, tmp_path):
-    """numpy's RuntimeWarnings reached stderr as two lines each — a file path with a line number and
-    the source text — naming no input; now one log line of `pointspro.warnings` naming the input."""
-    r = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - zernike: {terms: 4, centre: [1.0e300, 0]}\n")
-    data = shutil.copy(DATA, tmp_path / "part.csv")
-    code, _, err = run_cli("--batch", r, data, "--out", tmp_path / "o", "--quiet", "--figures", "none")
-    lines = err.strip().splitlines()
-    assert lines and all(ln.startswith("pointspro.warnings: part.csv: RuntimeWarning: ") for ln in lines), err
-    assert "dx *= dx" not in err

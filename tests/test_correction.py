@@ -369,3 +369,43 @@ def test_example_star_pattern_gets_a_correction_a_cam_can_take():
     if spec["type"] == "even_asphere":
         assert max(int(k) for k in spec.get("A", {4: 0})) <= 20
     assert rep["predicted_rms_um"] < 0.2 * rep["error_rms_um"]
+
+
+def test_heights_of_a_curved_part_are_not_its_form_error():
+    """A sphere's sag with 0.1 µm of error, no misalignment: the step took z as the error and wrote a
+    624 µm "correction"; refused now. With a flat or no nominal, z is a form-error map (unchanged)."""
+    g = np.arange(-20.0, 20.01, 1.0)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    keep = np.hypot(x, y) <= 20.0
+    x, y = x[keep], y[keep]
+    sphere = EvenAsphere(1 / 500.0, 0.0, aperture=40.0)
+    cloud = PointCloud.from_xyz(x, y, sphere.sag(x, y) + 1e-4 * np.cos(x / 7))
+    with pytest.raises(StepError, match="heights z are the part's sag, not its form error"):
+        _run(cloud, sphere, cutoff_mm=4.0)
+    assert _run(cloud, sphere, channel="z", cutoff_mm=4.0).report["channel"] == "z"  # said explicitly
+    assert _run(cloud, None, diameter=40, cutoff_mm=4.0).report["channel"] == "z"
+
+
+@pytest.mark.parametrize("params", [{"cutoff_mm": 1e6}, {"cutoff_mm": 2.0, "extend_mm": 1e5}])
+def test_a_working_grid_beyond_its_limit_is_refused_before_it_is_allocated(params):
+    """Node for node on a gridded input: cutoff_mm 1e6 asked numpy for 284 TiB (internal error)."""
+    cloud = _map_cloud(lambda x, y: 1e-5 * np.cos(x / 5), half=10.0, h=1.0)
+    with pytest.raises(StepError, match="working grid .* too large|more than 25,000,000 nodes"):
+        _run(cloud, None, diameter=20, **params)
+
+
+def test_scattered_points_report_what_the_map_does_not_resolve():
+    """predicted_rms_um is the error left on the map's grid; the points also hold what the spline
+    does not resolve (noise, detail finer than the knots): unresolved_rms_um. A cutoff below twice
+    the knot spacing holds no data: a warning."""
+    rng = np.random.default_rng(4)
+    x, y = rng.uniform(-25, 25, (2, 3000))
+    keep = np.hypot(x, y) <= 25
+    x, y = x[keep], y[keep]
+    noise = 2e-5
+    cloud = PointCloud.from_xyz(x, y, np.zeros_like(x), residual=1e-4 * (x / 25) ** 2 + rng.normal(0, noise, x.size))
+    rep = _run(cloud, None, diameter=50).report
+    assert rep["unresolved_rms_um"] == pytest.approx(noise * 1e3, rel=0.25)
+    assert not any("knot spacing" in w for w in rep["warnings"])
+    fine = _run(cloud, None, diameter=50, cutoff_mm=2.0, spacing=0.5).report
+    assert any("below twice the knot spacing" in w for w in fine["warnings"])

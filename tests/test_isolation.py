@@ -33,23 +33,63 @@ class BuggyStep(Step):
 '''
 
 
-@pytest.fixture
-def buggy_package(tmp_path, monkeypatch):
+WARNS = '''
+import numpy as np
+
+from pointspro.core.step import Params, Step, StepResult
+
+
+class WarnsParams(Params):
+    pass
+
+
+class WarnsStep(Step):
+    id = "warns"
+    title = "A third party's step that meets a numpy warning"
+    summary = "divides by zero in numpy (a RuntimeWarning, no error)"
+    Params = WarnsParams
+
+    def run(self, cloud, params, ctx):
+        ratio = np.ones(3) / np.zeros(3)
+        return StepResult(cloud.replace(), {"ratio_finite": bool(np.isfinite(ratio).all())})
+'''
+
+
+def _install_step(tmp_path, monkeypatch, module: str, step_id: str, cls: str, source: str):
     """An installed third-party package with a `pointspro.steps` entry point (a real dist-info on
     sys.path and PYTHONPATH, so spawned workers and Dask's see it too)."""
     site = tmp_path / "site"
-    site.mkdir()
-    (site / "buggy_step.py").write_text(BUGGY, encoding="utf-8")
-    dist = site / "buggy_step-0.1.dist-info"
+    site.mkdir(exist_ok=True)
+    (site / f"{module}.py").write_text(source, encoding="utf-8")
+    dist = site / f"{module}-0.1.dist-info"
     dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: buggy-step\nVersion: 0.1\n", encoding="utf-8")
-    (dist / "entry_points.txt").write_text("[pointspro.steps]\nbuggy = buggy_step:BuggyStep\n", encoding="utf-8")
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {module.replace('_', '-')}\nVersion: 0.1\n",
+                                   encoding="utf-8")
+    (dist / "entry_points.txt").write_text(f"[pointspro.steps]\n{step_id} = {module}:{cls}\n", encoding="utf-8")
     monkeypatch.syspath_prepend(str(site))
     import os
 
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(site),
                                                                     os.environ.get("PYTHONPATH")])))
     return site
+
+
+@pytest.fixture
+def buggy_package(tmp_path, monkeypatch):
+    return _install_step(tmp_path, monkeypatch, "buggy_step", "buggy", "BuggyStep", BUGGY)
+
+
+def test_a_library_warning_is_one_log_line_naming_the_input(tmp_path, monkeypatch, run_cli):
+    """numpy's RuntimeWarnings reached stderr as two lines each — a file path with a line number and
+    the source text — naming no input; now one log line of `pointspro.warnings` naming the input."""
+    _install_step(tmp_path, monkeypatch, "warns_step", "warns", "WarnsStep", WARNS)
+    r = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - warns: {}\n")
+    data = write(tmp_path / "part.csv", (EXAMPLE / "asphere_cmm.csv").read_text(encoding="utf-8"))
+    code, _, err = run_cli("--batch", r, data, "--out", tmp_path / "o", "--quiet", "--figures", "none")
+    lines = err.strip().splitlines()
+    assert code == 0 and lines, err
+    assert all(ln.startswith("pointspro.warnings: part.csv: RuntimeWarning: ") for ln in lines), err
+    assert "divide by zero" in err and "np.ones(3)" not in err  # not the source line
 
 
 def _inputs(tmp_path):

@@ -370,3 +370,18 @@ def test_form_error_png_of_a_grid_has_no_empty_bins():
     assert not np.isnan(np.asarray(img, dtype=float)).any()
     img = scattered_map(X.ravel(), Y.ravel(), r.ravel()).axes[0].images[0].get_array()
     assert np.isnan(np.asarray(img, dtype=float)).any()  # without the pixel, as before: the gaps
+
+
+def test_the_map_says_when_the_scan_gaps_set_its_knots():
+    """On a star scan the automatic knots follow the widest gap between the lines (the example:
+    86.6 mm for points every 5 mm along them), and a 40 mm ring is smoothed away with no sign in the
+    fit residual: the report says what the map cannot hold. A raster: no note."""
+    from .paper002 import raster, star
+
+    step = BSplineMapStep()
+    for (x, y), noted in ((star(1000.0, lines=12, pitch=5.0), True), (raster(1000.0, 12.0), False)):
+        cloud = PointCloud(np.column_stack([x, y, np.zeros_like(x)]), {"residual": 1e-4 * (x / 500) ** 2})
+        rep = step.run(cloud, step.Params(), Context()).report
+        assert ("resolution_note" in rep) is noted, rep.get("resolution_note")
+        if noted:
+            assert "widest gaps between the scan's lines" in rep["resolution_note"]

@@ -113,3 +113,11 @@ def test_an_aperture_of_any_finite_size_selects_instead_of_overflowing():
     c = PointCloud.from_xyz(np.arange(5.0), np.zeros(5), np.zeros(5))
     r = ApertureStep().run(c, ApertureStep.Params(diameter=1e300), Context())
     assert r.cloud.n == 5
+
+
+def test_a_figure_with_no_k_still_reads():
+    """u = 0 leaves k None (report.json null): report.html failed with 'unsupported format string
+    passed to NoneType' and the input failed."""
+    summary = {"rms_um": 0.5, "pv_um": None, "pvr_um": None, "slope_rms_urad": None,
+               "uncertainty": {"rms_um": {"value": 0.46, "U95": 0.0, "k": None, "bias": 0.04}}}
+    assert figure_rows(summary)["RMS"].startswith("460")

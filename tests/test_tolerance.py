@@ -486,3 +486,21 @@ def test_a_negative_wavelength_is_named_as_a_wavelength():
 
     with pytest.raises(RecipeError, match=r"key 'wavelength_nm': a wavelength is a finite number > 0 \(got -1\)"):
         parse_tolerance({"rms_um": 0.1, "wavelength_nm": -1}, "recipe.yaml")
+
+
+@pytest.mark.parametrize("n", [30, 35])
+def test_too_few_points_for_spherical_aberration_are_refused(n):
+    """With 16–35 points the joint fit fell back to Z1–Z4: pure spherical aberration read C 0 µm
+    ("conforms") and A 0.07 µm. The ISO quantities now need Z1–Z9: 36 points."""
+    from pointspro.core.errors import PointsProError
+
+    rng = np.random.default_rng(n)
+    r, t = np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
+    x, y = 20 * r * np.cos(t), 20 * r * np.sin(t)
+    w = 0.15e-3 * zk.zernike(4, 0, *polar(x, y))
+    with pytest.raises(PointsProError, match="too few for the sagitta and irregularity .at least 36"):
+        iso_quantities(x, y, w, (0.0, 0.0))
+    r, t = np.sqrt(rng.uniform(0, 1, 40)), rng.uniform(0, 2 * np.pi, 40)
+    x, y = 20 * r * np.cos(t), 20 * r * np.sin(t)
+    q = iso_quantities(x, y, 0.15e-3 * zk.zernike(4, 0, *polar(x, y)), (0.0, 0.0))
+    assert abs(q["sag_um"]) < 1e-6 and q["rsi_um"] > 0.1  # 40 points: Z9 fitted, C is there

@@ -39,6 +39,7 @@ def parse(text):
     ("uncertainty:\n  sources:\n    temperature: {u: 0.2, cte: 2.6 ppm/K}\n", ["'sources.temperature.u'",
                                                                             "no unit", "K"]),
     ("uncertainty:\n  samples: 200.5\n", ["'samples'", "integer"]),
+    ("uncertainty:\n  noise: 0 nm\n", ["line 7", "'noise'", "σ = 0", "repeatability"]),
 ])
 def test_bad_blocks_are_one_line_naming_line_and_key(block, words):
     with pytest.raises(RecipeError) as e:
@@ -277,3 +278,15 @@ def test_an_infinite_standard_uncertainty_says_finite():
     with pytest.raises(RecipeError, match=r"a standard uncertainty is a finite number ≥ 0 \(got '1e999 um'\)"):
         parse_uncertainty({"samples": 200, "sources": {"probe_radius": "1e999 um"}}, "recipe.yaml", "recipe.yaml",
                           steps=["probe_radius"])
+
+
+def test_a_given_noise_larger_than_the_residual_itself_is_warned_of():
+    """σ 5 µm on a form of ~0.2 µm RMS: "RMS 0 ± …", all below the noise, with no word of why. The
+    residual holds its noise (RMS² ≈ form² + σ²): a σ above its spread is a unit slip."""
+    case = CASES["issue"]
+    noisy, _ = case.measure(12)
+    res = run_pipeline(noisy, case.recipe("{samples: 50, seed: 2, noise: 5 um}"))
+    meta = res.summary()["uncertainty"]["_meta"]
+    assert any("exceeds the spread of the final residual" in w for w in meta.get("warnings", []))
+    ok = run_pipeline(noisy, case.recipe("{samples: 50, seed: 2, noise: 50 nm}"))
+    assert not any("exceeds" in w for w in ok.summary()["uncertainty"]["_meta"].get("warnings", []))

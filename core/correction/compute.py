@@ -89,12 +89,20 @@ class ErrorMap:
     covered: np.ndarray
     spacing: float
     source: str
+    #: scattered input: the B-spline's knot spacing (mm) and the RMS (mm) of the points less the map
+    #: at the points — noise and detail finer than the knots, which no correction of the map removes
+    knot_spacing: float | None = None
+    unresolved_rms: float | None = None
 
 
 def working_axes(lo: float, hi: float, x0: float, h: float) -> np.ndarray:
     """Nodes x0 + i·h covering [lo, hi]."""
     i0 = int(np.floor((lo - x0) / h + 1e-9))
     i1 = int(np.ceil((hi - x0) / h - 1e-9))
+    if i1 - i0 + 1 > MAX_GRID_NODES:  # refused before numpy is asked for the nodes
+        raise CorrectionInputError(f"a working grid {hi - lo:.6g} mm wide at spacing {h:g} mm has more "
+                                   f"than {MAX_GRID_NODES:,} nodes along one side — check cutoff_mm and "
+                                   "extend_mm (they widen the grid beyond the aperture)")
     return x0 + h * np.arange(i0, i1 + 1, dtype=np.float64)
 
 
@@ -114,6 +122,7 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
         outer = outer(h) if callable(outer) else outer
         xs = working_axes(cx - outer, cx + outer, gx[0], h)
         ys = working_axes(cy - outer, cy + outer, gy[0], h)
+        _check_grid_size(xs, ys, h)
         E = np.full((ys.size, xs.size), np.nan)
         ox = int(np.rint((gx[0] - xs[0]) / h))
         oy = int(np.rint((gy[0] - ys[0]) / h))
@@ -142,9 +151,7 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
     outer = outer(h) if callable(outer) else outer
     xs = working_axes(cx - outer, cx + outer, 0.0, h)
     ys = working_axes(cy - outer, cy + outer, 0.0, h)
-    if xs.size * ys.size > 25_000_000:
-        raise CorrectionInputError(f"a {xs.size} × {ys.size} grid at spacing {h:g} mm is too large; "
-                                   "use a larger spacing")
+    _check_grid_size(xs, ys, h)
     from ..maps.grid import coverage_mask
 
     # a node is supported when its knot cell (or a neighbour, closed) holds points: the spline is
@@ -153,8 +160,24 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
     E = spline.grid(xs, ys)
     disk = (xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2 <= radius * radius
     E = np.where(disk, E, np.nan)
+    miss = v[inside] - spline(x[inside], y[inside])
     return ErrorMap(xs, ys, E, covered & disk, float(h),
-                    f"smoothing B-spline of the points (knots every {spline.h:.4g} mm)")
+                    f"smoothing B-spline of the points (knots every {spline.h:.4g} mm)",
+                    float(spline.h), float(np.sqrt(np.mean(miss * miss))))
+
+
+#: nodes of a correction's working grid at most (as bspline_map's map: core/maps/grid.py)
+MAX_GRID_NODES = 25_000_000
+
+
+def _check_grid_size(xs, ys, h: float) -> None:
+    """Refuse a working grid beyond MAX_GRID_NODES before it is allocated: a cutoff or extend_mm far
+    beyond the part (cutoff_mm 1e6) asked numpy for 284 TiB on a gridded input ("internal error")."""
+    if xs.size * ys.size > MAX_GRID_NODES:
+        raise CorrectionInputError(
+            f"a {xs.size:,} × {ys.size:,} working grid at spacing {h:g} mm is too large (at most "
+            f"{MAX_GRID_NODES:,} nodes): the aperture plus extend_mm and the filter's margin span "
+            f"{(xs[-1] - xs[0]):.6g} mm — check cutoff_mm and extend_mm, or give a larger spacing")
 
 
 def plane_fit(X, Y, Z):

@@ -74,10 +74,24 @@ def _covariance_normal(a: np.ndarray, residuals: np.ndarray, npar: int):
     scale = np.sqrt(np.diag(a)).copy()
     scale[scale == 0] = 1.0
     a_s = a / np.outer(scale, scale)
-    ev = np.linalg.eigvalsh(a_s)
+    ev, vec = np.linalg.eigh(a_s)
     cond = float(np.sqrt(ev[-1] / ev[0])) if ev[0] > 0 else np.inf  # cond(J_s) = sqrt(cond(J_sᵀJ_s))
-    jtj_inv = np.linalg.pinv(a_s, hermitian=True) / np.outer(scale, scale)
-    return s2 * jtj_inv, cond
+    # the inverse on every direction, however weakly determined: a pseudo-inverse drops directions
+    # below ~1e-15 of the largest, and the parameters along them got a variance of ~0 instead of a
+    # huge one (a sphere fitted with 5 DOF: u(α) 4.6e-6° for an α 0.1° off); an undetermined
+    # direction (eigenvalue ≤ 0) makes its parameters' variance infinite
+    null = ev <= 0
+    jtj_inv = (vec[:, ~null] / ev[~null]) @ vec[:, ~null].T
+    if null.any():
+        loose = np.any(np.abs(vec[:, null]) > 1e-3, axis=1)  # the parameters along the null space
+        jtj_inv[loose, :] = np.inf
+        jtj_inv[:, loose] = np.inf
+    jtj_inv = jtj_inv / np.outer(scale, scale)
+    with np.errstate(invalid="ignore"):  # an exact fit (s² = 0) along an undetermined direction: inf
+        cov = s2 * jtj_inv
+    if not np.isnan(s2):
+        cov[np.isinf(jtj_inv)] = np.inf
+    return cov, cond
 
 
 def _finish(names, values, jac, res, extra=None) -> FitResult:

@@ -332,9 +332,10 @@ class PosedSurfaceFit:
             warnings.append(
                 f"ill-posed fit (condition number {cond:.3g}): {', '.join(pairs) or 'several parameters'} "
                 "trade off" + (" — on a nearly spherical part a tilt looks like a decenter" if sphere else "")
-                + ". The fitted surface and residual are still right, but these values are not separately "
-                "meaningful: fix one of each pair (leave it out of `dof`, give it in `initial`) to read "
-                "the others")
+                + ". These values are not separately meaningful: fix one of each pair (leave it out of "
+                "`dof`, give it in `initial`) to read the others. The residual is that of the best "
+                "pose along the trade-off (exactly so on a sphere); on an asphere or a freeform, form "
+                "error that such a pose change reproduces is in the pose, not in the residual")
         pose = Pose(vals["alpha"], vals["beta"], vals["dx"], vals["dy"], vals["dz"])
         _, x_best, shift = self._best
         if x_best is None or not np.array_equal(x_best, res.x):

@@ -18,7 +18,7 @@ points in about a second (benchmarks/bench_maps.py).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -61,6 +61,8 @@ class TensorBSpline:
     y0: float
     h: float
     coef: np.ndarray
+    #: automatic knots: the bounds they were chosen from (knot_spacing_terms), else None
+    knot_terms: dict | None = field(default=None, compare=False, repr=False)
 
     @property
     def intervals(self) -> tuple[int, int]:
@@ -155,7 +157,14 @@ class TensorBSpline:
 
 
 def default_knot_spacing(x, y, extent: float | None = None) -> float:
-    """The larger of
+    """The largest of ``knot_spacing_terms`` (mm)."""
+    return max(knot_spacing_terms(x, y, extent).values())
+
+
+def knot_spacing_terms(x, y, extent: float | None = None) -> dict[str, float]:
+    """The three lower bounds of the automatic knot spacing (mm), by name — ``points`` (2 × the mean
+    point spacing), ``gaps`` (2 × the widest gaps of the pattern) and ``size`` (the system's bound);
+    the spacing is the largest. The largest of
        2 × the mean point spacing sqrt(area/N)  (each cell then holds ~4 points),
        2 × the 95th percentile of the distance from places inside the points' hull to the nearest
            point (the half-width of the widest gaps: between the spokes of a star pattern, between
@@ -186,7 +195,7 @@ def default_knot_spacing(x, y, extent: float | None = None) -> float:
         gap = float(np.percentile(d[sampling], 95))
     if step > 1:  # the subsample's gaps are wider by about √step where points are dense
         gap /= np.sqrt(step)
-    return float(max(2.0 * mean_spacing, 2.0 * gap, span / MAX_INTERVALS))
+    return {"points": float(2.0 * mean_spacing), "gaps": float(2.0 * gap), "size": float(span / MAX_INTERVALS)}
 
 
 #: places across the points' box where default_knot_spacing measures the distance to the nearest point
@@ -394,8 +403,10 @@ def fit_bspline(x, y, z, *, knot_spacing: float | None = None, smoothing: float 
         bounds = (x.min(), x.max(), y.min(), y.max())
     xmin, xmax, ymin, ymax = (float(b) for b in bounds)
     automatic = knot_spacing is None
+    terms = None
     if automatic:
-        knot_spacing = default_knot_spacing(x, y, max(xmax - xmin, ymax - ymin))
+        terms = knot_spacing_terms(x, y, max(xmax - xmin, ymax - ymin))
+        knot_spacing = max(terms.values())
     h = float(knot_spacing)
     if not h > 0:
         raise ValueError("knot spacing must be > 0")
@@ -445,4 +456,4 @@ def fit_bspline(x, y, z, *, knot_spacing: float | None = None, smoothing: float 
         raise ValueError("the spline system is singular: too few points for the knots") from None
     if not np.all(np.isfinite(c)):
         raise ValueError("the spline system is singular: too few points for the knots")
-    return TensorBSpline(x0, y0, h, c.reshape(mx, my))
+    return TensorBSpline(x0, y0, h, c.reshape(mx, my), terms)

@@ -52,8 +52,11 @@ AREAL = frozenset(ISO_KEYS) | {"pvr_um", "slope_rms_urad"}
 KINDS = {"sag_um": "linear", "irr_um": "extreme", "rsi_um": "smooth", "rmst_um": "quadratic",
          "rmsi_um": "quadratic", "rmsa_um": "quadratic"}
 
-#: Fringe terms of the joint fit, most first; the largest with ≥ 4 points a term is used
-FIT_TERM_COUNTS = (37, 25, 16, 9, 4)
+#: Fringe terms of the joint fit, most first; the largest with ≥ 4 points a term is used. Never fewer
+#: than 9 (through Z9, primary spherical): with Z1–Z4 alone (16–35 points) C had no term to come from
+#: (0 µm, "conforms") and power took the spherical aberration into A (30 points of pure SA read
+#: A 0.07 µm, C 0)
+FIT_TERM_COUNTS = (37, 25, 16, 9)
 #: points on which S(ρ) is evaluated for C
 RADIAL_SAMPLES = 513
 

@@ -119,6 +119,14 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
     else:
         sigma, u_rel = spec.noise, 0.0
         noise_from = f"given in the recipe ({spec.noise_text}), taken as exact"
+        v, of = mc.residual_values(nominal, plan.surface)
+        spread = float(np.std(v)) if v.size > 1 else float("nan")
+        if sigma > 1.5 * spread:  # the residual holds its noise: RMS² ≈ form² + σ² ≥ σ²
+            from ..units import format_length
+
+            warnings.append(f"the given noise σ {format_length(sigma)} exceeds the spread of {of} "
+                            f"({format_length(spread)}), which holds that noise: check its unit — the "
+                            "figures are then mostly noise bias")
     names = _ordered(list(f0))
     kinds = getattr(extra_figures, "kinds", None)
     extreme = [n for n in names if est.kind_of(n, kinds) == "extreme"]

@@ -160,6 +160,9 @@ def parse_uncertainty(data, at: str, where: str, steps=None) -> UncertaintySpec:
     else:
         sigma, noise_text = _quantity(noise, LENGTH_UNITS, "noise", loc("noise"),
                                       "a length (σ of the noise along the measuring axis) or auto")
+        if sigma == 0:  # every sample would be the nominal run: U95 ~1e-18, a "proof" of conformity
+            raise RecipeError(f"{loc('noise')}: uncertainty: key 'noise': σ = 0 makes every Monte Carlo "
+                              "sample the same run — give the σ a repeatability test measured, or auto")
     sources_in = data.get("sources") or {}
     if not isinstance(sources_in, dict):
         raise RecipeError(f"{loc('sources')}: uncertainty: key 'sources': a mapping of source: standard "

@@ -130,6 +130,14 @@ class CorrectionStep(Step):
         channel = params.channel
         if channel == "auto":
             channel = "residual" if "residual" in cloud.channels else "z"
+            from pointspro.core.metrics.pupil import is_flat
+
+            if channel == "z" and not is_flat(ctx.surface):
+                # the heights of a curved part are its sag, not its form error: a "correction" of
+                # them is the whole surface (a 624 µm removal map of a sphere with 0.1 µm of error)
+                raise StepError("the cloud has no residual, and its heights z are the part's sag, not its "
+                                "form error: run misalignment (or register) before correction, or give "
+                                "channel: z for heights that are already a form-error map")
         if channel == "residual" and "residual" not in cloud.channels:
             raise StepError("channel 'residual' asked for, but the cloud has none (run misalignment "
                             "first, or give a map with channel: z)")
@@ -219,6 +227,15 @@ class CorrectionStep(Step):
             raise StepError(f"cutoff_mm {cutoff:g} mm is below twice the map spacing ({h:g} mm): "
                             f"the map holds no detail that fine — use cutoff_mm ≥ {2 * h:g} or a "
                             "finer spacing")
+        resolution_warning = None
+        if params.cutoff_mm is not None and em.knot_spacing is not None and cutoff < 0.99 * 2.0 * em.knot_spacing:
+            # a cubic spline resolves wavelengths down to ~2 knot intervals: what the filter passes
+            # below that is the spline's interpolation, not the data
+            resolution_warning = (
+                f"cutoff_mm {cutoff:g} mm is below twice the knot spacing of the map ({em.knot_spacing:.4g} "
+                f"mm, scattered points): the map resolves no detail that fine, so the correction holds "
+                f"none — give knot_spacing ≤ {cutoff / 2:.3g} (where the points are dense enough) or a "
+                "larger cutoff_mm")
         ctx.progress.check()
         ctx.progress.update(0.3, "filter")
         try:
@@ -246,11 +263,17 @@ class CorrectionStep(Step):
             "predicted_pv_um": C.pv(cor.predicted) * 1e3,
             "predicted_inner_rms_um": C.rms(np.where(inner, cor.predicted, np.nan)) * 1e3,
             "predicted_edge_rms_um": C.rms(np.where(inside & ~inner, cor.predicted, np.nan)) * 1e3,
-            "predicted_note": ("error left after the correction: detail finer than the cutoff, the "
-                               "continuation within one cutoff of the rim (edge), and (1 − gain) of "
-                               "the rest; inner = r ≤ aperture radius − cutoff"),
-            "warnings": [],
+            "predicted_note": ("error left after the correction, on the map's grid: detail finer than "
+                               "the cutoff, the continuation within one cutoff of the rim (edge), and "
+                               "(1 − gain) of the rest; inner = r ≤ aperture radius − cutoff"
+                               + ("" if em.unresolved_rms is None else
+                                  "; the points also hold what the map does not resolve "
+                                  "(unresolved_rms_um: noise and detail finer than the knots), which "
+                                  "stays")),
+            "warnings": [resolution_warning] if resolution_warning else [],
         }
+        if em.unresolved_rms is not None:
+            rep["unresolved_rms_um"] = em.unresolved_rms * 1e3
         arts = {}
         comments = [f"PointsPro correction: {SIGN}",
                     f"gain {params.gain:g}; Gaussian low-pass cutoff {cutoff:g} mm (ISO 16610-61); "

@@ -25,6 +25,7 @@ from pydantic import field_validator
 from pointspro.core.errors import StepError
 from pointspro.core.geometry.posed_fit import PosedSurfaceFit
 from pointspro.core.params.pose import (
+    EXCLUDE_HELP,
     FIVE_DOF,
     INITIAL_HELP,
     MAX_ITER_HELP,
@@ -41,6 +42,7 @@ class MisalignmentParams(Params):
                                 "conic; leave one out to hold it at its initial value")
     initial: InitialPose = param(default_factory=InitialPose, help=INITIAL_HELP)
     max_iterations: int = param(100, ge=1, le=10000, help=MAX_ITER_HELP)
+    exclude_beyond: float | None = param(8.0, gt=2.0, le=1000.0, help=EXCLUDE_HELP)
 
     @field_validator("dof")
     @classmethod
@@ -70,16 +72,28 @@ class MisalignmentStep(Step):
         try:
             fit = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "vertical",
                                   max_iter=params.max_iterations, check=ctx.progress.check).fit()
+            part, residual = fit.part, fit.residuals  # p = Rᵀ(q − t) and z − sag(x, y) at the solution
+            excluded, exclusion = None, {}
+            if params.exclude_beyond is not None:
+                from pointspro.core.geometry.outliers import refit_without_outliers
+
+                ctx.progress.update(0.6, "outliers")
+                fit, part, residual, excluded, exclusion = refit_without_outliers(
+                    surface, cloud.xyz, dof, params.initial.as_dof(), "vertical", params.exclude_beyond,
+                    fit, part, residual, max_iter=params.max_iterations, check=ctx.progress.check)
         except StepError as e:
             from pointspro.core.profiles import with_profile_hint
 
             raise with_profile_hint(e) from None
         ctx.progress.update(0.9, "residual")
-        part, residual = fit.part, fit.residuals  # p = Rᵀ(q − t) and z − sag(x, y) at the solution
         report = fit.report()
         report.update(residual_rms_um=float(np.sqrt(np.mean(residual ** 2)) * 1e3),
                       residual_pv_um=float(np.ptp(residual) * 1e3),
-                      warnings=list(fit.warnings) + ([note] if note else []))
+                      warnings=list(fit.warnings) + ([note] if note else []) + exclusion.pop("warnings", []),
+                      **exclusion)
+        if excluded is not None and excluded.any():
+            rows = cloud["index"][excluded] if "index" in cloud.channels else np.flatnonzero(excluded)
+            report["excluded_from_pose_rows"] = [int(r) for r in rows[:50]]
         if fit.surface is not surface:
             report["surface"] = fit.surface.describe()
         ctx.log.info("pose %s; residual RMS %.4g µm, PV %.4g µm (%d iterations)", ", ".join(

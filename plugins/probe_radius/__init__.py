@@ -24,9 +24,10 @@ from typing import Literal
 import numpy as np
 from pydantic import field_validator
 
-from pointspro.core.errors import StepError
+from pointspro.core.errors import DomainError, StepError
 from pointspro.core.geometry.posed_fit import PosedSurfaceFit
 from pointspro.core.params.pose import (
+    EXCLUDE_HELP,
     FIVE_DOF,
     INITIAL_HELP,
     MAX_ITER_HELP,
@@ -51,6 +52,7 @@ class ProbeRadiusParams(Params):
                         "form error); design: the fitted surface's normals")
     neighbours: int = param(16, ge=6, le=200, help="points per local slope fit when normals are refined")
     max_iterations: int = param(100, ge=1, le=10000, help=MAX_ITER_HELP)
+    exclude_beyond: float | None = param(8.0, gt=2.0, le=1000.0, help=EXCLUDE_HELP)
 
     @field_validator("dof")
     @classmethod
@@ -74,6 +76,44 @@ def check_no_fold(surface, foot: np.ndarray, side: int, radius: float) -> None:
         raise StepError(f"the probe radius {radius:g} mm exceeds the part's local radius of curvature "
                         f"({rc:.4g} mm at r = {rho[i]:.4g} mm) on the ball's side: the offset surface folds "
                         "there and the centres cannot be compensated — use a smaller ball or check `side`")
+
+
+#: a distance residual above this RMS (mm) makes the step try the other probe side
+SIDE_CHECK_RMS = 1e-3
+#: the other side fits this much better (RMS ratio): refused; below SIDE_WARN_RATIO a warning
+SIDE_REFUSE_RATIO, SIDE_WARN_RATIO = 0.05, 0.3
+#: points the other side is fitted on at most (evenly spread rows)
+SIDE_CHECK_POINTS = 20_000
+
+
+def _other_side_check(surface, centres, dof, params, e, ctx) -> str | None:
+    """A wrong ``side`` on a steep part is no fit failure: the pose absorbs most of the 2ρ offset and
+    leaves a smooth power/spherical residual that reads as form error (a paraboloid with 56° slopes,
+    side −1 for +1 data: RMS 219.6 µm for a true 0.107 µm, exit 0). When the distance residual is
+    large (RMS > SIDE_CHECK_RMS) the other side is fitted on ≤ SIDE_CHECK_POINTS of the centres:
+    fitting ≥ 20× better (RMS ratio) is refused, ≥ 3× better a warning. Returns the warning or None."""
+    rms = float(np.sqrt(np.mean(e * e)))
+    if not rms > SIDE_CHECK_RMS:
+        return None
+    step = max(1, len(centres) // SIDE_CHECK_POINTS)
+    sub = centres[::step]
+    other = -params.side
+    try:
+        alt = PosedSurfaceFit(surface, sub, dof, params.initial.as_dof(), "normal",
+                              offset=other * params.radius, max_iter=params.max_iterations,
+                              check=ctx.progress.check).fit()
+        _, _, d = alt.foot_point()
+    except (StepError, DomainError):
+        return None
+    e_alt = d - other * params.radius
+    rms_sub = float(np.sqrt(np.mean(e[::step] ** 2)))
+    rms_alt = float(np.sqrt(np.mean(e_alt * e_alt)))
+    text = (f"with side {other:+d} the centres fit {rms_sub / max(rms_alt, 1e-300):.3g}× better (distance "
+            f"residual RMS {rms_alt * 1e3:.4g} µm against {rms_sub * 1e3:.4g} µm with side "
+            f"{params.side:+d}): check `side` (+1: the ball touches the part from +z, −1: from below)")
+    if rms_alt < SIDE_REFUSE_RATIO * rms_sub:
+        raise StepError(text)
+    return text if rms_alt < SIDE_WARN_RATIO * rms_sub else None
 
 
 class ProbeRadiusStep(Step):
@@ -111,9 +151,24 @@ class ProbeRadiusStep(Step):
             raise with_profile_hint(e) from None
         ctx.progress.update(0.8, "compensating")
         foot, n, dist = fit.foot_point()  # warm-started from the fit's last foot radii
-        check_no_fold(fit.surface, foot, s, rho_b)
         e = dist - s * rho_b  # envelope residual: form error along the normal, plus noise (mm)
+        exclusion, excluded = {}, None
+        if params.exclude_beyond is not None:  # the pose without the outliers (core/geometry/outliers.py)
+            from pointspro.core.geometry.outliers import refit_without_outliers
+
+            first = fit
+            fit, part, e, excluded, exclusion = refit_without_outliers(
+                surface, cloud.xyz, dof, params.initial.as_dof(), "normal", params.exclude_beyond, fit, None, e,
+                offset=s * rho_b, max_iter=params.max_iterations, check=ctx.progress.check)
+            if fit is not first:
+                foot, n, dist = fit.surface.foot_point(part)
+        check_no_fold(fit.surface, foot, s, rho_b)
+        side_warning = _other_side_check(surface, cloud.xyz, dof, params, e, ctx)
         report = fit.report()
+        report.update(exclusion)
+        if excluded is not None:
+            rows = cloud["index"][excluded] if "index" in cloud.channels else np.flatnonzero(excluded)
+            report["excluded_from_pose_rows"] = [int(r) for r in rows[:50]]
         if params.normals == "refined":
             slopes, n_out = residual_slopes(foot[:, :2], e, params.neighbours)
             report["normal_outliers_set_aside"] = n_out
@@ -130,7 +185,8 @@ class ProbeRadiusStep(Step):
             probe_radius=rho_b, side=s, normals=params.normals,
             distance_residual_rms_um=float(np.sqrt(np.mean(e ** 2)) * 1e3),
             distance_residual_pv_um=float(np.ptp(e) * 1e3),
-            warnings=list(fit.warnings) + ([note] if note else []))
+            warnings=list(fit.warnings) + ([note] if note else []) + ([side_warning] if side_warning else [])
+            + report.pop("warnings", []))
         if fit.surface is not surface:
             report["surface"] = fit.surface.describe()
         ctx.log.info("probe radius %.6g mm (side %+d, %s normals); distance residual RMS %.4g µm, "

@@ -86,7 +86,10 @@ class ZernikeStep(Step):
                             "the normalisation radius is not a finite number; give a centre near the "
                             "measured region (or none: docs/conventions.md, Pupil)")
         warnings = []
-        outside = _count_outside(x, y, c, R * (1 + 1e-9))
+        # beyond 0.1 % of the radius: a scan that ends at the clear aperture leaves a few points some
+        # µm beyond it once the pose is removed (6.9 µm at 30 mm), where the polynomials are as good as
+        # inside; the warning fired on 10 of 17 ordinary parts in a review
+        outside = _count_outside(x, y, c, R * (1 + OUTSIDE_TOLERANCE))
         if outside:
             warnings.append(f"{outside} points lie outside the normalisation radius {R:g} mm "
                             "(polynomials are extrapolated there); use aperture first")
@@ -172,6 +175,10 @@ def _ptp_of_difference(a, b) -> float:
         d = a[s:s + _CHUNK] - b[s:s + _CHUNK]
         lo, hi = min(lo, float(d.min())), max(hi, float(d.max()))
     return hi - lo
+
+
+#: relative reach beyond the normalisation radius a point may have before the fit warns of extrapolation
+OUTSIDE_TOLERANCE = 1e-3
 
 
 def _count_outside(x, y, c, r: float) -> int:
