@@ -276,6 +276,9 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
 
     # the shop's blocks (docs/uncertainty.md): validated here, before any file is read
     uncertainty = tolerance = None
+    for key, what in (("uncertainty", "samples, noise, sources"), ("tolerance", "the drawing's form or limits")):
+        if key in data and data[key] is None:  # `tolerance:` with nothing under it was silently dropped
+            raise RecipeError(f"{at(key)}: {key}: is empty — give {what}, or remove the key")
     if data.get("uncertainty") is not None:
         from .uncertainty import parse_uncertainty
 

@@ -92,17 +92,9 @@ def verdict_line(tolerance: dict | None) -> str | None:
         return None
     if tolerance.get("text"):
         return str(tolerance["text"])
-    verdict = tolerance.get("verdict", "undecided")
-    items = tolerance.get("items") or []
-    worst = [i for i in items if i.get("verdict") == verdict] or items
-    parts = []
-    for i in worst[:3]:
-        u = i.get("U95")
-        val = f"{i.get('value'):.3g}" + (f" ± {u:.2g}" if u is not None else "")
-        rel = ">" if i.get("verdict") == "does not conform" else "≤"
-        unit = i.get("unit", "")
-        parts.append(f"{i.get('name')} {val} {unit} {rel} {i.get('limit'):.3g} {unit}".replace("  ", " "))
-    return verdict + (": " + "; ".join(parts) if parts else "")
+    from .tolerance.decision import summary_text  # a report written before "text" existed
+
+    return summary_text(tolerance.get("verdict", "undecided"), tolerance.get("items") or [])
 
 
 def verdict_banner_html(tolerance: dict | None) -> str:
@@ -117,19 +109,37 @@ def verdict_banner_html(tolerance: dict | None) -> str:
             f"font-size:1.2em'>{html.escape(verdict.upper())}"
             f"<span style='font-weight:normal;font-size:.8em'> — decision rule: "
             f"{html.escape(str(rule))}</span></div>")
-    rows = ["<tr><th>quantity</th><th>value</th><th>U95</th><th>limit</th><th>verdict</th></tr>"]
-    for i in tolerance.get("items") or []:
+    items = tolerance.get("items") or []
+    # what the verdicts compare (the 95 % interval's ends: an RMS's is not value ± U95) and why an
+    # item is undecided: a reader could not reproduce "undecided" for 0.4642 ± 0.0105 < 0.475 before
+    intervals = any(i.get("interval95") for i in items)
+    notes = any(i.get("note") for i in items)
+    nowrap = "class='num' nowrap style='white-space:nowrap'"  # "0.1548 fr" broke into "0.15 / 48 / fr"
+    rows = ["<tr><th>quantity</th><th>value</th><th>U95</th>"
+            + ("<th>95 % interval</th>" if intervals else "") + "<th>limit</th><th>verdict</th>"
+            + ("<th>note</th>" if notes else "") + "</tr>"]
+    for i in items:
         unit = html.escape(str(i.get("unit", "")))
         u = i.get("U95")
         c = VERDICT_COLOURS.get(i.get("verdict"), "#777")
+        iv = i.get("interval95")
         rows.append(
             f"<tr><td>{html.escape(str(i.get('name')))}</td>"
-            # nowrap: a narrow panel broke "0.1548 fr" into "0.15 / 48 / fr" (read as 0.15)
-            f"<td class='num' nowrap style='white-space:nowrap'>{_num(i.get('value'))} {unit}</td>"
-            f"<td class='num' nowrap style='white-space:nowrap'>{'—' if u is None else _num(u) + ' ' + unit}</td>"
-            f"<td class='num' nowrap style='white-space:nowrap'>{_num(i.get('limit'))} {unit}</td>"
-            f"<td style='color:{c};font-weight:bold'>{html.escape(str(i.get('verdict')))}</td></tr>")
-    return head + "<table>" + "".join(rows) + "</table>"
+            f"<td {nowrap}>{_num(i.get('value'))} {unit}</td>"
+            f"<td {nowrap}>{'—' if u is None else _num(u) + ' ' + unit}</td>"
+            + (f"<td {nowrap}>{'—' if not iv else f'{_num(iv[0])} … {_num(iv[1])} {unit}'}</td>" if intervals else "")
+            + f"<td {nowrap}>{_num(i.get('limit'))} {unit}</td>"
+            f"<td style='color:{c};font-weight:bold'>{html.escape(str(i.get('verdict')))}</td>"
+            + (f"<td>{html.escape(str(i.get('note') or ''))}</td>" if notes else "") + "</tr>")
+    basis = []
+    if tolerance.get("form"):
+        basis.append(f"drawing: {html.escape(str(tolerance['form']))}")
+    if tolerance.get("wavelength_nm"):
+        basis.append(f"1 fr = λ/2 = {tolerance.get('fringe_um', 0) * 1e3:.4g} nm at λ {tolerance['wavelength_nm']:g} nm")
+    if tolerance.get("rule_text"):
+        basis.append(html.escape(str(tolerance["rule_text"])))
+    foot = f"<p class='muted'>{'; '.join(basis)}</p>" if basis else ""
+    return head + "<table>" + "".join(rows) + "</table>" + foot
 
 
 def _num(v) -> str:

@@ -34,7 +34,16 @@ def test_verdict_banner_colours_and_line():
                       "verdict": "conforms"}]}
     html = verdict_banner_html(tol)
     assert "#b3261e" in html and "DOES NOT CONFORM" in html and "irregularity" in html
-    assert verdict_line(tol) == "does not conform: irregularity 0.62 ± 0.05 fr > 0.5 fr"
+    assert verdict_line(tol) == "does not conform: irregularity 0.620 ± 0.050 fr > 0.5 fr"  # as decision.item_text
+    assert "95 % interval" not in html and "<th>note</th>" not in html  # none given: no empty columns
+    full = dict(tol, rule_text="… the 95 % coverage interval …", form="3/2(0.5)", wavelength_nm=546.07,
+                fringe_um=0.273035,
+                items=[dict(tol["items"][0], interval95=[0.57, 0.70]),
+                       dict(tol["items"][1], verdict="undecided", note="the 95 % interval holds the limit")])
+    page = verdict_banner_html(full)  # what the verdict compares and why, readable without report.json
+    assert "<th>95 % interval</th>" in page and "0.57 … 0.7 fr" in page
+    assert "the 95 % interval holds the limit" in page and "drawing: 3/2(0.5)" in page
+    assert "273 nm at λ 546.07 nm" in page and "coverage interval" in page
     assert verdict_banner_html(None) == "" and verdict_line(None) is None
     ok = dict(tol, verdict="conforms")
     assert "#1b7f3b" in verdict_banner_html(ok)

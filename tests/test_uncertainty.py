@@ -40,6 +40,8 @@ def parse(text):
                                                                             "no unit", "K"]),
     ("uncertainty:\n  samples: 200.5\n", ["'samples'", "integer"]),
     ("uncertainty:\n  noise: 0 nm\n", ["line 7", "'noise'", "σ = 0", "repeatability"]),
+    ("uncertainty:\n", ["line 6", "uncertainty: is empty"]),  # was silently no uncertainty at all
+    ("tolerance:\n", ["line 6", "tolerance: is empty"]),
 ])
 def test_bad_blocks_are_one_line_naming_line_and_key(block, words):
     with pytest.raises(RecipeError) as e:
