@@ -42,30 +42,41 @@ ALPHA = 0.01
 BIC_STRONG = -10.0
 #: an effect whose SSR gain comes for more than this share from the 10 % best cells is local
 LOCAL_LIMIT = 0.6
+#: …and more than this many times the share of the effect's own fitted energy in those cells. An
+#: effect that explains the gap gains where its shape has its energy (gain share ≈ energy share: a
+#: quadratic drift at the centre of an inward spiral 0.62 against 0.61); one that fits part of a local
+#: bump gains far more there than its shape holds (straightness 0.84 against 0.52, pose 0.89 against 0.25)
+SHAPE_RATIO = 1.3
 #: the σ re-estimated on the residual replaces the gap's when it differs by more than this share
 SIGMA_SETTLED = 0.05
 
 
-def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells: int = 24) -> tuple[float, float]:
+def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells: int = 24
+                   ) -> tuple[float, float, float]:
     """Share of the SSR gain r_old² − r_new² that the best 10 % of occupied cells hold (of the gain of
-    the cells that gain: where other unmodelled signal crosses the fit, cells gain and lose), and the share of
-    the points in those cells (a spiral samples its centre more densely: a global effect gains most
-    where the points are, a local one where the defect is)."""
+    the cells that gain: where other unmodelled signal crosses the fit, cells gain and lose), the share
+    of the points in those cells (a spiral samples its centre more densely: a global effect gains most
+    where the points are, a local one where the defect is), and the share of the fitted contribution's
+    own energy, Σ(r_old − r_new)², in them (an effect whose shape is concentrated there — a quadratic
+    drift at the end of an inward spiral — gains there by its shape, not because a defect is local)."""
     x, y = ctx.x, ctx.y
     span = max(np.ptp(x), np.ptp(y)) or 1.0
     ix = np.clip(((x - x.min()) / span * cells).astype(int), 0, cells - 1)
     iy = np.clip(((y - y.min()) / span * cells).astype(int), 0, cells - 1)
     k = iy * cells + ix
+    m = r_old - r_new
     gain = np.bincount(k, weights=r_old * r_old - r_new * r_new, minlength=cells * cells)
     count = np.bincount(k, minlength=cells * cells)
+    energy = np.bincount(k, weights=m * m, minlength=cells * cells)
     occ = count > 0
     rank = np.argsort(gain[occ])[::-1]
-    gain, count = gain[occ][rank], count[occ][rank]
+    gain, count, energy = gain[occ][rank], count[occ][rank], energy[occ][rank]
     total = gain[gain > 0].sum()  # where the fit gains (unmodelled signal makes others lose)
     if total <= 0:
-        return 1.0, 0.0
+        return 1.0, 0.0, 0.0
     top = max(int(np.ceil(0.1 * gain.size)), 1)
-    return float(gain[:top].sum() / total), float(count[:top].sum() / count.sum())
+    return (float(gain[:top].sum() / total), float(count[:top].sum() / count.sum()),
+            float(energy[:top].sum() / max(energy.sum(), 1e-300)))
 
 
 #: what separates two effects that a scan cannot tell apart
@@ -471,12 +482,23 @@ def _candidates(s: _Search, max_effects: int) -> list[str]:
     return names
 
 
-def _is_local(s: _Search, name: str) -> bool:
+def _is_local(s: _Search, name: str, entering=()) -> bool:
     """Every library effect acts over the whole part: one whose SSR gain comes from a small area (more
-    than LOCAL_LIMIT of it from the best 10 % of the cells, and more than twice their share of the
-    points) is fitting a local defect, which no effect explains (→ unexplained, located)."""
-    gain, points = local_fraction(s.ctx, s.resid, s.D.resid(s.cols + s.D.index[name]))
-    return gain > LOCAL_LIMIT and gain > 2.0 * points
+    than LOCAL_LIMIT of it from the best 10 % of the cells, more than twice their share of the points
+    and more than SHAPE_RATIO × their share of the effect's own fitted energy) is fitting a local defect,
+    which no effect explains (→ unexplained, located). A harmonic of a spindle error motion is judged
+    with the other entering harmonics of its effect: harmonics in phase add up in one sector, where
+    each one alone gains most (2…8 upr in phase were refused as "local" and the search stopped)."""
+    me = s.by_name[name]
+    cols = s.cols + s.D.index[name]
+    if me.harmonic is not None:
+        for c in entering:
+            o = s.by_name[c.effect]
+            if o.effect == me.effect and o.name != name:
+                cols = cols + s.D.index[o.name]
+        s.D.ensure(cols)
+    gain, points, shape = local_fraction(s.ctx, s.resid, s.D.resid(cols))
+    return gain > LOCAL_LIMIT and gain > 2.0 * points and gain > SHAPE_RATIO * shape
 
 
 def _tie_threshold(sigma: float, a: Candidate, b: Candidate) -> float:
@@ -590,7 +612,7 @@ def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
         if not entering:
             break
         named, tie = _choose(s, entering, sigma)
-        if _is_local(s, named.effect):
+        if _is_local(s, named.effect, entering):  # a local defect: what enters after it would fit it
             break
         _add(s, named, _ambiguous_with(s, named, tie, sigma), len(names))
     _refine(s, sigma)
