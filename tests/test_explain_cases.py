@@ -285,3 +285,19 @@ def test_a_quadratic_drift_on_an_inward_spiral_is_found(tmp_path, d2):
     rep = run(tmp_path, ASPHERE, SPIRAL, [{"thermal_drift": {"d2": d2}}], seed=43)
     assert "thermal_drift" in names(rep) and rep["verdict"] in ("explained", "ambiguous")
     assert rep["gap_after"]["rms_um"] < 1.1 * NOISE * 1e3
+
+
+@pytest.mark.parametrize("seed", [44, 45])
+def test_a_catch_all_is_judged_again_against_every_physical_effect(tmp_path, seed):
+    """Squareness and a tip radius hidden together on an anamorphic part, raster: at the first stage
+    the 5-parameter volumetric field took part of the squareness cone and won, the tip radius was
+    never in that stage's tie, and the report said "volumetric, squareness" (a review). With the
+    other effects in the fit a catch-all is weighed against every physical candidate again."""
+    surface = {"type": "xy_polynomial", "c": 0.0005, "k": 0.0, "norm_radius": 20.0,
+               "terms": {"x2y0": 0.004, "x0y2": -0.0025}}
+    scan = {"type": "raster", "radius": 20.0, "spacing": 0.25, "lines": 121, "speed": 20.0}
+    rep = run(tmp_path, surface, scan, [{"squareness": {"eb0c_arcsec": 0.05}}, {"probe_radius": {"radius": 0.3}}],
+              seed=seed)
+    assert "probe_radius" in names(rep) and "volumetric" not in names(rep)
+    assert set(names(rep)) <= {"probe_radius", "squareness"}
+    assert rep["gap_after"]["rms_um"] < 1.1 * NOISE * 1e3

@@ -568,6 +568,12 @@ def _refine(s: _Search, sigma: float) -> None:
     for i, st in enumerate(s.stages):
         alts = [a["candidate"] for a in st.ambiguous_with if "candidate" in a]
         taken = {o.candidate for j, o in enumerate(s.stages) if j != i}
+        if s.by_name[st.candidate].catch_all:
+            # a catch-all named at its stage may have won only because an effect found later was still
+            # in the gap (squareness + a tip radius: volumetric took part of the squareness cone and the
+            # tip radius was never in that stage's tie): every physical candidate is judged again
+            alts = alts + [g.name for g in s.groups if not g.catch_all and g.name in s.D.index
+                           and g.name not in alts and g.name != st.candidate]
         alts = [a for a in alts if a not in taken]
         if not alts:
             continue
