@@ -106,6 +106,10 @@ def test_000_volumetric_field_predicted_between_fiducials(tmp_path):
     far = VolumetricStep().run(PointCloud(M[:1] + [500.0, 0, 0]), VolumetricStep.Params(model="m.json"),
                                Context(base_dir=tmp_path))
     assert far.cloud["outside_workspace"][0] == 1 and "outside the calibrated workspace" in far.report["warnings"][0]
+    ws = np.asarray(json.loads((tmp_path / "m.json").read_text(encoding="utf-8"))["workspace"])
+    edge = np.array([[ws[0, 1] + 0.02, ws[1].mean(), ws[2].mean()]])  # 20 µm beyond the balls' box
+    near = VolumetricStep().run(PointCloud(edge), VolumetricStep.Params(model="m.json"), Context(base_dir=tmp_path))
+    assert near.cloud["outside_workspace"][0] == 0 and not near.report["warnings"]
     ref_frame = VolumetricStep().run(PointCloud(M), VolumetricStep.Params(model="m.json", frame="reference"),
                                      Context(base_dir=tmp_path))
     assert np.sqrt(np.mean((ref_frame.cloud.xyz - R) ** 2)) < 0.3 * np.sqrt(np.mean(field(T) ** 2))

@@ -257,14 +257,19 @@ def fiducial_spacing(X) -> float:
     return float((np.prod(ext) / max(len(X), 1)) ** (1.0 / ext.size))
 
 
-def candidate_kernels(X, y_norm, Q: int = 10, noise_floor: float | None = None, seed: int = 0) -> dict:
+def candidate_kernels(X, y_norm, Q: int = 10, noise_floor: float | None = None, seed: int = 0,
+                      noise_ceiling: float | None = None) -> dict:
     """The kernels compared, for targets normalised to unit variance. Length scales are bounded
     below by the fiducial spacing (nothing shorter can be resolved between the balls) and above by
     ten workspace sizes; the white noise is bounded below by half the known measurement variance
     ``noise_floor`` (normalised units) when it is given. Candidates: RBF and Matérn 5/2 with one length
     scale per axis (marginal likelihood), RBF with the length scales fixed at 0.25, 0.5 and 1 × the
     workspace extent per axis (only the amplitude and the noise fitted), and spectral mixtures with
-    Q = 1, 2, 4, … ≤ ``Q`` components (tried in that order while they improve)."""
+    Q = 1, 2, 4, … ≤ ``Q`` components (tried in that order while they improve). ``noise_ceiling``
+    (normalised units): the white noise's upper bound, else the targets' whole variance — with that,
+    the marginal likelihood of 24 balls often put everything into the noise (amplitude at its lower
+    bound), the fit then tied "no GP" and the selection under-fitted (an independent review: a
+    smooth 0.3 × extent field read 1.18 µm where an RBF with the known noise gives 0.64 µm)."""
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
     X = np.asarray(X, float)
@@ -272,7 +277,7 @@ def candidate_kernels(X, y_norm, Q: int = 10, noise_floor: float | None = None, 
     h = fiducial_spacing(X)
     ext = np.maximum(np.ptp(X, axis=0), h)
     lo_n = 1e-8 if noise_floor is None else max(0.5 * noise_floor, 1e-8)
-    hi_n = max(1.0, 4 * lo_n)
+    hi_n = max(1.0, 4 * lo_n) if noise_ceiling is None else max(min(1.0, noise_ceiling), 4 * lo_n)
 
     def noise():
         start = 1e-3 if noise_floor is None else min(max(noise_floor, lo_n), hi_n)
@@ -392,7 +397,7 @@ NONE = "none"
 
 
 def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0, maxiter: int = 150,
-               check=None, affine=None) -> tuple[list, dict]:
+               check=None, affine=None, noise_max=None) -> tuple[list, dict]:
     """One GP per column of ``Y`` (e.g. the volumetric error's ex, ey, ez at the fiducials X), their
     kernel chosen together by the lowest pooled K-fold cross-validated RMS (module doc) among
     ``candidate_kernels`` and "none" (no GP: a zero prediction, ZeroGP), so that a GP is applied only
@@ -400,7 +405,7 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
     own. Pooling the columns' held-out residuals triples what the choice rests on (24 fiducials give
     24 held-out values per column, too few to tell kernels apart one column at a time). ``noise_var``:
     per column, the known variance of the measurement noise (units of y²), a floor for the white-noise
-    term. ``affine``: per column (design [X_r, 1], targets) of the transform the errors are the
+    term; ``noise_max``: per column, its upper bound (candidate_kernels' noise_ceiling). ``affine``: per column (design [X_r, 1], targets) of the transform the errors are the
     residuals of — re-fitted inside each fold too (``cv_residuals``). ``check`` (a Progress's) is
     called between candidates. Returns ([NormalisedGP or ZeroGP per column], info) with info =
     {"chosen": name, "kind": model-file kind, "criterion": words, "cv_rms": {name: [RMS per column]},
@@ -414,11 +419,13 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
         Y = Y[:, None]
     m = Y.shape[1]
     nv = [None] * m if noise_var is None else list(np.broadcast_to(np.asarray(noise_var, float), (m,)))
+    nx = [None] * m if noise_max is None else list(np.broadcast_to(np.asarray(noise_max, float), (m,)))
     aff = [None] * m if affine is None else list(affine)
     fold_sets = kfold_indices(len(X), folds, seed)
     stds = [_scale(Y[:, j])[1] for j in range(m)]
     cand = [{NONE: None} | candidate_kernels(X, (Y[:, j] - Y[:, j].mean()) / stds[j], Q,
-                                             None if nv[j] is None else nv[j] / stds[j] ** 2, seed)
+                                             None if nv[j] is None else nv[j] / stds[j] ** 2, seed,
+                                             None if nx[j] is None else nx[j] / stds[j] ** 2)
             for j in range(m)]
     cv, loo, fitted, resid = {}, {}, {}, {}
     best_sm, sm_stopped = np.inf, False

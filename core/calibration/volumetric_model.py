@@ -115,14 +115,16 @@ def loads(text: str, source: str) -> VolumetricModelSpec:
 ERROR_COMPONENTS = ("ex", "ey", "ez")
 
 
-def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None) -> tuple[dict, dict, dict, dict]:
+def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None,
+                  noise_max=None) -> tuple[dict, dict, dict, dict]:
     """A GP of each volumetric-error component (ex, ey, ez) at the positions X (machine frame, mm),
     their kernel chosen by K-fold cross-validation with the hyperparameters re-fitted in each fold
     (core.calibration.gp.select_gps) among the candidate kernels and "none" (no GP: the affine
     transform alone, kind "none" in the model file). ``ref``: the calibrated centres (mm) the transform
     was fitted to (errors = transform(ref) − X); given, the transform is re-fitted in each fold too,
     so the held-out errors are out of sample. ``noise_var``: the known variance (mm²) of each component's
-    error at a fiducial (measured and calibrated centres' σ²), a floor for the GP's noise. Returns
+    error at a fiducial (measured and calibrated centres' σ²), a floor for the GP's noise;
+    ``noise_max`` its ceiling. Returns
     (regressors, their specs for the model file, {component: closed-form LOO RMS µm per kernel and
     the chosen one — in-sample, for comparison}, the selection: {"criterion", "chosen",
     "cv_rms_um": {kernel: {component: RMS}}, "gp_cv_rms_um": the chosen kernel's {component: RMS,
@@ -139,7 +141,8 @@ def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None) 
         design = np.column_stack([np.asarray(ref, dtype=np.float64), np.ones(len(X))])
         # e_k = design · θ_k − X_k with θ_k the least-squares fit of X_k (the transform's components)
         affine = [(design, X[:, k]) for k in range(3)]
-    gp_list, info = select_gps(X, errors, Q=Q, noise_var=noise_var, check=check, affine=affine)
+    gp_list, info = select_gps(X, errors, Q=Q, noise_var=noise_var, check=check, affine=affine,
+                               noise_max=noise_max)
     chosen, kind = info["chosen"], info["kind"]
     gps, specs, loo = {}, {}, {}
     for k, name in enumerate(ERROR_COMPONENTS):
