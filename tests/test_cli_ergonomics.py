@@ -388,3 +388,13 @@ def test_simulate_refuses_non_finite_effect_values(run_cli, tmp_path):
         code, _, err = run_cli("simulate", m, "--out", tmp_path / "s.csv")
         assert code == 2 and says in err and "line 4" in err, err
         assert not (tmp_path / "s.csv").exists()
+
+
+def test_a_probe_radius_in_the_model_is_refused_as_not_simulated(run_cli, tmp_path):
+    """`probe: {radius: 0.5}` was accepted and changed nothing (byte-identical simulations): it names
+    the effect that simulates an uncompensated tip radius instead."""
+    m = write(tmp_path / "m.yaml", "pointspro_model: 1\nsurface: {type: sphere, R: 100}\n"
+              "scan: {type: raster, radius: 10, pitch: 1}\nprobe: {noise: 1.0e-6, radius: 0.5}\n")
+    code, _, err = run_cli("simulate", m, "--out", tmp_path / "s.csv")
+    assert code == 2 and "line 4" in err and "probe_radius: {radius: 0.5}" in err, err
+    assert not (tmp_path / "s.csv").exists()

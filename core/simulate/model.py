@@ -28,8 +28,17 @@ from .scan import ScanSpec, scan_points
 class ProbeSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     noise: float = Field(0.0, ge=0, description="RMS noise of the reading (mm)")
-    radius: float = Field(0.0, ge=0, description="tip radius (mm); an uncompensated radius is the "
-                          "probe_radius effect")
+    radius: float = Field(0.0, ge=0, description="tip radius (mm); not simulated here — an uncompensated "
+                          "radius is the probe_radius effect")
+
+    @field_validator("radius")
+    @classmethod
+    def _radius_is_an_effect(cls, v):
+        # a radius here was accepted and changed nothing (byte-identical simulations with and without)
+        if v:
+            raise ValueError(f"probe.radius {v:g} mm is not simulated: an uncompensated tip radius is the "
+                             f"effect `- probe_radius: {{radius: {v:g}}}` under effects")
+        return v
 
 
 class ModelSpec(BaseModel):
