@@ -409,3 +409,13 @@ def test_scattered_points_report_what_the_map_does_not_resolve():
     assert not any("knot spacing" in w for w in rep["warnings"])
     fine = _run(cloud, None, diameter=50, cutoff_mm=2.0, spacing=0.5).report
     assert any("below twice the knot spacing" in w for w in fine["warnings"])
+
+
+def test_a_programmed_surface_bending_the_other_way_is_refused():
+    """A programmed R −500 against a nominal R +500 (a sign slip) was accepted."""
+    cloud = _map_cloud(lambda x, y: 1e-5 * np.cos(x / 5), half=20.0, h=1.0)
+    nominal = EvenAsphere(1 / 500.0, 0.0, aperture=40.0)
+    with pytest.raises(StepError, match="bends the other way"):
+        _run(cloud, nominal, cutoff_mm=4.0, programmed_surface={"type": "even_asphere", "R": -500.0})
+    ok = _run(cloud, nominal, cutoff_mm=4.0, programmed_surface={"type": "even_asphere", "R": 501.0})
+    assert "cutting" in ok.report["outputs"]

@@ -226,8 +226,10 @@ class ProfileFit:
                 f"{', '.join(pairs) or 'several parameters'} trade off"
                 + (" — on a nearly spherical part a tilt in the profile's plane is a decentre along it"
                    if sphere else "")
-                + ". The residual is still right, but these values are not separately meaningful: hold "
-                "one (leave it out of `dof`, give it in `initial`) to read the other")
+                + ". These values are not separately meaningful: hold one (leave it out of `dof`, give "
+                "it in `initial`) to read the other. The residual is that of the best pose along the "
+                "trade-off (exactly so on a circle); form error such a pose change reproduces is in the "
+                "pose, not in the residual")
         u, w, _, _ = self.part(vals)
         return ProfileFitResult(list(self.free), values, unc, corr, float(cond), res.residuals,
                                 res.iterations, surf, u, w, warnings)

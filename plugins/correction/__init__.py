@@ -112,6 +112,27 @@ def _rotational(surface) -> bool:
     return isinstance(surface, SurfaceOfRevolution) and not surface.is_flat()
 
 
+def _check_same_side(nominal, programmed) -> None:
+    """The programmed surface is the part as cut last run: its sag at 0.7 of the aperture's radius
+    must lie on the nominal's side (a programmed R −500 against a nominal R 500 was accepted, and the
+    corrected surface then bent the wrong way)."""
+    from pointspro.core.errors import DomainError
+    from pointspro.core.metrics.pupil import is_flat
+
+    ap = getattr(nominal, "aperture", None) or getattr(programmed, "aperture", None)
+    if nominal is None or not ap or is_flat(nominal) or is_flat(programmed):
+        return
+    r = np.array([0.35 * float(ap)])
+    try:
+        a, b = float(nominal.sag(r, np.zeros(1))[0]), float(programmed.sag(r, np.zeros(1))[0])
+    except (DomainError, ValueError, TypeError):
+        return
+    if a * b < 0 and min(abs(a), abs(b)) > 1e-3:
+        raise StepError(f"programmed_surface bends the other way from the nominal (sag {b:.4g} mm against "
+                        f"{a:.4g} mm at r = {r[0]:g} mm): check the sign of its R or c — it is the surface "
+                        "the machine cut last run")
+
+
 class CorrectionStep(Step):
     id = "correction"
     title = "Correction for the next run"
@@ -151,6 +172,7 @@ class CorrectionStep(Step):
             programmed = surface_from_spec(params.programmed_surface, ctx.base_dir)
             if getattr(programmed, "aperture", None) is None and nominal is not None:
                 programmed.aperture = getattr(nominal, "aperture", None)
+            _check_same_side(nominal, programmed)
         # which outputs: asked, else all the inputs allow
         asked = list(dict.fromkeys(params.outputs))
         skipped = {}
