@@ -94,7 +94,8 @@ def load_model(path) -> ModelSpec:
         key = ".".join(str(k) for k in err["loc"])
         line = data.key_lines.get(err["loc"][0]) if err["loc"] else None
         at = f", line {line}" if line else ""
-        raise RecipeError(f"{path}{at}: key '{key}': {err['msg']}") from None
+        msg = err["msg"].removeprefix("Value error, ")  # a validator's own words, without pydantic's tag
+        raise RecipeError(f"{path}{at}: key '{key}': {msg}") from None
 
 
 def effects_dz(ctx: ScanContext, effects: list[dict]) -> np.ndarray:
