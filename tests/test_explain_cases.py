@@ -317,3 +317,20 @@ def test_an_effect_that_cannot_be_estimated_beside_the_others_never_enters(tmp_p
     for f in rep["found"]:
         if f["effect"] == "probe_radius":
             assert abs(f["params"]["radius"]) < 1.0  # mm: no absurd tip radius
+
+
+def test_two_vibration_lines_are_both_named(tmp_path):
+    """A machine has more than one resonance: 170.3 Hz at 30 nm and 61.7 Hz at 6 nm were reported as
+    one line, the second left as 2.6 σ of "noise" with nothing said (a review). Each line is an
+    entry of its own, with its frequency and amplitude, and both go into model.updated.yaml."""
+    hidden = [{"vibration": {"frequency_hz": 97.3, "amplitude": 3e-5}},  # below this scan's Nyquist (150 Hz)
+              {"vibration": {"frequency_hz": 41.7, "amplitude": 6e-6}}]
+    rep = run(tmp_path, ASPHERE, SPIRAL, hidden, seed=47)
+    lines = sorted((f["params"]["frequency_hz"], f["params"]["amplitude"]) for f in rep["found"]
+                   if f["effect"] == "vibration")
+    assert len(lines) == 2 and names(rep).count("vibration") == 2
+    assert lines[0][0] == pytest.approx(41.7, abs=0.05) and lines[1][0] == pytest.approx(97.3, abs=0.05)
+    assert lines[0][1] == pytest.approx(6e-6, rel=0.1) and lines[1][1] == pytest.approx(3e-5, rel=0.05)
+    assert rep["gap_after"]["rms_um"] < 1.1 * NOISE * 1e3
+    updated = (tmp_path / "out" / "model.updated.yaml").read_text(encoding="utf-8")
+    assert updated.count("vibration:") == 2
