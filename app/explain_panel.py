@@ -97,7 +97,9 @@ class ExplainPanel(QtWidgets.QWidget):
         self.run.setEnabled(True)
         self.save.setEnabled(True)
         self.view.setHtml((self.folder / "explain.html").read_text(encoding="utf-8"))
-        names = ", ".join(f["effect"] for f in report["found"]) or "nothing"
+        from pointspro.core.explain.workflow import found_name
+
+        names = ", ".join(found_name(f) for f in report["found"]) or "nothing"
         from pointspro.core.units import format_length
 
         self.log.emit(f"explain: {report['verdict']} — found {names}; gap RMS "

@@ -757,7 +757,9 @@ def cmd_explain(args) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     rep = explain(Path(args.measured), out, Path(args.model) if args.model else None,
                   Path(args.simulated) if args.simulated else None, bootstrap=args.bootstrap)
-    names = ", ".join(f["effect"] for f in rep["found"]) or "none"
+    from .explain.workflow import found_name
+
+    names = ", ".join(found_name(f) for f in rep["found"]) or "none"
     from .units import format_length
 
     print(f"{out}: verdict {rep['verdict']}; found {names}; gap {format_length(rep['gap_before']['rms_um'] * 1e-3, 4)}"

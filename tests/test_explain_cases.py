@@ -334,3 +334,11 @@ def test_two_vibration_lines_are_both_named(tmp_path):
     assert rep["gap_after"]["rms_um"] < 1.1 * NOISE * 1e3
     updated = (tmp_path / "out" / "model.updated.yaml").read_text(encoding="utf-8")
     assert updated.count("vibration:") == 2
+
+
+def test_a_vibration_is_named_with_its_frequency_on_the_command_line():
+    from pointspro.core.explain.workflow import found_name
+
+    assert found_name({"effect": "vibration", "params": {"frequency_hz": 61.7, "amplitude": 6e-6}}) \
+        == "vibration 61.7 Hz"
+    assert found_name({"effect": "spindle_axial", "params": {"a3": 1e-6}}) == "spindle_axial"

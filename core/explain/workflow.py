@@ -64,6 +64,13 @@ def _merge(effects: list[dict], name: str, params: dict) -> list[dict]:
     return out
 
 
+def found_name(f: dict) -> str:
+    """A found effect as a person names it: "vibration 61.7 Hz" (there may be several lines), else
+    the effect's name."""
+    hz = (f.get("params") or {}).get("frequency_hz") if f.get("effect") == "vibration" else None
+    return f"vibration {hz:.4g} Hz" if isinstance(hz, (int, float)) else str(f.get("effect"))
+
+
 def _view(name: str) -> str:
     return {"squareness": "radius", "straightness": "radius", "z_scale": "radius", "probe_radius": "radius",
             "spindle_tilt": "angle", "spindle_axial": "angle", "thermal_drift": "time",
