@@ -52,3 +52,18 @@ class single_threaded_blas:
                 else:
                     os.environ[k] = v
         return False
+
+
+def in_chunks(fn, n: int, size: int, threads: int | None = None) -> list:
+    """[fn(slice)] over consecutive slices of ``size`` of range(n), in order, on up to ``threads``
+    threads (default and ceiling: ``thread_count()``). For numpy work that releases the GIL (gathers,
+    partitions, einsum, ufuncs) where each slice writes its own part of an output or returns it: the
+    bits are those of one thread, whatever the thread count."""
+    slices = [slice(lo, min(lo + size, n)) for lo in range(0, n, size)]
+    threads = min(thread_count() if threads is None else min(threads, thread_count()), len(slices))
+    if threads <= 1:
+        return [fn(sl) for sl in slices]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(threads) as pool:
+        return list(pool.map(fn, slices))

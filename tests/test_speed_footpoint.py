@@ -193,3 +193,23 @@ def test_bounded_neighbour_query_finds_the_same_neighbours(kind):
     d = np.linalg.norm(xy[idx] - xy[:, None, :], axis=2)
     np.testing.assert_allclose(d, d_ref, rtol=0, atol=1e-12)  # the same neighbours (ties aside)
     assert np.mean(np.all(np.sort(idx, axis=1) == np.sort(i_ref, axis=1), axis=1)) > 0.999
+
+
+def test_leaf_order_query_keeps_the_tie_breaks_of_the_plain_order():
+    """_knn asks the points in the tree's leaf order (faster); on an exact raster, where the 16th
+    neighbour is one of 8 equidistant points, the answer is that of the same query in input order."""
+    from scipy.spatial import cKDTree
+
+    from pointspro.plugins.probe_radius import normals
+
+    g = np.arange(-150, 151) * 2.0
+    x, y = np.meshgrid(g, g)
+    xy = np.column_stack([x.ravel(), y.ravel()])
+    tree = cKDTree(xy)
+    d_sub, _ = tree.query(xy[:: len(xy) // normals._SAMPLE], k=16)
+    bound = 1.1 * float(np.quantile(d_sub[:, -1], 0.95))
+    d, ref = tree.query(xy, k=16, distance_upper_bound=bound)
+    again = ~np.isfinite(d[:, -1])
+    ref[again] = tree.query(xy[again], k=16)[1]
+    assert again.any() and not np.all(np.sort(ref, axis=1) == np.sort(tree.query(xy, k=16)[1], axis=1))
+    np.testing.assert_array_equal(_knn(tree, xy, 16, 2), ref)

@@ -481,8 +481,11 @@ def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layou
     data = None
     # pandas reads the file's bytes: not for UTF-16 (the numpy path reads the decoded text)
     if len(raw) > _FAST_BYTES and not cr_only and encoding in ("utf-8-sig", "latin-1"):
-        data = _fast_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
-                           lay.trailing_empty, encoding)
+        data = _arrow_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
+                            lay.trailing_empty, encoding, raw)
+        if data is None:
+            data = _fast_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
+                               lay.trailing_empty, encoding)
     # "1","2","3": numpy takes the quotes off when told to; looked for only when there are any
     quotechar = '"' if data is None and '"' in text else None
     try:
@@ -642,6 +645,54 @@ def _check_index(path, lines, first_data, cols: dict, names, rows, quote: bool =
 
 
 _FAST_BYTES = 4_000_000
+
+
+def _arrow_parse(path, first_data, delim, decimal_comma, comments, ncols, trailing_empty, encoding, raw):
+    """Arrow's CSV reader (pyarrow, which the CSV writer uses already) for the common export — one
+    comma, semicolon or tab between values, decimal points, no comment markers, UTF-8: no pandas
+    import (0.3 s of a batch process's start) and parsing on the process's threads (10⁶ rows 0.26 →
+    ~0.1 s). Its float parsing is correctly rounded (round trip of 17-digit values tested). Anything
+    else — comments, whitespace columns, decimal commas, a BOM on the first data line, a parse error,
+    an empty field, a blank line of spaces — returns None and pandas' or numpy's path runs, which
+    names the line and column at fault."""
+    if (comments is not None or delim is None or decimal_comma or encoding != "utf-8-sig"
+            or (first_data == 0 and raw.startswith(b"\xef\xbb\xbf"))):
+        return None
+    try:
+        import pyarrow.csv as pacsv
+    except ImportError:  # pragma: no cover - a dependency
+        return None
+    from ..parallel import thread_count
+
+    width = ncols + 1 if trailing_empty else ncols
+    names = [f"c{i}" for i in range(width)]
+    import pyarrow as pa
+
+    try:
+        table = pacsv.read_csv(
+            path,
+            read_options=pacsv.ReadOptions(skip_rows=first_data, column_names=names,
+                                           use_threads=thread_count() > 1),
+            parse_options=pacsv.ParseOptions(delimiter=delim, ignore_empty_lines=True),
+            convert_options=pacsv.ConvertOptions(column_types={c: pa.float64() for c in names},
+                                                 null_values=[""], strings_can_be_null=False))
+    except Exception:  # noqa: BLE001 - any failure: the other paths parse and diagnose
+        return None
+    cols = [table.column(i) for i in range(width)]
+    if trailing_empty:
+        if cols[-1].null_count != len(cols[-1]):
+            return None
+        cols = cols[:ncols]
+    if any(c.null_count for c in cols):
+        return None
+    data = np.empty((table.num_rows, ncols))
+    for i, c in enumerate(cols):  # from the chunks' value buffers: Arrow's to_numpy imports pandas
+        row = 0
+        for ch in c.chunks:
+            data[row:row + len(ch), i] = np.frombuffer(ch.buffers()[1], dtype=np.float64, count=len(ch),
+                                                       offset=8 * ch.offset)
+            row += len(ch)
+    return data if np.isfinite(data).all() else None
 
 
 def _fast_parse(path, first_data, delim, decimal_comma, comments, ncols, trailing_empty, encoding):

@@ -306,17 +306,9 @@ def _plane_loo(win: _Windows, d, w, full):
 def _in_chunks(fn, n, size=None):
     """[fn(slice)] over consecutive slices of ``size`` (CHUNK) points, on up to THREADS threads (numpy's gathers
     and arithmetic release the GIL); each slice writes its own part of an output or returns it."""
-    size = size or CHUNK
-    slices = [slice(lo, min(lo + size, n)) for lo in range(0, n, size)]
-    from pointspro.core.parallel import thread_count
+    from pointspro.core.parallel import in_chunks
 
-    threads = min(THREADS, thread_count(), len(slices))
-    if threads <= 1:
-        return [fn(sl) for sl in slices]
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(threads) as pool:
-        return list(pool.map(fn, slices))
+    return in_chunks(fn, n, size or CHUNK, THREADS)
 
 
 def _best_window_z(win: _Windows, fits: _CellFits, live, pos, d):

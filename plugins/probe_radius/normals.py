@@ -40,25 +40,31 @@ def residual_slopes(xy: np.ndarray, e: np.ndarray, k: int = 16) -> tuple[np.ndar
     6.8 s (issue 17), the same slopes to rounding (1e-14 relative)."""
     from scipy.spatial import cKDTree
 
-    from pointspro.core.parallel import thread_count
+    from pointspro.core.parallel import in_chunks, thread_count
 
     n = len(xy)
     k = int(min(k, n))
     idx = _knn(cKDTree(xy), xy, k, thread_count())
-    # rows in chunks: the (chunk, k) temporaries stay in cache instead of 128 MB arrays per operation
-    chunks = [slice(s, s + _CHUNK) for s in range(0, n, _CHUNK)]
+    # rows in chunks: the (chunk, k) temporaries stay in cache instead of 128 MB arrays per operation;
+    # the chunks on the process's threads (each writes its own rows: the bits of one thread)
     local = np.empty(n)
-    for c in chunks:
+
+    def medians(c):
         local[c] = _row_median(e[idx[c]])
+
+    in_chunks(medians, n, _CHUNK)
     dev = e - local
     sigma = 1.4826 * np.median(np.abs(dev))
     outlier = np.abs(dev) > 6.0 * sigma if sigma > 0 else np.zeros(n, dtype=bool)
     if outlier.any():
         e = np.where(outlier, local, e)
     v1x, v1y, b1, b2, inv_big, inv_small, fit_sd = (np.empty(n) for _ in range(7))
-    for c in chunks:
+
+    def planes(c):
         (v1x[c], v1y[c], b1[c], b2[c], inv_big[c], inv_small[c],
          fit_sd[c]) = _local_planes(xy[:, 0][idx[c]], xy[:, 1][idx[c]], e[idx[c]])
+
+    in_chunks(planes, n, _CHUNK)
     # noise of the local plane fits, then shrink what noise could make
     s2 = np.median(fit_sd) ** 2
 
