@@ -215,3 +215,46 @@ def test_bounded_query_keeps_its_tie_breaks():
     ref[again] = tree.query(xy[again], k=16)[1]
     assert again.any() and not np.all(np.sort(ref, axis=1) == np.sort(tree.query(xy, k=16)[1], axis=1))
     np.testing.assert_array_equal(_knn(tree, xy, 16, 2), ref)
+
+
+@pytest.mark.parametrize("name", list(SURFACES))
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_large_fit_started_from_its_subsample_reaches_the_same_minimum(monkeypatch, name, seed):
+    """Above 4 × PREFIT_POINTS points the pose fit starts from the fit of every k-th point (issue 17:
+    10⁶ points, LM's 5–7 whole evaluations → 2–3) and reaches the same minimum as from the starting
+    pose, to what LM's own convergence tests leave: it stops when a step gains less than 1e-10 of
+    the cost, so |J δ|² ≤ 1e-10 |r|², i.e. the residual to 1e-5 of its RMS (seen: ≤ 9e-7; 10⁶ raster
+    points 1e-7), and along a tilt/decenter valley the pose to 1e-9 of the part's size (seen: ≤ 2e-10,
+    55 pm on a 300 mm part) — in no more whole-cloud iterations. Patched to a small PREFIT_POINTS so
+    that 8,000 points take the path that 10⁶ take in the batch."""
+    from pointspro.core.geometry import posed_fit
+    from pointspro.plugins.misalignment import MisalignmentStep
+
+    surface, diameter, ball = SURFACES[name]
+    q = centres(surface, diameter, ball, seed, diameter / 100)
+    calls = []
+    orig = posed_fit.PosedSurfaceFit._prefit
+
+    def spy(self, x0):
+        out = orig(self, x0)
+        calls.append(not np.array_equal(out, x0))
+        return out
+
+    monkeypatch.setattr(posed_fit.PosedSurfaceFit, "_prefit", spy)
+    monkeypatch.setattr(posed_fit, "PREFIT_POINTS", 10**9)
+    whole = run(q, surface, ball)
+    mis_whole = MisalignmentStep().run(whole.cloud, MisalignmentStep.Params(dof=whole.report["parameters"]),
+                                       Context(surface=surface))
+    assert calls == [False, False]
+    monkeypatch.setattr(posed_fit, "PREFIT_POINTS", len(q) // 5)
+    pre = run(q, surface, ball)
+    mis_pre = MisalignmentStep().run(pre.cloud, MisalignmentStep.Params(dof=pre.report["parameters"]),
+                                     Context(surface=surface))
+    assert calls[2:] == [True, True]  # both fits started from their subsample's minimum
+    for a, b in ((whole, pre), (mis_whole, mis_pre)):
+        assert b.report["iterations"] <= a.report["iterations"]
+        np.testing.assert_allclose(b.cloud.xyz, a.cloud.xyz, rtol=0, atol=1e-9 * diameter)
+    r_w, r_p = whole.cloud["probe_residual"], pre.cloud["probe_residual"]
+    assert np.max(np.abs(r_p - r_w)) <= 1e-5 * np.sqrt(np.mean(r_w ** 2))
+    r_w, r_p = mis_whole.cloud["residual"], mis_pre.cloud["residual"]
+    assert np.max(np.abs(r_p - r_w)) <= 1e-5 * np.sqrt(np.mean(r_w ** 2))

@@ -37,6 +37,9 @@ ILL_POSED_CONDITION = 1e3
 DEGENERATE_CORRELATION = 0.999
 #: points per block of the vertical fit's model and Jacobian (2¹⁶: ~15 columns of 0.5 MB, in cache)
 CHUNK = 1 << 16
+#: a fit of more than 4× this many points starts from the fit of every k-th point (~this many): LM's
+#: first iterations walk from the starting pose to the minimum, and on 10⁶ points each costs 0.2 s
+PREFIT_POINTS = 50_000
 
 
 def dof_names_valid(names) -> list[str]:
@@ -262,6 +265,29 @@ class PosedSurfaceFit:
         return r, J
 
     # -- the fit ------------------------------------------------------------------------------------
+    def _prefit(self, x0: np.ndarray) -> np.ndarray:
+        """Where the whole fit starts: ``x0``, or for more than 4 × PREFIT_POINTS points the minimum
+        of the same fit on every k-th point (an even spread of ~PREFIT_POINTS, as rows come: rasters,
+        spirals and stars alike). The whole fit then runs its own iterations to its own convergence
+        tests from there — the same minimum, reached in 2–3 evaluations of all points instead of 5–7
+        (10⁶ raster points: probe_radius's fit 1.0 → ~0.5 s). Any trouble on the subsample (no
+        convergence, a point outside the conic's domain) leaves ``x0``: the whole fit then meets it
+        and says so."""
+        n = len(self.q)
+        if n <= 4 * PREFIT_POINTS:
+            return x0
+        sub = PosedSurfaceFit(self.surface0, self.q[:: n // PREFIT_POINTS], self.free, self.initial,
+                              self.residual, self.offset, self.max_iter, self.check)
+        try:
+            if self.residual == "vertical":
+                res = levenberg_marquardt_normal(sub.normal_equations, x0, max_iter=self.max_iter,
+                                                 check=self.check)
+            else:
+                res = levenberg_marquardt(sub.model, x0, max_iter=self.max_iter, check=self.check)
+        except DomainError:
+            return x0
+        return res.x if res.converged and np.all(np.isfinite(res.x)) else x0
+
     def fit(self) -> PosedFitResult:
         n, k = len(self.q), len(self.free)
         if n <= k:
@@ -291,6 +317,7 @@ class PosedSurfaceFit:
                 pass
         for name in self.free:
             x0.append(start[name] if name in POSE_DOF else self._design_value(self.surface0, name))
+        x0 = self._prefit(np.array(x0))
         try:
             if self.residual == "vertical":  # JᵀJ, Jᵀr accumulated by blocks: no N × p Jacobian held
                 res = levenberg_marquardt_normal(self.normal_equations, np.array(x0), max_iter=self.max_iter,
