@@ -64,3 +64,13 @@ def test_bad_rows_in_big_files_are_still_named(tmp_path, monkeypatch, body, wher
     p.write_text("x,y,z\n" + body, encoding="utf-8")
     with pytest.raises(InputError, match=where):
         read_cloud(p)
+
+
+def test_quotes_in_a_preamble_do_not_make_pandas_skip_a_data_row(tmp_path, monkeypatch):
+    """pandas counts the lines it skips as CSV rows, a quote joining lines: two '"q' lines before the
+    data made it skip the first data row without a word (a review). With a blank line of spaces in
+    the data (Arrow declines) the file now goes to numpy's reader: both rows."""
+    p = tmp_path / "q.csv"
+    p.write_bytes(b'"q\n"q\n1,2,3\n \n4,5,6\n')
+    monkeypatch.setattr(text, "_FAST_BYTES", 0)
+    assert read_cloud(p).xyz.tolist() == [[1, 2, 3], [4, 5, 6]]

@@ -258,3 +258,30 @@ def test_a_large_fit_started_from_its_subsample_reaches_the_same_minimum(monkeyp
     assert np.max(np.abs(r_p - r_w)) <= 1e-5 * np.sqrt(np.mean(r_w ** 2))
     r_w, r_p = mis_whole.cloud["residual"], mis_pre.cloud["residual"]
     assert np.max(np.abs(r_p - r_w)) <= 1e-5 * np.sqrt(np.mean(r_w ** 2))
+
+
+def test_a_pre_fit_pose_outside_the_conics_domain_falls_back_to_the_start(monkeypatch):
+    """A point not in the subsample can lie outside the conic's domain at the subsample's pose (an
+    edge point of a decentred sphere, a review): the whole fit then starts from the starting pose as
+    without the pre-fit and says what it said — not "at the starting pose", which the user never gave."""
+    from pointspro.core.errors import StepError
+    from pointspro.core.geometry import posed_fit
+    from pointspro.plugins.misalignment import MisalignmentStep
+
+    sph = EvenAsphere(1 / 100.0, 0.0, None, 200)
+    g = np.arange(-95, 95.01, 1.5)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    keep = np.hypot(x, y) <= 95
+    x, y = x[keep], y[keep]
+    q = np.column_stack([x + 0.5, y, sph.sag(x, y) + np.random.default_rng(0).normal(0, 1e-4, len(x))])
+    edge = [[-99.8, 0.0, float(sph.sag(np.array([99.8]), np.array([0.0]))[0])]]
+    q = np.vstack([q[:1001], edge, q[1001:]])  # row 1001: not in the every-25th subsample
+    messages = []
+    for points in (10**9, 500):
+        monkeypatch.setattr(posed_fit, "PREFIT_POINTS", points)
+        with pytest.raises(StepError) as e:
+            MisalignmentStep().run(PointCloud(q), MisalignmentStep.Params(dof=["dx", "dy", "dz"],
+                                                                          exclude_beyond=None),
+                                   Context(surface=sph))
+        messages.append(str(e.value))
+    assert messages[1] == messages[0] and "starting pose" not in messages[1]

@@ -317,15 +317,25 @@ class PosedSurfaceFit:
                 pass
         for name in self.free:
             x0.append(start[name] if name in POSE_DOF else self._design_value(self.surface0, name))
-        x0 = self._prefit(np.array(x0))
-        try:
-            if self.residual == "vertical":  # JᵀJ, Jᵀr accumulated by blocks: no N × p Jacobian held
-                res = levenberg_marquardt_normal(self.normal_equations, np.array(x0), max_iter=self.max_iter,
-                                                 check=self.check)
-            else:
-                res = levenberg_marquardt(self.model, np.array(x0), max_iter=self.max_iter, check=self.check)
-        except DomainError as e:
-            raise StepError(f"at the starting pose: {e}") from None
+        x0 = np.array(x0)
+        starts = [self._prefit(x0)]
+        if starts[0] is not x0:
+            # a point left out of the subsample may lie outside the conic's domain at the subsample's
+            # pose (a review: an edge point of a decentred sphere): then the whole fit starts as before
+            starts.append(x0)
+        for i, x_start in enumerate(starts):
+            self._shift, self._best = None, (np.inf, None, None)
+            try:
+                if self.residual == "vertical":  # JᵀJ, Jᵀr accumulated by blocks: no N × p Jacobian held
+                    res = levenberg_marquardt_normal(self.normal_equations, np.array(x_start),
+                                                     max_iter=self.max_iter, check=self.check)
+                else:
+                    res = levenberg_marquardt(self.model, np.array(x_start), max_iter=self.max_iter,
+                                              check=self.check)
+                break
+            except DomainError as e:
+                if i == len(starts) - 1:
+                    raise StepError(f"at the starting pose: {e}") from None
         vals, surf = self._unpack(res.x)
         cov, cond = res.covariance()
         if not res.converged and cond > ILL_POSED_CONDITION:

@@ -483,7 +483,9 @@ def _parse_numbers(path, raw: bytes, text: str, lines: "_LazyLines", lay: _Layou
     if len(raw) > _FAST_BYTES and not cr_only and encoding in ("utf-8-sig", "latin-1"):
         data = _arrow_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
                             lay.trailing_empty, encoding, raw)
-        if data is None:
+        # pandas counts skipped lines as CSV rows, a quote joining lines: a preamble with quotes
+        # ('"q' twice) made it skip a data row, silently (a review); numpy's path reads such files
+        if data is None and '"' not in text[:lines.offset(lay.first_data)]:
             data = _fast_parse(path, lay.first_data, lay.delim, lay.decimal_comma, comments, lay.ncols,
                                lay.trailing_empty, encoding)
     # "1","2","3": numpy takes the quotes off when told to; looked for only when there are any
