@@ -22,6 +22,10 @@ that order as much as a vibration — and is reported ambiguous with one.
 Noise: σ from second differences along the scan, σ = 1.4826·MAD(Δ²g)/√6, which a smooth gap does not
 inflate but a strong vibration does; it is therefore estimated again on the residual once the found
 effects are removed, and the selection repeated with it (its ties depend on σ) until it settles.
+Correlated noise: the tests above assume white noise; when the residual is correlated along the scan
+(lag-1 autocorrelation above RHO_GATE), each chosen effect is tested again on data whitened for AR(1)
+noise of that correlation (Prais–Winsten: generalised least squares) and dropped if it no longer
+enters (_ar1_gate).
 At the end: VIF of every chosen column, a χ² test of the residual against σ, the lag-1
 autocorrelation of the residual along the scan (whiteness), regions where the residual's local mean
 is significant, and a block bootstrap of the selection (stability of each choice).
@@ -51,6 +55,9 @@ SHAPE_RATIO = 1.3
 MAX_VIBRATION_LINES = 3
 #: the σ re-estimated on the residual replaces the gap's when it differs by more than this share
 SIGMA_SETTLED = 0.05
+#: the residual's lag-1 autocorrelation along the scan above which (and above 4/√N, its white-noise
+#: spread ×4) the chosen effects are tested again with the noise taken as AR(1) (_ar1_gate)
+RHO_GATE = 0.2
 
 
 def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells: int = 24
@@ -743,13 +750,92 @@ def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int
             break
         sigma = s_new
         s = forward_search(_start(ctx, g, order, groups, D), sigma, max_effects)
+    _, dropped = _ar1_gate(s, order)
+    for _ in range(3):  # ρ̂ again on what is left once effects were dropped: their fits had taken some
+        if not dropped or not s.stages:
+            break
+        _, more = _ar1_gate(s, order)
+        if not more:
+            break
+        dropped += more
     found, resid = _fitted_effects(s) if s.stages else ([], s.resid)
     checks = residual_checks(resid, sigma, order, len(s.cols))
+    checks["dropped_under_correlated_noise"] = dropped
     stability = {}
     if s.stages and bootstrap > 0:
         stability = _bootstrap(ctx, g - resid, resid, s.effects, bootstrap, seed, max_effects)
     return {"sigma": sigma, "sigma_gap": sigma_gap, "found": found, "residual": resid, **checks,
             "unobservable": unobservable, "stability": stability, "order": order}
+
+
+def _effect_key(st) -> str:
+    """One entry of the report: an effect with all its harmonics, or one vibration line."""
+    return st.candidate if st.effect == "vibration" else st.effect
+
+
+def prais_winsten(X: np.ndarray, order: np.ndarray, rho: float) -> np.ndarray:
+    """Rows of X (or a vector) in scan order, whitened for AR(1) noise of lag-1 correlation ρ
+    (Prais & Winsten 1954): x̃₀ = √(1 − ρ²)·x₀, x̃ᵢ = xᵢ − ρ·xᵢ₋₁. Least squares on whitened data is
+    generalised least squares under that noise: its F tests hold their α again."""
+    Xs = np.asarray(X, dtype=np.float64)[order]
+    W = np.empty_like(Xs)
+    W[0] = np.sqrt(1.0 - rho * rho) * Xs[0]
+    W[1:] = Xs[1:] - rho * Xs[:-1]
+    return W
+
+
+def _ar1_gate(s: _Search, order: np.ndarray) -> tuple[float, list[str]]:
+    """The selection's F tests and ΔBIC assume white noise. Noise correlated along the scan (a probe's
+    or an interferometer's: lag-1 autocorrelation 0.5) has a red spectrum, and its slow part reads as
+    an effect: on pure AR(1) noise of ρ = 0.5, 15 of 40 gaps named one (a vibration at a low line,
+    mostly). When the residual left by the chosen effects is correlated (lag-1 autocorrelation ρ̂ >
+    RHO_GATE and > 4/√N), every chosen effect (all its harmonics; each vibration line) is tested again
+    beside the others on data and columns whitened for AR(1) noise of that ρ̂ (prais_winsten): an
+    effect that is then not significant (Bonferroni over its stage's family, as it entered) or not
+    strong (ΔBIC ≥ −10) is dropped. Effects the gap holds well above the noise stay (their F falls by
+    about (1 − ρ)/(1 + ρ) at most); on white noise ρ̂ stays below the gate and nothing changes.
+    Returns ρ̂ and the dropped effects' names."""
+    N = s.g.size
+    r = s.resid[order]
+    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if N > 3 and np.std(r) > 0 else 0.0
+    if not s.stages or not (rho > max(RHO_GATE, 4.0 / np.sqrt(N))) or rho >= 1.0:
+        return rho, []
+    piston = list(s.D.index["_piston"])
+    keys = list(dict.fromkeys(_effect_key(st) for st in s.stages))
+    cols_of = {k: [c for st in s.stages if _effect_key(st) == k for c in s.D.index[st.candidate]] for k in keys}
+    allc = piston + [c for k in keys for c in cols_of[k]]
+    s.D.ensure(allc)
+    Xw = prais_winsten(s.D.X(allc), order, rho)
+    gw = prais_winsten(s.g, order, rho)
+    at = {c: j for j, c in enumerate(allc)}
+
+    def ssr(cols):
+        A = Xw[:, [at[c] for c in cols]]
+        beta = np.linalg.lstsq(A, gw, rcond=1e-12)[0]
+        e = gw - A @ beta
+        return max(float(e @ e), 1e-300)
+
+    full = ssr(allc)
+    dof = N - len(allc)
+    dropped = []
+    for k in keys:
+        pe = len(cols_of[k])
+        without = ssr([c for c in allc if c not in set(cols_of[k])])
+        F = ((without - full) / pe) / (full / dof) if dof > 0 else 0.0
+        p = float(special.fdtrc(pe, dof, F)) if dof > 0 and F > 0 else 1.0
+        dbic = N * np.log(full / without) + pe * np.log(N)
+        m = max(st.n_candidates * (getattr(s.by_name[st.candidate], "n_search", N / 2)
+                                   if st.effect == "vibration" else 1)
+                for st in s.stages if _effect_key(st) == k)
+        if not (significant(p, m) and dbic < BIC_STRONG):
+            dropped.append(k)
+    if dropped:
+        s.stages = [st for st in s.stages if _effect_key(st) not in dropped]
+        s.cols = piston + [c for st in s.stages for c in s.D.index[st.candidate]]
+        s.D.ensure(s.cols)
+        s.ssr, _ = s.D.ssr(s.cols)
+        s.resid = s.D.resid(s.cols)
+    return rho, [s.by_name[k].effect if k in s.by_name else k for k in dropped]
 
 
 def _bootstrap(ctx, fitted, resid, names, B, seed, max_effects) -> dict:
