@@ -765,6 +765,8 @@ def cmd_explain(args) -> int:
     print(f"{out}: verdict {rep['verdict']}; found {names}; gap {format_length(rep['gap_before']['rms_um'] * 1e-3, 4)}"
           f" → {format_length(rep['gap_after']['rms_um'] * 1e-3, 4)} RMS "
           f"(noise {format_length(rep['noise_um'] * 1e-3, 3)})")
+    if rep["unexplained"].get("note"):
+        print(f"  note: {rep['unexplained']['note']}")
     return EXIT_OK
 
 

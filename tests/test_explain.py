@@ -109,6 +109,31 @@ def test_a_local_bump_is_unexplained_and_located(tmp_path):
     assert reg["mean_um"] > 0
 
 
+def test_correlated_noise_names_nothing_and_says_why_it_reads_as_structure(tmp_path):
+    """A gap of AR(1) noise (ρ = 0.6, the probe's white noise set to zero): no effect is named (two
+    vibration lines and a spindle harmonic were, by the white-noise tests), and the report says the
+    residual is correlated and that its σ and regions assume white noise — not just "unexplained"."""
+    from scipy.signal import lfilter
+
+    m = model(BASE_EFFECTS).model_copy(update={"probe": model(BASE_EFFECTS).probe.model_copy(
+        update={"noise": 0.0})})
+
+    def ar1(sim):
+        order = np.argsort(sim["t"], kind="stable")
+        e = lfilter([1.0], [1.0, -0.6], np.random.default_rng(5).normal(0, NOISE * 0.8, order.size))
+        out = np.empty(order.size)
+        out[order] = e
+        return out
+
+    rep = run(tmp_path, m, m, extra=ar1)
+    assert rep["found"] == [] and rep["verdict"] == "unexplained"
+    assert rep["checks"]["residual_lag1_autocorrelation"] > 0.5
+    assert "correlated along the scan" in rep["unexplained"]["note"]
+    assert rep["checks"]["dropped_under_correlated_noise"]
+    html = (tmp_path / "out" / "explain.html").read_text(encoding="utf-8")
+    assert "correlated along the scan" in html
+
+
 def test_two_hidden_effects_are_both_found(tmp_path):
     hidden = [{"spindle_tilt": {"a2_arcsec": 0.3}},
               {"vibration": {"frequency_hz": 61.0, "amplitude": 8e-6}}]
