@@ -74,3 +74,14 @@ def test_quotes_in_a_preamble_do_not_make_pandas_skip_a_data_row(tmp_path, monke
     p.write_bytes(b'"q\n"q\n1,2,3\n \n4,5,6\n')
     monkeypatch.setattr(text, "_FAST_BYTES", 0)
     assert read_cloud(p).xyz.tolist() == [[1, 2, 3], [4, 5, 6]]
+
+
+@pytest.mark.parametrize("body, where", [('x,y,z\n "1",2,3\n4,5,6\n', "line 2, column 1"),
+                                         ('x;y;z\n1;2;3\n4; "5";6\n', "line 3, column 2")])
+def test_a_space_before_an_opening_quote_is_named(tmp_path, body, where):
+    """numpy's reader takes a quote only at the start of a field: ' "1"' failed with "could not parse
+    the numeric data", naming no line (a review)."""
+    p = tmp_path / "q.csv"
+    p.write_text(body, encoding="utf-8")
+    with pytest.raises(InputError, match=where + r": ' \"\d\"' has a space before its opening quote"):
+        read_cloud(p)

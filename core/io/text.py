@@ -829,7 +829,12 @@ def _diagnose(path, lines, first_data, delim, decimal_comma, ncols, trailing_emp
         if len(toks) != ncols:
             raise InputError(f"{path}, line {i + 1}: {len(toks)} column(s), expected {ncols} "
                              f"as on line {first_data + 1}")
+        raw = line.split(delim) if delim else None
         for j, t in enumerate(toks):
+            if raw is not None and j < len(raw) and t.startswith('"') and not raw[j].startswith('"'):
+                # numpy's reader takes a quote only at the start of a field (pandas' after spaces too)
+                raise InputError(f"{path}, line {i + 1}, column {j + 1}: {_q(raw[j], quote)}has a space "
+                                 "before its opening quote — write the quote first (\"1.5\") or no quotes")
             if not _is_number(t, decimal_comma):
                 hint = (" (a decimal comma where the rows above have none — write every number "
                         "one way)"
