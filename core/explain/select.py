@@ -23,9 +23,9 @@ Noise: σ from second differences along the scan, σ = 1.4826·MAD(Δ²g)/√6, 
 inflate but a strong vibration does; it is therefore estimated again on the residual once the found
 effects are removed, and the selection repeated with it (its ties depend on σ) until it settles.
 Correlated noise: the tests above assume white noise; when the residual is correlated along the scan
-(lag-1 autocorrelation above RHO_GATE), each chosen effect is tested again on data whitened for AR(1)
-noise of that correlation (Prais–Winsten: generalised least squares) and dropped if it no longer
-enters (_ar1_gate).
+(|lag-1 autocorrelation| above RHO_GATE), each chosen effect is tested again on data whitened for the
+residual's AR(3) model (Cochrane–Orcutt: generalised least squares), and the least supported of those
+that no longer enter is dropped, one at a time (_ar1_gate).
 At the end: VIF of every chosen column, a χ² test of the residual against σ, the lag-1
 autocorrelation of the residual along the scan (whiteness), regions where the residual's local mean
 is significant, and a block bootstrap of the selection (stability of each choice).
@@ -55,8 +55,8 @@ SHAPE_RATIO = 1.3
 MAX_VIBRATION_LINES = 3
 #: the σ re-estimated on the residual replaces the gap's when it differs by more than this share
 SIGMA_SETTLED = 0.05
-#: the residual's lag-1 autocorrelation along the scan above which (and above 4/√N, its white-noise
-#: spread ×4) the chosen effects are tested again with the noise taken as AR(1) (_ar1_gate)
+#: the residual's lag-1 autocorrelation along the scan beyond which (either sign, and beyond 4/√N, its
+#: white-noise spread ×4) the chosen effects are tested again under the residual's AR noise (_ar1_gate)
 RHO_GATE = 0.2
 
 
@@ -751,13 +751,6 @@ def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int
         sigma = s_new
         s = forward_search(_start(ctx, g, order, groups, D), sigma, max_effects)
     _, dropped = _ar1_gate(s, order)
-    for _ in range(3):  # ρ̂ again on what is left once effects were dropped: their fits had taken some
-        if not dropped or not s.stages:
-            break
-        _, more = _ar1_gate(s, order)
-        if not more:
-            break
-        dropped += more
     found, resid = _fitted_effects(s) if s.stages else ([], s.resid)
     checks = residual_checks(resid, sigma, order, len(s.cols))
     checks["dropped_under_correlated_noise"] = dropped
@@ -773,69 +766,100 @@ def _effect_key(st) -> str:
     return st.candidate if st.effect == "vibration" else st.effect
 
 
-def prais_winsten(X: np.ndarray, order: np.ndarray, rho: float) -> np.ndarray:
-    """Rows of X (or a vector) in scan order, whitened for AR(1) noise of lag-1 correlation ρ
-    (Prais & Winsten 1954): x̃₀ = √(1 − ρ²)·x₀, x̃ᵢ = xᵢ − ρ·xᵢ₋₁. Least squares on whitened data is
-    generalised least squares under that noise: its F tests hold their α again."""
+#: terms of the autoregressive model of the noise, fitted to the residual (Yule–Walker): one is a
+#: probe's or an interferometer's lag (AR(1)); three follow flicker-like (1/f) noise closely enough
+#: for the tests to hold their rate on it (a review: 1/f noise named an effect in 8–26 of 40 gaps
+#: whitened by AR(1), CHANGELOG) and change nothing on AR(1) noise (the extra terms fit ~0)
+AR_ORDER = 3
+
+
+def ar_coefficients(r: np.ndarray, p: int = AR_ORDER) -> np.ndarray:
+    """φ₁…φ_p of an AR(p) model of the series r (Yule–Walker: the Toeplitz system of its
+    autocovariances, whose solution is always a stationary model)."""
+    from scipy.linalg import solve_toeplitz
+
+    r = r - r.mean()
+    n = r.size
+    acov = np.array([r[: n - k] @ r[k:] for k in range(p + 1)]) / n
+    if not acov[0] > 0:
+        return np.zeros(p)
+    return solve_toeplitz(acov[:p], acov[1: p + 1])
+
+
+def whiten(X: np.ndarray, order: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Rows of X (or a vector) in scan order, whitened for AR(p) noise of coefficients φ (Cochrane &
+    Orcutt 1949): x̃ᵢ = xᵢ − Σ φ_k·xᵢ₋ₖ for i ≥ p. Least squares on whitened data is generalised
+    least squares under that noise: its F tests hold their α again."""
     Xs = np.asarray(X, dtype=np.float64)[order]
-    W = np.empty_like(Xs)
-    W[0] = np.sqrt(1.0 - rho * rho) * Xs[0]
-    W[1:] = Xs[1:] - rho * Xs[:-1]
+    p = phi.size
+    W = Xs[p:].copy()
+    for k in range(1, p + 1):
+        W -= phi[k - 1] * Xs[p - k: Xs.shape[0] - k]
     return W
 
 
 def _ar1_gate(s: _Search, order: np.ndarray) -> tuple[float, list[str]]:
     """The selection's F tests and ΔBIC assume white noise. Noise correlated along the scan (a probe's
-    or an interferometer's: lag-1 autocorrelation 0.5) has a red spectrum, and its slow part reads as
-    an effect: on pure AR(1) noise of ρ = 0.5, 15 of 40 gaps named one (a vibration at a low line,
-    mostly). When the residual left by the chosen effects is correlated (lag-1 autocorrelation ρ̂ >
-    RHO_GATE and > 4/√N), every chosen effect (all its harmonics; each vibration line) is tested again
-    beside the others on data and columns whitened for AR(1) noise of that ρ̂ (prais_winsten): an
-    effect that is then not significant (Bonferroni over its stage's family, as it entered) or not
-    strong (ΔBIC ≥ −10) is dropped. Effects the gap holds well above the noise stay (their F falls by
-    about (1 − ρ)/(1 + ρ) at most); on white noise ρ̂ stays below the gate and nothing changes.
-    Returns ρ̂ and the dropped effects' names."""
+    or an interferometer's lag, flicker) has a coloured spectrum, and its slow part reads as effects:
+    on pure AR(1) noise of ρ = 0.5, 15 of 40 spiral gaps named one (a low "vibration" mostly). When
+    the residual left by the chosen effects is correlated (|lag-1 autocorrelation| ρ̂ > RHO_GATE and
+    > 4/√N), every chosen effect (all its harmonics; each vibration line) is tested again beside the
+    others on data and columns whitened for the residual's AR(AR_ORDER) model (whiten), and the
+    least supported of those that no longer enter (Bonferroni over its stage's family, as it entered;
+    ΔBIC < −10) is dropped — one at a time, the others tested again after each drop, with ρ̂ and the
+    model fitted again on what is left (a review: dropping every failing effect at once lost a true
+    squareness beside a spurious look-alike, each failing only beside the other). Effects the gap
+    holds well above the noise stay; on white noise ρ̂ stays below the gate and nothing changes.
+    Returns the last ρ̂ and the dropped effects' names."""
     N = s.g.size
-    r = s.resid[order]
-    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if N > 3 and np.std(r) > 0 else 0.0
-    if not s.stages or not (rho > max(RHO_GATE, 4.0 / np.sqrt(N))) or rho >= 1.0:
-        return rho, []
     piston = list(s.D.index["_piston"])
-    keys = list(dict.fromkeys(_effect_key(st) for st in s.stages))
-    cols_of = {k: [c for st in s.stages if _effect_key(st) == k for c in s.D.index[st.candidate]] for k in keys}
-    allc = piston + [c for k in keys for c in cols_of[k]]
-    s.D.ensure(allc)
-    Xw = prais_winsten(s.D.X(allc), order, rho)
-    gw = prais_winsten(s.g, order, rho)
-    at = {c: j for j, c in enumerate(allc)}
+    dropped: list[str] = []
+    rho = 0.0
+    while s.stages:
+        r = s.resid[order]
+        rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if N > 3 and np.std(r) > 0 else 0.0
+        if not (abs(rho) > max(RHO_GATE, 4.0 / np.sqrt(N))) or N <= 4 * AR_ORDER + len(s.cols):
+            break
+        phi = ar_coefficients(r, AR_ORDER)
+        keys = list(dict.fromkeys(_effect_key(st) for st in s.stages))
+        cols_of = {k: [c for st in s.stages if _effect_key(st) == k for c in s.D.index[st.candidate]] for k in keys}
+        allc = piston + [c for k in keys for c in cols_of[k]]
+        s.D.ensure(allc)
+        Xw = whiten(s.D.X(allc), order, phi)
+        gw = whiten(s.g, order, phi)
+        at = {c: j for j, c in enumerate(allc)}
+        n = gw.size
 
-    def ssr(cols):
-        A = Xw[:, [at[c] for c in cols]]
-        beta = np.linalg.lstsq(A, gw, rcond=1e-12)[0]
-        e = gw - A @ beta
-        return max(float(e @ e), 1e-300)
+        def ssr(cols):
+            A = Xw[:, [at[c] for c in cols]]
+            e = gw - A @ np.linalg.lstsq(A, gw, rcond=1e-12)[0]
+            return max(float(e @ e), 1e-300)
 
-    full = ssr(allc)
-    dof = N - len(allc)
-    dropped = []
-    for k in keys:
-        pe = len(cols_of[k])
-        without = ssr([c for c in allc if c not in set(cols_of[k])])
-        F = ((without - full) / pe) / (full / dof) if dof > 0 else 0.0
-        p = float(special.fdtrc(pe, dof, F)) if dof > 0 and F > 0 else 1.0
-        dbic = N * np.log(full / without) + pe * np.log(N)
-        m = max(st.n_candidates * (getattr(s.by_name[st.candidate], "n_search", N / 2)
-                                   if st.effect == "vibration" else 1)
-                for st in s.stages if _effect_key(st) == k)
-        if not (significant(p, m) and dbic < BIC_STRONG):
-            dropped.append(k)
-    if dropped:
-        s.stages = [st for st in s.stages if _effect_key(st) not in dropped]
+        full = ssr(allc)
+        dof = n - len(allc)
+        worst, worst_score = None, 0.0
+        for k in keys:
+            pe = len(cols_of[k])
+            without = ssr([c for c in allc if c not in set(cols_of[k])])
+            F = ((without - full) / pe) / (full / dof) if dof > 0 else 0.0
+            p = float(special.fdtrc(pe, dof, F)) if dof > 0 and F > 0 else 1.0
+            dbic = n * np.log(full / without) + pe * np.log(n)
+            m = max(st.n_candidates * (getattr(s.by_name[st.candidate], "n_search", N / 2)
+                                       if st.effect == "vibration" else 1)
+                    for st in s.stages if _effect_key(st) == k)
+            if not (significant(p, m) and dbic < BIC_STRONG):
+                score = p * m / ALPHA + max(dbic - BIC_STRONG, 0.0)  # how far from entering
+                if worst is None or score > worst_score:
+                    worst, worst_score = k, score
+        if worst is None:
+            break
+        dropped.append(s.by_name[worst].effect if worst in s.by_name else worst)
+        s.stages = [st for st in s.stages if _effect_key(st) != worst]
         s.cols = piston + [c for st in s.stages for c in s.D.index[st.candidate]]
         s.D.ensure(s.cols)
         s.ssr, _ = s.D.ssr(s.cols)
         s.resid = s.D.resid(s.cols)
-    return rho, [s.by_name[k].effect if k in s.by_name else k for k in dropped]
+    return rho, dropped
 
 
 def _bootstrap(ctx, fitted, resid, names, B, seed, max_effects) -> dict:
