@@ -156,7 +156,15 @@ def test_a_true_effect_beside_a_look_alike_survives_the_gate(monkeypatch):
         w[0] = rng.normal(0.0, NOISE)
         e = np.empty(sq.size)
         e[np.argsort(ctx.t, kind="stable")] = lfilter([1.0], [1.0, -0.8], w)
-        return [f["effect"] for f in S.select(ctx, 8.0 * NOISE * sq + e, bootstrap=0)["found"]]
+        g = 8.0 * NOISE * sq + e
+        found = S.select(ctx, g, bootstrap=0)["found"]
+        # each stage's evidence is stated against the stages kept before it (after a drop too)
+        stages = sorted((st for f in found for st in f["stages"]), key=lambda st: -st.ssr_before)
+        ssr = float(np.sum((g - g.mean()) ** 2))
+        for st in stages:
+            assert st.ssr_before == pytest.approx(ssr, rel=1e-9)
+            ssr = st.ssr_after
+        return [f["effect"] for f in found]
 
     seeds = range(9000, 9012)
     gated = [names(s) for s in seeds]

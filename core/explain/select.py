@@ -618,7 +618,13 @@ def _refine(s: _Search, sigma: float) -> None:
                               "ssr_excess": float(c.ssr - named.ssr), "candidate": c.effect}
                              for c in tie if s.by_name[c.effect].effect != gr.effect] + kept
         st.candidate, st.effect, st.harmonic = gr.name, gr.effect, gr.harmonic
-    cols = piston
+    _restate_evidence(s)
+
+
+def _restate_evidence(s: _Search) -> None:
+    """Each stage's evidence (F, p, ΔBIC against the stages before it) computed again in their order,
+    and the fit on them all — after _refine swapped a choice, or _ar1_gate dropped a stage."""
+    cols = list(s.D.index["_piston"])
     ssr = s.D.ssr(cols)[0]
     for st in s.stages:
         c = candidate(s.D, cols, s.by_name[st.candidate], ssr, st.n_candidates)
@@ -855,10 +861,7 @@ def _ar1_gate(s: _Search, order: np.ndarray) -> tuple[float, list[str]]:
             break
         dropped.append(s.by_name[worst].effect if worst in s.by_name else worst)
         s.stages = [st for st in s.stages if _effect_key(st) != worst]
-        s.cols = piston + [c for st in s.stages for c in s.D.index[st.candidate]]
-        s.D.ensure(s.cols)
-        s.ssr, _ = s.D.ssr(s.cols)
-        s.resid = s.D.resid(s.cols)
+        _restate_evidence(s)  # the stages left: their evidence without the dropped one
     return rho, dropped
 
 
