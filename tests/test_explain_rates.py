@@ -109,7 +109,7 @@ def test_correlated_noise_alone_names_no_effect(scan, monkeypatch):
     """Noise correlated along the scan (AR(1), ρ = 0.5: a probe's or an interferometer's) has a red
     spectrum, and the white-noise tests named an effect — a low "vibration" mostly — in 15–17 of 40
     such gaps. Each named effect is now tested again on data whitened for the residual's own AR(1)
-    correlation (select._ar1_gate): at most the binomial bound at α over 40 seeds. Without the gate
+    correlation (select._correlated_noise_gate): at most the binomial bound at α over 40 seeds. Without the gate
     the same seeds exceed it (the test can fail)."""
     ctx = scan_context(SCANS[scan])
     seeds = range(40)

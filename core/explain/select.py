@@ -25,7 +25,7 @@ effects are removed, and the selection repeated with it (its ties depend on σ) 
 Correlated noise: the tests above assume white noise; when the residual is correlated along the scan
 (|lag-1 autocorrelation| above RHO_GATE), each chosen effect is tested again on data whitened for the
 residual's AR(3) model (Cochrane–Orcutt: generalised least squares), and the least supported of those
-that no longer enter is dropped, one at a time (_ar1_gate).
+that no longer enter is dropped, one at a time (_correlated_noise_gate).
 At the end: VIF of every chosen column, a χ² test of the residual against σ, the lag-1
 autocorrelation of the residual along the scan (whiteness), regions where the residual's local mean
 is significant, and a block bootstrap of the selection (stability of each choice).
@@ -56,7 +56,7 @@ MAX_VIBRATION_LINES = 3
 #: the σ re-estimated on the residual replaces the gap's when it differs by more than this share
 SIGMA_SETTLED = 0.05
 #: the residual's lag-1 autocorrelation along the scan beyond which (either sign, and beyond 4/√N, its
-#: white-noise spread ×4) the chosen effects are tested again under the residual's AR noise (_ar1_gate)
+#: white-noise spread ×4) the chosen effects are tested again under the residual's AR noise (_correlated_noise_gate)
 RHO_GATE = 0.2
 
 
@@ -623,7 +623,7 @@ def _refine(s: _Search, sigma: float) -> None:
 
 def _restate_evidence(s: _Search) -> None:
     """Each stage's evidence (F, p, ΔBIC against the stages before it) computed again in their order,
-    and the fit on them all — after _refine swapped a choice, or _ar1_gate dropped a stage."""
+    and the fit on them all — after _refine swapped a choice, or _correlated_noise_gate dropped a stage."""
     cols = list(s.D.index["_piston"])
     ssr = s.D.ssr(cols)[0]
     for st in s.stages:
@@ -756,7 +756,7 @@ def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int
             break
         sigma = s_new
         s = forward_search(_start(ctx, g, order, groups, D), sigma, max_effects)
-    _, dropped = _ar1_gate(s, order)
+    _, dropped = _correlated_noise_gate(s, order)
     found, resid = _fitted_effects(s) if s.stages else ([], s.resid)
     checks = residual_checks(resid, sigma, order, len(s.cols))
     checks["dropped_under_correlated_noise"] = dropped
@@ -773,9 +773,10 @@ def _effect_key(st) -> str:
 
 
 #: terms of the autoregressive model of the noise, fitted to the residual (Yule–Walker): one is a
-#: probe's or an interferometer's lag (AR(1)); three follow flicker-like (1/f) noise closely enough
-#: for the tests to hold their rate on it (a review: 1/f noise named an effect in 8–26 of 40 gaps
-#: whitened by AR(1), CHANGELOG) and change nothing on AR(1) noise (the extra terms fit ~0)
+#: probe's or an interferometer's lag (AR(1)); three also take AR(2)-like noise and part of flicker
+#: (1/f) noise (named in 4–20 of 40 gaps whitened so, against 8–26 whitened by AR(1); 8 or 16 terms
+#: gain little more: its slowest wander is a polynomial in time, an effect's signature on a spiral)
+#: and change nothing on AR(1) noise (the extra terms fit ~0); benchmarks/README.md
 AR_ORDER = 3
 
 
@@ -804,7 +805,7 @@ def whiten(X: np.ndarray, order: np.ndarray, phi: np.ndarray) -> np.ndarray:
     return W
 
 
-def _ar1_gate(s: _Search, order: np.ndarray) -> tuple[float, list[str]]:
+def _correlated_noise_gate(s: _Search, order: np.ndarray) -> tuple[float, list[str]]:
     """The selection's F tests and ΔBIC assume white noise. Noise correlated along the scan (a probe's
     or an interferometer's lag, flicker) has a coloured spectrum, and its slow part reads as effects:
     on pure AR(1) noise of ρ = 0.5, 15 of 40 spiral gaps named one (a low "vibration" mostly). When

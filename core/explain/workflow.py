@@ -119,8 +119,8 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
                            if structure and res["rho1"] > RHO_GATE else {})},
         "checks": {"chi2_p": res["chi2_p"], "residual_lag1_autocorrelation": res["rho1"],
                    "residual_rms_over_noise": res["rms"] / max(sigma, 1e-300),
-                   # effects the white-noise tests named but a test under AR(1) noise of the
-                   # residual's own correlation does not support (core/explain/select.py _ar1_gate)
+                   # effects the white-noise tests named but a test under the residual's own AR
+                   # noise does not support (core/explain/select.py _correlated_noise_gate)
                    "dropped_under_correlated_noise": res["dropped_under_correlated_noise"]},
         "not_observable_on_this_scan": res["unobservable"], "points": int(meas.n), "match": match,
         "measured": str(measured), "model": str(model_path) if model_path else None,
