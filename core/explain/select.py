@@ -733,9 +733,12 @@ def residual_checks(resid: np.ndarray, sigma: float, order: np.ndarray, P: int) 
     N = resid.size
     rms = float(np.sqrt(np.mean(resid**2)))
     chi2_p = float(stats.chi2.sf(float(resid @ resid) / max(sigma, 1e-300) ** 2, max(N - P, 1)))
-    ro = resid[order]
-    rho1 = float(np.corrcoef(ro[:-1], ro[1:])[0, 1]) if N > 3 and np.std(ro) > 0 else 0.0
-    return {"rms": rms, "chi2_p": chi2_p, "rho1": rho1}
+    return {"rms": rms, "chi2_p": chi2_p, "rho1": lag1(resid[order])}
+
+
+def lag1(r: np.ndarray) -> float:
+    """The lag-1 autocorrelation of a series (0 for fewer than 4 values or a constant one)."""
+    return float(np.corrcoef(r[:-1], r[1:])[0, 1]) if r.size > 3 and np.std(r) > 0 else 0.0
 
 
 def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int = 10,
@@ -756,7 +759,7 @@ def select(ctx: ScanContext, g: np.ndarray, max_effects: int = 6, bootstrap: int
             break
         sigma = s_new
         s = forward_search(_start(ctx, g, order, groups, D), sigma, max_effects)
-    _, dropped = _correlated_noise_gate(s, order)
+    dropped = _correlated_noise_gate(s, order)
     found, resid = _fitted_effects(s) if s.stages else ([], s.resid)
     checks = residual_checks(resid, sigma, order, len(s.cols))
     checks["dropped_under_correlated_noise"] = dropped
@@ -805,7 +808,7 @@ def whiten(X: np.ndarray, order: np.ndarray, phi: np.ndarray) -> np.ndarray:
     return W
 
 
-def _correlated_noise_gate(s: _Search, order: np.ndarray) -> tuple[float, list[str]]:
+def _correlated_noise_gate(s: _Search, order: np.ndarray) -> list[str]:
     """The selection's F tests and ΔBIC assume white noise. Noise correlated along the scan (a probe's
     or an interferometer's lag, flicker) has a coloured spectrum, and its slow part reads as effects:
     on pure AR(1) noise of ρ = 0.5, 15 of 40 spiral gaps named one (a low "vibration" mostly). When
@@ -817,14 +820,13 @@ def _correlated_noise_gate(s: _Search, order: np.ndarray) -> tuple[float, list[s
     model fitted again on what is left (a review: dropping every failing effect at once lost a true
     squareness beside a spurious look-alike, each failing only beside the other). Effects the gap
     holds well above the noise stay; on white noise ρ̂ stays below the gate and nothing changes.
-    Returns the last ρ̂ and the dropped effects' names."""
+    Returns the dropped effects' names."""
     N = s.g.size
     piston = list(s.D.index["_piston"])
     dropped: list[str] = []
-    rho = 0.0
     while s.stages:
         r = s.resid[order]
-        rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if N > 3 and np.std(r) > 0 else 0.0
+        rho = lag1(r)
         if not (abs(rho) > max(RHO_GATE, 4.0 / np.sqrt(N))) or N <= 4 * AR_ORDER + len(s.cols):
             break
         phi = ar_coefficients(r, AR_ORDER)
@@ -863,7 +865,7 @@ def _correlated_noise_gate(s: _Search, order: np.ndarray) -> tuple[float, list[s
         dropped.append(s.by_name[worst].effect if worst in s.by_name else worst)
         s.stages = [st for st in s.stages if _effect_key(st) != worst]
         _restate_evidence(s)  # the stages left: their evidence without the dropped one
-    return rho, dropped
+    return dropped
 
 
 def _bootstrap(ctx, fitted, resid, names, B, seed, max_effects) -> dict:

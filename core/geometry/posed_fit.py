@@ -271,8 +271,8 @@ class PosedSurfaceFit:
         spirals and stars alike). The whole fit then runs its own iterations to its own convergence
         tests from there — the same minimum, reached in 2–3 evaluations of all points instead of 5–7
         (10⁶ raster points: probe_radius's fit 1.0 → ~0.5 s). Any trouble on the subsample (no
-        convergence, a point outside the conic's domain) leaves ``x0``: the whole fit then meets it
-        and says so."""
+        convergence, a point outside the conic's domain) leaves ``x0``; a whole fit that cannot start
+        from the subsample's minimum starts from ``x0`` again (fit)."""
         n = len(self.q)
         if n <= 4 * PREFIT_POINTS:
             return x0
