@@ -45,6 +45,9 @@ class InputOutcome:
     traceback: str | None = field(default=None, repr=False)
     #: the log records of a worker (plain dicts, ``logging.makeLogRecord``'s input), for the parent
     log: list = field(default_factory=list, repr=False)
+    #: the steps' warnings ("'aperture': it removed 61 % of the points …"), which the command prints
+    #: beside the input's line — in report.json alone nobody reads them (a review)
+    warnings: list = field(default_factory=list)
 
 
 #: what ``--cloud-format`` may name: the processed cloud is written as ``cloud.<format>``; "auto"
@@ -70,6 +73,10 @@ def output_stems(inputs: list[Path]) -> list[str]:
     stems = [p.stem for p in inputs]
     seen: dict[str, Path] = {}
     for p, s in zip(inputs, stems):
+        if s.strip(".") == "":
+            # "..csv" has the stem ".": its outputs would replace the output folder itself (a review)
+            raise RecipeError(f"{p}: its name gives no output folder name ('{s}/' is a path, not a "
+                              "folder of its own); rename the input")
         if s in seen:
             raise RecipeError(f"{seen[s]} and {p} would both write {s}/ in the output folder; "
                               "rename one or run them separately")
@@ -289,11 +296,17 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
                                paths=paths, input_sha256=digest)
         progress.update(1.0, "written")
         return InputOutcome(shown, True, None, time.perf_counter() - t0, str(out_dir / stem),
-                            report["summary"])
+                            report["summary"], warnings=step_warnings(result))
     except Cancelled:
         raise
     except Exception as e:  # noqa: BLE001 — isolation is the point: one bug must not sink the night
         return failed_outcome(shown, stage, e, time.perf_counter() - t0, paths)
+
+
+def step_warnings(result) -> list[str]:
+    """Each step's report warnings, "'step_id': text", in the order the steps ran."""
+    return [f"'{rec.id}': {w}" for rec in result.steps
+            for w in (rec.report.get("warnings") or []) if isinstance(w, str)]
 
 
 def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0,
@@ -362,7 +375,7 @@ def load_batch_recipe(path, overrides=()) -> Recipe:
     itself is (core.recipe.parse_recipe): a bad value is the same RecipeError, naming the key, with
     the overrides said. An override naming no step, an ambiguous step id or an unknown key is a
     RecipeError naming the override."""
-    from .recipe import load_recipe, parse_recipe
+    from .recipe import check_step_order, load_recipe, parse_recipe
     from .yamlio import load_yaml
 
     if not overrides:
@@ -373,7 +386,9 @@ def load_batch_recipe(path, overrides=()) -> Recipe:
     for text in overrides:
         apply_override(data, text)
     try:
-        return parse_recipe(data, str(path), base=path)
+        recipe = parse_recipe(data, str(path), base=path)
+        check_step_order(recipe.steps, str(path))
+        return recipe
     except RecipeError as e:
         shown = " ".join(f"--set {o}" for o in overrides)
         raise RecipeError(f"{e} (with {shown})") from None
@@ -563,15 +578,20 @@ def input_digest(path) -> str:
         return hashlib.file_digest(f, "sha256").hexdigest()
 
 
+#: --figures, from fewest to most figures drawn
+FIGURE_MODES = ("none", "summary", "all")
+
+
 def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
-                cloud_format: str = "auto") -> dict | None:
+                cloud_format: str = "auto", figures: str = "all") -> dict | None:
     """The report of a complete earlier output of this input with this recipe, else None.
 
     Output folders appear only when complete (atomic rename); the report must also name the same
     input with the same content (its SHA-256: a file measured again under the same name, or edited,
     is run again — before, its old numbers were reported as done), the same recipe (every
     parameter, ``--set`` overrides applied) and the same cloud file (``--cloud-format``), so a
-    changed recipe or format is run again."""
+    changed recipe or format is run again; the files its steps wrote are all still there, and the
+    figures asked (``--figures``) were drawn then."""
     import json
 
     folder = Path(out_dir) / stem
@@ -586,6 +606,14 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
     from .report import jsonable
 
     if data.get("input") != str(path) or data.get("recipe") != jsonable(recipe.to_dict(full=True)):
+        return None
+    # the figures asked now were drawn then (a run with --figures none does not stand for one with all)
+    done_mode = (data.get("figures") or {}).get("mode", "all")
+    if FIGURE_MODES.index(figures) > FIGURE_MODES.index(done_mode if done_mode in FIGURE_MODES else "none"):
+        return None
+    # every file the report names is still there (a review: map.csv deleted, the input "skipped")
+    named = [f for st in data.get("steps") or [] for f in st.get("artifacts") or []]
+    if not all((folder / f).is_file() for f in [*named, "report.html"]):
         return None
     try:  # the same content: a file measured again under the same name is run again
         if data.get("input_sha256") != input_digest(path):

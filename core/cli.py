@@ -300,7 +300,8 @@ def _batch(args, recipe_path: Path, pool) -> int:
         _remove_if_made_empty(out, made)
         raise
     try:
-        results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "auto")
+        results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "auto",
+                                   args.figures)
         # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
         runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed, session,
                                 pool)
@@ -514,7 +515,7 @@ def _cores() -> int:
 
 
 def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: bool,
-               cloud_format: str = "csv"):
+               cloud_format: str = "csv", figures: str = "all"):
     """(results of the inputs already complete, jobs (path, stem) left to run). With ``resume``,
     what a killed run left behind is removed first and complete outputs (same recipe, same cloud
     format) are skipped."""
@@ -526,7 +527,7 @@ def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: 
     if resume:
         cleanup_partials(out)  # what a killed run left behind
     for path, stem in zip(inputs, stems):
-        done = is_complete(out, stem, path, recipe, cloud_format) if resume else None
+        done = is_complete(out, stem, path, recipe, cloud_format, figures) if resume else None
         if done is not None:
             results[str(path)] = entry(str(path), "skipped", report=done)
         else:
@@ -575,6 +576,8 @@ def _reporter(results: dict, args, progress=None):
             if not args.quiet:
                 say(f"{oc.input}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} "
                     f"points{extra}, {oc.seconds:.2f} s)")
+                for w in getattr(oc, "warnings", None) or []:
+                    say(f"{oc.input}: warning: {w}", sys.stderr)
         else:
             if args.debug and oc.traceback:
                 say(oc.traceback.rstrip("\n"), sys.stderr)

@@ -214,7 +214,11 @@ def load_recipe(path, registry: Registry | None = None) -> Recipe:
                           "recipe as UTF-8") from None
     except OSError as e:
         raise RecipeError(f"{path}: cannot read the recipe ({e})") from None
-    return parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
+    recipe = parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
+    # a recipe file is what a batch runs: its order is checked as it is read (a session's project
+    # may hold a recipe mid-edit; run_pipeline checks before running any)
+    check_step_order(recipe.steps, str(path))
+    return recipe
 
 
 def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
@@ -265,9 +269,11 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
             raise RecipeError(f"{at('inputs')}: inputs: key '{name}': file {p} not found")
         resolved_inputs[str(name)] = p
 
-    raw_steps = data.get("steps")
+    if "steps" not in data:
+        raise RecipeError(f"{where}: missing `steps:` (the list of steps; `steps: []` for none)")
+    raw_steps = data["steps"]
     if raw_steps is None:
-        raw_steps = []
+        raise RecipeError(f"{at('steps')}: steps: is empty — give the list of steps, or `steps: []` for none")
     if not isinstance(raw_steps, list):
         raise RecipeError(f"{at('steps')}: steps: must be a list of `- step_id: {{params}}`")
     steps = []
@@ -291,6 +297,29 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
         # a tolerance on a quantity these steps and this surface do not compute: one line, now
         tolerance.check_computable(steps, surface, at("tolerance"))
     return Recipe(steps, surface, resolved_inputs, base, reader_options, uncertainty, tolerance)
+
+
+def check_step_order(steps, where: str = "recipe") -> None:
+    """Refuse a step that works on the form error (Step.reads_residual: zernike, bspline_map,
+    correction — their ``channel`` left at "auto") placed before the step that makes it
+    (Step.makes_residual: misalignment, register): run first, it would take the heights z — the
+    part's sag on a curved part — for the form error, and write a "map" or a "correction" of the
+    whole surface with exit 0 (a review: bspline_map first wrote a 71.8 mm PV map.asc). README,
+    "Step order". Disabled steps do not run and are not checked."""
+    live = [(k, s) for k, s in enumerate(steps, start=1) if s.enabled]
+    for pos, (k, s) in enumerate(live):
+        if not getattr(s.step_cls, "reads_residual", False):
+            continue
+        if getattr(s.params, "channel", "auto") == "z":
+            continue  # heights asked for by name: a map that is already form error
+        maker = next(((j, t) for j, t in live[pos + 1:] if getattr(t.step_cls, "makes_residual", False)),
+                     None)
+        if maker is not None:
+            j, t = maker
+            loc = f"{where}, line {s.line}" if s.line else where
+            raise RecipeError(f"{loc}: step {k} '{s.id}' works on the form error (the residual), which "
+                              f"step {j} '{t.id}' makes later: it would take the heights z for it — move "
+                              f"'{s.id}' after '{t.id}'")
 
 
 def _is_file(p: Path) -> bool:

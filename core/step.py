@@ -54,6 +54,13 @@ class Params(BaseModel):
             from pydantic_core import PydanticCustomError  # lax mode takes 1 and 0.0 as yes and no
 
             raise PydanticCustomError("bool_number", "Input should be true or false (got {got})", {"got": v})
+        if f.annotation in (float, int, float | None, int | None) and isinstance(v, str) and _numeric(v):
+            # lax mode reads the text "1_290" (a word in YAML 1.2: `diameter: 1_290`) or a quoted
+            # "1290" as the number; a number is written as one (a review)
+            from pydantic_core import PydanticCustomError
+
+            raise PydanticCustomError("number_text", "Input should be a number, not text "
+                                      "(write it without quotes or underscores)")
         if isinstance(v, (bool, list, tuple, dict)):
             from .yamlio import bool_as_number
 
@@ -69,6 +76,15 @@ class Params(BaseModel):
             raise ValueError(f"written by a newer version ({from_version}) of this step "
                              f"than the installed one ({cls.schema_version})")
         return data
+
+
+def _numeric(text: str) -> bool:
+    """Text Python would read as a number ("1_290", " 1290"): pydantic's lax mode would."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def param(default: Any = ..., *, unit: str | None = None, help: str, file: bool = False,
@@ -171,6 +187,13 @@ class Step:
     Params: ClassVar[type[Params]] = Params
     #: one line for lists; the class docstring is the long help
     summary: ClassVar[str] = ""
+    #: the step makes the cloud's ``residual`` channel, the form error (misalignment: z − sag in the
+    #: part frame; register: the distance to the mesh). docs/recipes.md "Step order".
+    makes_residual: ClassVar[bool] = False
+    #: the step works on the form error: the ``residual`` channel when the cloud has one, else the
+    #: heights z (its ``channel`` parameter, where it has one, left at "auto"). Such a step belongs
+    #: after the step that makes the residual; core.recipe.check_step_order refuses it before.
+    reads_residual: ClassVar[bool] = False
 
     def run(self, cloud: PointCloud, params: Params, ctx: Context) -> StepResult:  # pragma: no cover
         raise NotImplementedError

@@ -628,18 +628,18 @@ def _rows_to_keep(path, lines, first_data, data, names, invalid: str, quote: boo
 def _check_index(path, lines, first_data, cols: dict, names, rows, quote: bool = True) -> None:
     """The integer columns of the file (index, line, fiducial, sensor) must be whole numbers that an
     int64 holds — cast as they are, 1e300 or 9.3e18 wraps to -9223372036854775808 with no more than a
-    RuntimeWarning — and the index non-negative (it numbers the input rows) and never repeated; the
+    RuntimeWarning — and non-negative (docs/formats.md), the index never repeated; the
     first bad value is named by line and column."""
     for n in (n for n in names if n in INTEGER_CHANNELS and n in cols):
         v = cols[n]
-        low = 0.0 if n == "index" else -2.0**63
-        bad = ~((v == np.floor(v)) & (v >= low) & (v < 2.0**63))  # 2**63 itself is out of range
+        # ≥ 0 for all four (docs/formats.md): a line, ball or sensor number of −1 is no number at all
+        bad = ~((v == np.floor(v)) & (v >= 0.0) & (v < 2.0**63))  # 2**63 itself is out of range
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
             ln = _data_line_number(lines.all(), first_data, int(rows[row]))
             val = f"{float(v[row])!r} " if quote else ""
             what = ("a non-negative whole number (the index numbers the input rows)" if n == "index"
-                    else "a whole number within ±9.2e18")
+                    else "a whole number from 0 to 9.2e18")
             raise InputError(f"{path}, line {ln}, column {names.index(n) + 1} ({n}): {val}is not "
                              f"{what}")
     if "index" in cols and len(np.unique(cols["index"])) != len(cols["index"]):

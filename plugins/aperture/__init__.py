@@ -30,8 +30,28 @@ class ApertureParams(Params):
 
     @model_validator(mode="after")
     def _shape_needs(self):
+        # a key of another shape is a mistake, not a detail to drop (a review: `shape: circle` with
+        # vertices kept the whole 1300 mm aperture, with inner_diameter no hole — exit 0). Values,
+        # not keys: a recipe written with every parameter (reports, projects) has them at defaults
+        if self.shape != "polygon" and self.vertices:
+            raise ValueError(f"vertices are for shape: polygon, not {self.shape}")
+        if self.shape != "annulus" and self.inner_diameter > 0:
+            raise ValueError(f"inner_diameter is for shape: annulus, not {self.shape}")
+        if self.shape == "polygon":
+            extra = [k for k, v in (("diameter", self.diameter is not None), ("center_x", self.center_x != 0),
+                                    ("center_y", self.center_y != 0)) if v]
+            if extra:
+                raise ValueError(f"{', '.join(extra)}: not used by shape: polygon (its vertices are the aperture)")
         if self.shape == "polygon" and len(self.vertices) < 3:
             raise ValueError("a polygon aperture needs at least 3 vertices")
+        if self.shape == "polygon":
+            from pointspro.core.geometry.polygon import self_intersection
+
+            hit = self_intersection(self.vertices)
+            if hit is not None:
+                i, j = hit
+                raise ValueError(f"the polygon's edges {i + 1} and {j + 1} cross: its vertices must go "
+                                 "round the aperture once, without crossing")
         if self.shape == "annulus":
             if self.inner_diameter <= 0:
                 raise ValueError("an annulus needs inner_diameter > 0")

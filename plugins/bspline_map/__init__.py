@@ -60,6 +60,7 @@ class BSplineMapParams(PupilCentreParams):
 class BSplineMapStep(Step):
     id = "bspline_map"
     title = "Form-error map (B-spline)"
+    reads_residual = True
     summary = "Smoothing bicubic B-spline of the residual on a grid: map.csv, map.x3p, map.asc."
     Params = BSplineMapParams
 

@@ -136,6 +136,7 @@ def _check_same_side(nominal, programmed) -> None:
 class CorrectionStep(Step):
     id = "correction"
     title = "Correction for the next run"
+    reads_residual = True
     summary = ("Form error → what the machine or polishing tool takes: correction.csv (dz to add), "
                "radial program and corrected surface, corrected sag + STL, removal map.")
     Params = CorrectionParams
@@ -162,6 +163,13 @@ class CorrectionStep(Step):
         if channel == "residual" and "residual" not in cloud.channels:
             raise StepError("channel 'residual' asked for, but the cloud has none (run misalignment "
                             "first, or give a map with channel: z)")
+        from pointspro.core.metrics.pupil import is_flat
+
+        if channel == "z" and "residual" in cloud.channels and not is_flat(ctx.surface):
+            # after misalignment z is the part's sag in the part frame (a review: dz −34 mm written
+            # under a header saying "form error = residual")
+            raise StepError("channel 'z' asked for, but z holds the part's heights (its sag) and the form "
+                            "error is the cloud's residual: leave channel at auto (or give residual)")
         v = cloud.z if channel == "z" else cloud[channel]
         x, y = cloud.x, cloud.y
         nominal = ctx.surface

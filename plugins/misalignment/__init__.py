@@ -53,6 +53,7 @@ class MisalignmentParams(Params):
 class MisalignmentStep(Step):
     id = "misalignment"
     title = "Misalignment (5 DOF)"
+    makes_residual = True
     summary = "Fit and remove tilt and decenter; residual = z − sag in the part frame."
     Params = MisalignmentParams
     needs_surface = True  # the batch refuses a recipe without `surface:` before any input

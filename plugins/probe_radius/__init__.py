@@ -130,6 +130,10 @@ class ProbeRadiusStep(Step):
     def run(self, cloud, params: ProbeRadiusParams, ctx: Context) -> StepResult:
         ctx.progress.check()
         surface = ctx.require_surface(self.id)
+        if "probe_residual" in cloud.channels:
+            # a second compensation moves contact points by the radius again (a review: 28 µm RMS, exit 0)
+            raise StepError("the points are contact points already: an earlier probe_radius compensated "
+                            "them (the cloud has its probe_residual) — run probe_radius once")
         s, rho_b = params.side, params.radius
         from pointspro.core.profiles import profiles_of
 

@@ -96,6 +96,7 @@ def _rot(w):
 class RegisterStep(Step):
     id = "register"
     title = "Register to mesh nominal"
+    makes_residual = True
     summary = "ICP (point-to-plane) then least squares to a CAD mesh; signed distance → residual."
     Params = RegisterParams
 

@@ -68,6 +68,7 @@ def removed_pairs(remove, ordering, pairs) -> list[tuple[int, int]]:
 class ZernikeStep(Step):
     id = "zernike"
     title = "Zernike decomposition"
+    reads_residual = True
     summary = "Fit Zernike terms over the aperture; remove piston, tilt, power… from the residual."
     Params = ZernikeParams
 

@@ -1,0 +1,174 @@
+"""What an independent review of the command found accepted with exit 0 (2026-11-26): steps in an order
+that silently gives a wrong result, keys of another aperture shape, an input named `..csv`, a
+--resume that trusted an incomplete folder, warnings nobody saw."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pointspro.core.errors import RecipeError
+from pointspro.core.recipe import load_recipe
+
+from .conftest import EXAMPLE, write
+
+SURFACE = ("surface: {type: even_asphere, c: 3.3333333333333335e-4, k: -0.98, "
+           "A: {4: 7.0e-13, 6: 1.0e-19}, aperture: 1300}\n")
+DATA = EXAMPLE / "asphere_cmm.csv"
+
+
+def recipe(tmp_path, *steps, name="r.yaml"):
+    return write(tmp_path / name, "pointspro: 1\n" + SURFACE + "steps:\n"
+                 + "".join(f"  - {s}\n" for s in steps))
+
+
+@pytest.mark.parametrize("first", ["bspline_map: {}", "zernike: {terms: 4}", "correction: {}"])
+def test_a_form_error_step_before_the_residual_is_made_is_refused(tmp_path, first):
+    """A review: bspline_map first wrote map.asc of the part's sag (71.8 mm PV) with exit 0."""
+    r = recipe(tmp_path, "probe_radius: {radius: 4.0}", first, "misalignment: {}")
+    step = first.split(":")[0]
+    with pytest.raises(RecipeError, match=rf"r\.yaml, line 5: step 2 '{step}' works on the form error "
+                                          rf"\(the residual\), which step 3 'misalignment' makes later"):
+        load_recipe(r)
+
+
+def test_the_order_rule_spares_disabled_steps_and_heights_asked_for_by_name(tmp_path):
+    load_recipe(recipe(tmp_path, "bspline_map: {channel: z}", "misalignment: {}"))
+    load_recipe(recipe(tmp_path, "{zernike: {terms: 4}, enabled: false}", "misalignment: {}"))
+    load_recipe(recipe(tmp_path, "misalignment: {}", "zernike: {}", "bspline_map: {}"))
+
+
+def test_the_order_rule_holds_for_recipes_edited_in_the_window_too(tmp_path):
+    """The window and the Python API insert steps without parsing a file: run_pipeline checks too."""
+    from pointspro.core.io import read_cloud
+    from pointspro.core.pipeline import run_pipeline
+    from pointspro.core.recipe import make_step
+
+    r = load_recipe(recipe(tmp_path, "misalignment: {}"))
+    r = r.inserted(make_step("zernike", {"terms": 4}), at=0)
+    with pytest.raises(RecipeError, match="step 1 'zernike' works on the form error"):
+        run_pipeline(read_cloud(DATA), r)
+
+
+def test_moving_the_points_after_the_residual_was_made_is_refused(run_cli, tmp_path):
+    """A review: probe_radius after misalignment kept the probe centres' residual (RMS 27.8 µm for a
+    true 0.99 µm), exit 0."""
+    r = recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}")
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none", "--quiet")
+    assert code != 0
+    assert ("step 2 'probe_radius': this step moves the points, but their residual (the form error) "
+            "was made before the move and would no longer match them — move 'probe_radius' before "
+            "step 1 'misalignment'") in err
+    # moved and the residual made again after it: fine
+    ok = recipe(tmp_path, "probe_radius: {radius: 4.0, side: 1}", "misalignment: {}", name="ok.yaml")
+    assert run_cli("--batch", ok, DATA, "--out", tmp_path / "o2", "--figures", "none", "--quiet")[0] == 0
+
+
+def test_probe_radius_twice_is_refused(run_cli, tmp_path):
+    r = recipe(tmp_path, "probe_radius: {radius: 4.0, side: 1}", "probe_radius: {radius: 4.0, side: 1}",
+               "misalignment: {}")
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none", "--quiet")
+    assert code != 0 and "step 2 'probe_radius': the points are contact points already" in err
+
+
+def test_correction_of_heights_z_on_a_curved_part_with_a_residual_is_refused(run_cli, tmp_path):
+    """A review: channel z after misalignment wrote dz ≈ −34 mm under a 'form error = residual' header."""
+    r = recipe(tmp_path, "probe_radius: {radius: 4.0, side: 1}", "misalignment: {}", "correction: {channel: z}")
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none", "--quiet")
+    assert code != 0 and "step 3 'correction': channel 'z' asked for, but z holds the part's heights" in err
+
+
+@pytest.mark.parametrize("params, pattern", [
+    ("{shape: circle, inner_diameter: 100}", "inner_diameter is for shape: annulus, not circle"),
+    ("{shape: circle, vertices: [[0, 0], [100, 0], [0, 100]]}", "vertices are for shape: polygon"),
+    ("{shape: annulus, diameter: 1200, inner_diameter: 100, vertices: [[0, 0], [1, 0], [0, 1]]}",
+     "vertices are for shape: polygon, not annulus"),
+    ("{shape: polygon, diameter: 100, vertices: [[0, 0], [100, 0], [0, 100]]}",
+     "diameter: not used by shape: polygon"),
+    ("{shape: polygon, vertices: [[0, 0], [100, 100], [100, 0], [0, 100]]}",
+     "the polygon's edges 1 and 3 cross"),
+])
+def test_aperture_keys_of_another_shape_and_crossing_polygons_are_refused(tmp_path, params, pattern):
+    with pytest.raises(RecipeError, match=rf"line 4: step 1 'aperture': .*{pattern}"):
+        load_recipe(recipe(tmp_path, f"aperture: {params}"))
+
+
+def test_simple_polygons_pass_the_crossing_test():
+    from pointspro.core.geometry.polygon import self_intersection
+
+    assert self_intersection([[0, 0], [4, 0], [4, 4], [2, 1], [0, 4]]) is None  # concave
+    assert self_intersection([[0, 0], [1, 0], [0, 1]]) is None
+    assert self_intersection([[0, 0], [1, 1], [1, 0], [0, 1]]) == (0, 2)
+    assert self_intersection([[0, 0], [2, 0], [1, 0], [1, 1]]) is not None  # doubles back on itself
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("pointspro: 1\n", r"missing `steps:`"),
+    ("pointspro: 1\nsteps:\n", r"steps: is empty — give the list of steps, or `steps: \[\]` for none"),
+])
+def test_a_recipe_without_steps_is_refused_but_an_empty_list_is_a_choice(tmp_path, text, pattern):
+    with pytest.raises(RecipeError, match=pattern):
+        load_recipe(write(tmp_path / "r.yaml", text))
+    assert load_recipe(write(tmp_path / "e.yaml", "pointspro: 1\nsteps: []\n")).steps == []
+
+
+@pytest.mark.parametrize("name", ["..csv", "...csv"])
+def test_an_input_whose_name_gives_no_folder_is_refused(run_cli, tmp_path, name):
+    """A review: `..csv` (stem ".") wrote its results into --out itself, replacing another input's."""
+    sub = tmp_path / "in"
+    sub.mkdir()
+    bad = sub / name
+    bad.write_bytes(DATA.read_bytes())
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine", encoding="utf-8")
+    code, _, err = run_cli("--batch", EXAMPLE / "recipe.yaml", DATA, bad, "--out", out, "--figures", "none")
+    assert code != 0 and f"{bad}: its name gives no output folder name" in err
+    assert (out / "notes.txt").read_text(encoding="utf-8") == "mine"
+
+
+def test_resume_runs_again_what_is_incomplete_or_drawn_with_fewer_figures(run_cli, tmp_path):
+    rec, out = EXAMPLE / "recipe.yaml", tmp_path / "o"
+
+    def status(*extra):
+        code, _, err = run_cli("--batch", rec, DATA, "--out", out, "--resume", "--quiet", *extra)
+        assert code == 0, err
+        return json.loads((out / "summary.json").read_text(encoding="utf-8"))["inputs"][0]["status"]
+
+    assert status("--figures", "none") == "ok"
+    assert status("--figures", "none") == "skipped"
+    (out / "asphere_cmm" / "map.csv").unlink()  # a review: reported "skipped" with map.csv missing
+    assert status("--figures", "none") == "ok"
+    assert (out / "asphere_cmm" / "map.csv").is_file()
+    assert status("--figures", "all") == "ok"  # drawn with none before: run again to draw them
+    assert (out / "asphere_cmm" / "map.png").is_file()
+    assert status("--figures", "none") == "skipped"  # more figures than asked: still complete
+
+
+def test_negative_line_numbers_are_refused(tmp_path):
+    from pointspro.core.errors import InputError
+    from pointspro.core.io import read_cloud
+
+    f = write(tmp_path / "l.csv", "x,y,z,line\n0,0,0,0\n1,0,0,-1\n0,1,0,1\n")
+    with pytest.raises(InputError, match=r"l\.csv, line 3, column 4 \(line\): -1\.0 is not a whole number "
+                                         r"from 0 to 9\.2e18"):
+        read_cloud(f)
+
+
+def test_step_warnings_reach_the_terminal(run_cli, tmp_path):
+    """A review: warnings were only in report.json; knn_denoise on the heights of a curved part (no
+    residual yet) found 0 of the example's spikes and said nothing."""
+    r = recipe(tmp_path, "knn_denoise: {window: 15.0}", "probe_radius: {radius: 4.0, side: 1}",
+               "misalignment: {}")
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none")
+    assert code == 0
+    assert "asphere_cmm.csv: warning: 'knn_denoise': the cloud has no residual yet" in err
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o2", "--figures", "none", "--quiet")
+    assert "warning" not in err
+
+
+@pytest.mark.parametrize("value", ["1_290", "'1290'"])
+def test_a_number_written_as_text_is_refused(tmp_path, value):
+    """YAML 1.2 reads 1_290 and '1290' as text; pydantic's lax mode made them the number (a review)."""
+    with pytest.raises(RecipeError, match=r"key 'diameter': Input should be a number, not text"):
+        load_recipe(recipe(tmp_path, f"aperture: {{diameter: {value}}}"))
