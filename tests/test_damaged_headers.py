@@ -514,3 +514,18 @@ def test_digits_python_reads_but_the_readers_do_not_name_their_line(tmp_path):
         p.write_text(f"x,y,z\n0,0,0\n1,0,1\n0,{tok},2\n", encoding="utf-8")
         with pytest.raises(InputError, match=r"u.csv, line 4, column 2: '.*' is not a number"):
             read_cloud(p)
+
+
+def test_a_matrix_of_one_row_is_refused(tmp_path):
+    """A review: matrix-3.txt cut in its second line read as a one-row map, its cut last value
+    '1.9473e-0' taken as 1.9473 m; the format stores no counts, so one row is refused."""
+    lines = (DATA / "matrix-3.txt").read_text(encoding="utf-8").splitlines()
+    first = next(i for i, ln in enumerate(lines) if ln and not ln.startswith("#"))
+    cut = tmp_path / "cut.txt"
+    cut.write_text("\n".join(lines[:first + 1]) + "\n" + lines[first + 1][:40] + "\n", encoding="utf-8")
+    with pytest.raises(InputError, match=r"cut\.txt"):
+        read_cloud(cut)
+    one = tmp_path / "one.txt"
+    one.write_text("\n".join(lines[:first + 1]) + "\n", encoding="utf-8")
+    with pytest.raises(InputError, match=r"one\.txt: one row of heights — a height map needs at least 2 × 2"):
+        read_cloud(one)

@@ -208,6 +208,11 @@ def _check_rows(path: Path):
             rows += 1
     if rows == 0:
         raise InputError(f"{path}: a matrix header but no rows of heights")
+    if rows == 1 or ncols == 1:
+        # a map of one line has no area (and is what is left of a file cut in its second line: a
+        # review's cut "1.9473e-0" read as 1.9473 m); the format stores no counts to check against
+        raise InputError(f"{path}: one {'row' if rows == 1 else 'column'} of heights — a height map "
+                         "needs at least 2 × 2 (a truncated file?)")
     return rows, ncols
 
 
