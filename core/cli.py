@@ -582,6 +582,12 @@ def _reporter(results: dict, args, progress=None):
             if args.debug and oc.traceback:
                 say(oc.traceback.rstrip("\n"), sys.stderr)
             say(f"pointspro: {oc.error}", sys.stderr)
+            earlier = Path(getattr(args, "out", None) or ".") / Path(oc.input).stem
+            if getattr(args, "out", None) and (earlier / "report.json").is_file():
+                # outputs are swapped in only when complete: a failed re-run leaves the last good
+                # ones, which looked current beside a summary.json saying "failed" (a review)
+                say(f"pointspro: {oc.input}: {earlier} still holds an earlier run's outputs "
+                    "(its report.json says when and with which recipe)", sys.stderr)
 
     return report
 

@@ -330,10 +330,25 @@ def _gaussian_pits(seed, s, R=60.0, dens=1.91, sn=20e-6, D=1e-3):
 @pytest.mark.parametrize("s", [0.9, 1.1])
 def test_round_pits_are_found_although_the_fine_fit_bends_into_them(seed, s):
     """The fine window's quadratic followed a Gaussian pit in part (its deep points read 3–5 σ): the
-    coarse window's decision counts too (robust.py, "Two windows decide"). Before: points deeper than
-    10 σ found 0.89–0.98, deeper than 5 σ 0.61–0.80; now 1.00 and 0.82–0.94."""
+    coarse window names candidates that join the dig by growth (robust.py, "Two windows decide").
+    Before: points deeper than 10 σ found 0.89–0.98, deeper than 5 σ 0.61–0.80; now 0.999–1.00 and
+    0.82–0.93."""
     x, y, d, depth, sn = _gaussian_pits(seed, s)
     f = robust_outliers(x, y, d, 3.0, None, 5.0, 1e-5).flagged
     assert f[depth > 10 * sn].mean() >= 0.99
     assert f[depth > 5 * sn].mean() >= 0.8
     assert np.count_nonzero(f & (depth < 2 * sn)) <= 1  # the surface around them stays
+
+
+@pytest.mark.parametrize("seed", [5022, 5038, 5034])
+def test_noise_free_surfaces_of_the_review_lose_nothing(seed, monkeypatch):
+    """The review's clean surfaces (benchmarks/bench_denoise_review.py --clean): 5022, a 50 mm part
+    with an order-6 residual, lost 4 noise-free points when the coarse window's decision counted on
+    its own; its candidates now only join a dig the fine pass found."""
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_denoise_review import clean_surface
+
+    x, y, s, _ = clean_surface(seed)
+    assert not robust_outliers(x, y, s, 3.0, None, 5.0, 1e-5).flagged.any()

@@ -172,3 +172,37 @@ def test_a_number_written_as_text_is_refused(tmp_path, value):
     """YAML 1.2 reads 1_290 and '1290' as text; pydantic's lax mode made them the number (a review)."""
     with pytest.raises(RecipeError, match=r"key 'diameter': Input should be a number, not text"):
         load_recipe(recipe(tmp_path, f"aperture: {{diameter: {value}}}"))
+
+
+def test_a_failed_rerun_says_the_folder_holds_the_earlier_outputs(run_cli, tmp_path):
+    """Outputs are swapped in only when complete: after a failed re-run the folder still holds the last
+    good run's files, which looked current beside a summary.json saying "failed" (a review)."""
+    out = tmp_path / "o"
+    assert run_cli("--batch", EXAMPLE / "recipe.yaml", DATA, "--out", out, "--figures", "none", "--quiet")[0] == 0
+    bad = recipe(tmp_path, "aperture: {diameter: 1.0e-6}")
+    code, _, err = run_cli("--batch", bad, DATA, "--out", out, "--figures", "none", "--quiet")
+    assert code != 0
+    assert f"asphere_cmm.csv: {out / 'asphere_cmm'} still holds an earlier run's outputs" in err
+
+
+def test_a_ball_larger_than_the_parts_curvature_is_named_when_the_fit_fails():
+    """A review: 55 mm on a 50 mm sphere read "outside the conic's domain … check units"."""
+    import numpy as np
+
+    from pointspro.core import PointCloud
+    from pointspro.core.errors import StepError
+    from pointspro.core.step import Context
+    from pointspro.core.surfaces import surface_from_spec
+    from pointspro.plugins.probe_radius import ProbeRadiusStep
+
+    sphere = surface_from_spec({"type": "even_asphere", "c": 0.02, "k": 0, "aperture": 40})
+    g = np.arange(-17.6, 17.7, 0.88)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    k = np.hypot(x, y) <= 18
+    x, y = x[k], y[k]
+    r = np.hypot(x, y)
+    nz = np.sqrt(1 - (r / 50) ** 2)
+    centres = PointCloud.from_xyz(x + 6 * x / 50, y + 6 * y / 50, sphere.sag(x, y) + 6 * nz)  # a 6 mm ball
+    with pytest.raises(StepError, match=r"the probe radius 55 mm exceeds the part's local radius of "
+                                        r"curvature \(50 mm"):
+        ProbeRadiusStep().run(centres, ProbeRadiusStep.Params(radius=55, side=1), Context(surface=sphere))

@@ -89,8 +89,11 @@ def check_fits(path, npoints: int, *, where: str = "header", file_short: bool = 
     need = needed_bytes(npoints)
     if need <= avail:
         return
+    if file_short:  # too many to process, and more than the file holds: the count is the fault
+        raise InputError(f"{path}: its {where} states {npoints:,} points, more than the file holds — "
+                         "the header is damaged or the file truncated; nothing was read")
     fit = max(int((avail - BASE_BYTES) / BYTES_PER_POINT), 0)
-    short = (" (and the file is shorter than that: the header may be damaged)" if file_short else "")
+    short = ""
     raise InputError(
         f"{path}: its {where} states {npoints:,} points{short}; processing them needs about "
         f"{_gb(need)} ({BYTES_PER_POINT} bytes a point + {_gb(BASE_BYTES)}) and {_gb(avail)} is "

@@ -150,9 +150,10 @@ def _check_memory(f, path: Path, fmt: str, n: int, props) -> None:
     nothing of the vertex data is read."""
     from .memory import check_fits
 
-    short = False
-    if fmt != "ascii":
-        short = path.stat().st_size - f.tell() < _fixed_size(props) * n
+    left = path.stat().st_size - f.tell()
+    # binary: the items' fixed sizes; text: at least one digit and one separator a value (a review: a
+    # header of 10¹² vertices over 8 bytes was advised to decimate, not told the file is short)
+    short = left < (_fixed_size(props) if fmt != "ascii" else 2 * len(props)) * n
     check_fits(path, n, where="PLY header (element vertex)", file_short=short)
 
 

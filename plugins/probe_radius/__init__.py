@@ -149,7 +149,12 @@ class ProbeRadiusStep(Step):
                                  check=ctx.progress.check)
         try:
             fit = fitter.fit()
-        except StepError as e:
+        except (StepError, DomainError) as e:
+            # a ball larger than the part's radius of curvature makes the offset surface fold, which
+            # the fit meets as "outside the conic's domain" (a review: 55 mm on a 50 mm sphere): say so
+            check_no_fold(surface, cloud.xyz, s, rho_b)
+            if isinstance(e, DomainError):
+                raise
             from pointspro.core.profiles import with_profile_hint
 
             raise with_profile_hint(e) from None
