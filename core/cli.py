@@ -371,7 +371,8 @@ def _check_screenshot(args) -> None:
     if shot.suffix.lower() not in SCREENSHOT_SUFFIXES:
         raise RecipeError(f"--screenshot {shot}: give an image file name ({', '.join(SCREENSHOT_SUFFIXES)})")
     if not shot.parent.is_dir():
-        raise RecipeError(f"--screenshot {shot}: folder {shot.parent} does not exist")
+        what = "is a file, not a folder" if shot.parent.exists() else "does not exist"
+        raise RecipeError(f"--screenshot {shot}: {shot.parent} {what}")
 
 
 def _check_batch_args(args) -> None:
@@ -711,7 +712,8 @@ def _check_simulate_out(out: Path, model: Path) -> None:
     if out.is_dir():
         raise RecipeError(f"--out {out}: is a folder; give the file to write (e.g. {out / 'simulated.csv'})")
     if not out.parent.is_dir():
-        raise RecipeError(f"--out {out}: the folder {out.parent} does not exist")
+        what = "is a file, not a folder" if out.parent.exists() else "does not exist"
+        raise RecipeError(f"--out {out}: {out.parent} {what}")
 
 
 def cmd_simulate(args) -> int:

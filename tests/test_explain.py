@@ -216,7 +216,8 @@ def test_commands_and_simulated_file(tmp_path, run_cli):
                            "--out", tmp_path / "o4")
     assert code == 2 and "3 point(s); explain compares" in err and not (tmp_path / "o4").exists()
     for out, want in ((tmp_path / "nodir" / "s.csv", "does not exist"), (notes, "is a folder"),
-                      (tmp_path / "base.yaml", "is the model file itself")):
+                      (tmp_path / "base.yaml", "is the model file itself"),
+                      (tmp_path / "base.yaml" / "s.csv", "base.yaml is a file, not a folder")):
         code, _, err = run_cli("simulate", tmp_path / "base.yaml", "--out", out)
         assert code == 2 and want in err and "internal error" not in err, err
 

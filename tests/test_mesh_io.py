@@ -260,3 +260,21 @@ def test_map_mesh_of_a_run_for_the_window(tmp_path):
     assert map_mesh_of(res.artifacts) is res.artifacts["map_mesh.obj"]
     assert isinstance(res.artifacts["map_mesh.obj"], MeshArtifact)
     assert map_mesh_of({}) is None
+
+
+def test_a_mesh_that_fails_to_read_leaves_the_working_folder_alone(tmp_path, monkeypatch):
+    """MeshLab's loader left the process in the file's folder when it failed (a review): the next
+    relative path of a batch was read from there. And it said "Unable to open file" of a file it
+    opened."""
+    import os
+
+    V, F = sheet()
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    write_mesh(sub / "whole.ply", V, F)
+    raw = (sub / "whole.ply").read_bytes()
+    (sub / "cut.ply").write_bytes(raw[: len(raw) // 2])
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(InputError, match=r"cut\.ply: cannot read the mesh: the file is damaged or truncated"):
+        read_mesh("sub/cut.ply", reader="pymeshlab")
+    assert os.getcwd() == str(tmp_path)

@@ -206,3 +206,24 @@ def test_a_ball_larger_than_the_parts_curvature_is_named_when_the_fit_fails():
     with pytest.raises(StepError, match=r"the probe radius 55 mm exceeds the part's local radius of "
                                         r"curvature \(50 mm"):
         ProbeRadiusStep().run(centres, ProbeRadiusStep.Params(radius=55, side=1), Context(surface=sphere))
+
+
+def test_a_tiny_map_spacing_is_one_short_line(run_cli, tmp_path):
+    """A review: spacing 1e-300 printed an overflow RuntimeWarning and a 600-digit node count."""
+    code, _, err = run_cli("--batch", EXAMPLE / "recipe.yaml", DATA, "--out", tmp_path / "o", "--quiet",
+                           "--figures", "none", "--set", "bspline_map.spacing=1e-300")
+    assert code != 0 and "RuntimeWarning" not in err
+    assert "a 1.298e+303 × 1.298e+303 map at spacing 1e-300 mm is too large (at most 25 million nodes)" in err
+
+
+def test_one_wild_height_is_named_not_read_as_a_line(run_cli, tmp_path):
+    """A review: one z of 1e12 mm among the example's points read "all points lie on a line"."""
+    lines = DATA.read_text(encoding="utf-8").splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln[:1].isdigit() or ln[:1] == "-") + 5
+    parts = lines[k].split(",")
+    lines[k] = ",".join([*parts[:2], "1e12", *parts[3:]])
+    wild = write(tmp_path / "wild.csv", "\n".join(lines) + "\n")
+    code, _, err = run_cli("--batch", EXAMPLE / "recipe.yaml", wild, "--out", tmp_path / "o", "--figures", "none")
+    assert code != 0
+    assert "1 point(s) lie absurdly far from the others in z (z = 1e+12 mm" in err
+    assert "line" not in err.split("absurdly")[0]

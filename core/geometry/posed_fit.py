@@ -104,6 +104,21 @@ class PosedFitResult:
                 "condition_number": self.condition_number, "iterations": self.iterations}
 
 
+def _refuse_wild_heights(q: np.ndarray) -> None:
+    """StepError naming the worst height when a few points lie absurdly far from the others along z
+    (beyond 10⁶ of the points' own spread): one z of 1e12 mm among a part's points made the cloud look
+    like an upright plane, and the fit said "all points lie on a line" (a review)."""
+    z = q[:, 2]
+    med = float(np.median(z))
+    spread = float(np.median(np.abs(z - med))) * 1.4826 or float(np.ptp(q[:, :2]))
+    far = np.abs(z - med) > 1e6 * max(spread, 1e-300)
+    if far.any():
+        i = int(np.argmax(np.abs(z - med)))
+        raise StepError(f"{int(far.sum())} point(s) lie absurdly far from the others in z (z = {z[i]:.6g} mm; "
+                        f"the others spread ~{spread:.3g} mm about {med:.6g} mm): a corrupted value in the "
+                        "file? Fix the file or remove the point(s) (manual_edit)")
+
+
 class PosedSurfaceFit:
     """One job: fit pose (and chosen design parameters) of ``surface`` to points ``q`` (measuring frame).
 
@@ -298,6 +313,8 @@ class PosedSurfaceFit:
         # a profile: narrower in x, y than 1/1000 of its length, or (a tilted profile bows sideways by
         # sag·tilt) all in one plane that stands upright — a plane section, not an areal measurement
         upright_plane = w3[0] <= 1e-9 * w3[2] and abs(v3[2, 0]) < 0.3
+        if upright_plane and not (ev[1] <= 0 or ev[0] <= 1e-6 * ev[1]):
+            _refuse_wild_heights(self.q)  # an areal footprint "upright" because of a wild height
         if ev[1] <= 0 or ev[0] <= 1e-6 * ev[1] or upright_plane:
             raise StepError("all points lie on a line: a profile cannot determine the tilt about its own "
                             "direction — measure a second line or an areal pattern (or fix those DOF)")

@@ -88,10 +88,21 @@ def _read_pymeshlab(path: Path):
 
     ms = pymeshlab.MeshSet()
     kw = {"unify_vertices": False} if path.suffix.lower() == ".stl" else {}  # numpy merges faster
+    import os
+
+    cwd = os.getcwd()
     try:
-        ms.load_new_mesh(str(path), **kw)
+        ms.load_new_mesh(str(path.resolve()), **kw)
     except pymeshlab.PyMeshLabException as e:
-        raise InputError(f"{path}: cannot read the mesh: {str(e).strip().splitlines()[0]}") from None
+        # MeshLab's loader leaves the process in the file's folder when it fails: every relative
+        # path after it (the next input of a batch) was read from there
+        os.chdir(cwd)
+        if path.stat().st_size == 0:
+            raise InputError(f"{path}: the mesh file is empty") from None
+        why = str(e).strip().splitlines()[0]
+        if why.startswith("Unable to open file"):  # what it says of a file it opened but could not parse
+            why = "the file is damaged or truncated, or not in the format its name says"
+        raise InputError(f"{path}: cannot read the mesh: {why}") from None
     m = ms.current_mesh()
     V = np.ascontiguousarray(m.vertex_matrix(), dtype=np.float64)
     F = np.ascontiguousarray(m.face_matrix(), dtype=np.int64) if m.face_number() else \
@@ -102,7 +113,10 @@ def _read_pymeshlab(path: Path):
 def _read_open3d(path: Path):
     import open3d as o3d  # lazy: heavy
 
-    m = o3d.io.read_triangle_mesh(str(path))
+    # its warnings ("Read PLY failed", "appears to be a geometry::PointCloud") went to stdout under
+    # --quiet (a review); a file it cannot read comes back empty and pymeshlab's error is the message
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        m = o3d.io.read_triangle_mesh(str(path))
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.triangles, dtype=np.int64)
 
 

@@ -160,9 +160,9 @@ def grid_map(spline: TensorBSpline, spacing: float, px, py, *, diameter: float |
     # the node counts before the nodes: spacing 1e-9 mm asked numpy for 9.5 TiB (MemoryError)
     nx = np.floor(hi_x / spacing + 1e-9) - np.ceil(lo_x / spacing - 1e-9) + 1
     ny = np.floor(hi_y / spacing + 1e-9) - np.ceil(lo_y / spacing - 1e-9) + 1
-    if nx * ny > 25_000_000:
-        raise ValueError(f"a {nx:.0f} × {ny:.0f} map at spacing {spacing:g} mm is too large; "
-                         "use a larger spacing")
+    if nx > 25_000_000 or ny > 25_000_000 or nx * ny > 25_000_000:  # (1e-300 mm: nx·ny overflows)
+        raise ValueError(f"a {nx:.4g} × {ny:.4g} map at spacing {spacing:g} mm is too large (at most "
+                         "25 million nodes); use a larger spacing")
     if nx < 2 or ny < 2:  # a spacing beyond the region's size: one node, RMS and PV 0, exit 0
         span = max(hi_x - lo_x, hi_y - lo_y)
         raise ValueError(f"spacing {spacing:g} mm leaves {max(nx, 0):.0f} × {max(ny, 0):.0f} map nodes over "

@@ -152,7 +152,10 @@ class ProbeRadiusStep(Step):
         except (StepError, DomainError) as e:
             # a ball larger than the part's radius of curvature makes the offset surface fold, which
             # the fit meets as "outside the conic's domain" (a review: 55 mm on a 50 mm sphere): say so
-            check_no_fold(surface, cloud.xyz, s, rho_b)
+            try:
+                check_no_fold(surface, cloud.xyz, s, rho_b)
+            except DomainError:  # points beyond the conic itself: the fit's own message says more
+                pass
             if isinstance(e, DomainError):
                 raise
             from pointspro.core.profiles import with_profile_hint
