@@ -856,7 +856,29 @@ def cmd_window(args) -> int:
 
 
 def console() -> None:  # pragma: no cover - the console-script wrapper
-    sys.exit(main())
+    code = main()
+    argv = sys.argv[1:]
+    if "--batch" in argv and not any(a.startswith("--scheduler") for a in argv):
+        exit_now(code)
+    sys.exit(code)
+
+
+def exit_now(code: int) -> None:
+    """End a finished local batch without the interpreter's teardown. By then every output is written
+    and closed (folders renamed into place, summary.json written), forked writers waited for and the
+    worker pool joined; what is left is Python clearing the modules of numpy, scipy, matplotlib and
+    pyarrow one object at a time: 0.30–0.55 s of a 50,000-point input's 3 s command, measured
+    2026-11-26 (0.02 s this way; issue 17). Streams and logging handlers are flushed first."""
+    import logging
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: nothing more can reach it
+            pass
+    logging.shutdown()
+    os._exit(code)
 
 
 if __name__ == "__main__":  # pragma: no cover
