@@ -221,6 +221,8 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
                 timed("matplotlib loaded before the figure processes fork", preload)
             for name, s in share_out(tasks, workers=workers, fork=fork_csv).items():
                 timings[name] = timings.get(name, 0.0) + s
+            # every file of the folder, which --resume checks are all still there (is_complete)
+            report["files"] = sorted({cloud_name, *(name for name, _ in tasks), "report.json", "report.html"})
             timed("report.json", lambda: (tmp / "report.json").write_text(dumps(report),
                                                                            encoding="utf-8"))
             timed("report.html", lambda: (tmp / "report.html").write_text(render_html(report, tmp),
@@ -611,8 +613,9 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
     done_mode = (data.get("figures") or {}).get("mode", "all")
     if FIGURE_MODES.index(figures) > FIGURE_MODES.index(done_mode if done_mode in FIGURE_MODES else "none"):
         return None
-    # every file the report names is still there (a review: map.csv deleted, the input "skipped")
-    named = [f for st in data.get("steps") or [] for f in st.get("artifacts") or []]
+    # every file it wrote is still there (a review: map.csv deleted, the input "skipped"); reports
+    # written before report.json listed its files: the steps' artifacts
+    named = data.get("files") or [f for st in data.get("steps") or [] for f in st.get("artifacts") or []]
     if not all((folder / f).is_file() for f in [*named, "report.html"]):
         return None
     try:  # the same content: a file measured again under the same name is run again

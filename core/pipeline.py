@@ -216,6 +216,18 @@ def _stale_residual(before: PointCloud, after: PointCloud) -> bool:
     return kept and moved
 
 
+def stale_message(stale, reader: str | None) -> str:
+    """The error of a residual left stale by a move (``_stale_residual``): the step after it uses
+    it (``reader``), or it would reach the outputs (None)."""
+    mover, mover_id, made_by = stale
+    fix = (f"move '{mover_id}' before {made_by}" if made_by else "the input's residual column is of the "
+           "points as read: leave it out of the input")
+    use = f"{reader} would use it" if reader else "it would be written as the form error"
+    return (f"{mover}: this step moves the points, but their residual (the form error) was made before "
+            f"the move and would no longer match them, and {use} — {fix}, or make the residual again "
+            "right after it (misalignment, register)")
+
+
 def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None = None,
                  log: logging.Logger | None = None, surface=None, upto: int | None = None,
                  allowed_dirs=None, assess: bool = True) -> PipelineResult:
@@ -244,6 +256,7 @@ def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None
     n = max(len(steps), 1)
     current = cloud
     residual_by = None  # the step that made the current residual ("step 3 'misalignment'"); None: the input
+    stale = None  # (where, id, residual_by) of a step that moved the points after their residual was made
     for i, rs in enumerate(steps):
         progress.check()
         sub = progress.sub(i / n, (i + 1) / n)
@@ -266,20 +279,24 @@ def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None
             raise InternalError(f"{where}: internal error: returned {type(out).__name__}, not a "
                                 "StepResult — please report")
         new = out.cloud.with_provenance({"id": rs.id, "params": rs.params.model_dump(mode="json")})
+        makes = getattr(rs.step_cls, "makes_residual", False)
+        if stale is not None:
+            if not makes:
+                raise StepError(stale_message(stale, where))
+            stale = None
         if "residual" in new.channels:
             if _stale_residual(current, new):
-                fix = (f"move '{rs.id}' before {residual_by}" if residual_by else "the input's residual "
-                       "column is of the points as read: leave it out of the input, or make the residual "
-                       f"after '{rs.id}' (misalignment, register)")
-                raise StepError(f"{where}: this step moves the points, but their residual (the form error) "
-                                f"was made before the move and would no longer match them — {fix}")
-            if getattr(rs.step_cls, "makes_residual", False):
+                # not yet an error: a residual-making step right after it makes the residual again
+                stale = (where, rs.id, residual_by)
+            elif makes or "residual" not in current.channels:
                 residual_by = where
         result.steps.append(StepRecord(rs.id, rs.step_cls.title, seconds, _one_form(out.report),
                                        dict(out.artifacts), current.n, new.n,
                                        reuse=dict(getattr(out, "reuse", None) or {})))
         sub.update(1.0, f"{rs.step_cls.title}: done")
         current = new
+    if stale is not None:
+        raise StepError(stale_message(stale, None))
     check_sanity(cloud, current)
     ids = [rec.id for rec in result.steps]
     for k, rec in enumerate(result.steps, 1):

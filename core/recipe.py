@@ -304,12 +304,14 @@ def check_step_order(steps, where: str = "recipe") -> None:
     correction — their ``channel`` left at "auto") placed before the step that makes it
     (Step.makes_residual: misalignment, register): run first, it would take the heights z — the
     part's sag on a curved part — for the form error, and write a "map" or a "correction" of the
-    whole surface with exit 0 (a review: bspline_map first wrote a 71.8 mm PV map.asc). README,
-    "Step order". Disabled steps do not run and are not checked."""
+    whole surface with exit 0 (a review: bspline_map first wrote a 71.8 mm PV map.asc) — unless a
+    residual-making step ran before it too. README, "Step order". Disabled steps are not checked."""
     live = [(k, s) for k, s in enumerate(steps, start=1) if s.enabled]
     for pos, (k, s) in enumerate(live):
         if not getattr(s.step_cls, "reads_residual", False):
             continue
+        if any(getattr(t.step_cls, "makes_residual", False) for _, t in live[:pos]):
+            continue  # a residual is there already (a second misalignment later refines it)
         if getattr(s.params, "channel", "auto") == "z":
             continue  # heights asked for by name: a map that is already form error
         maker = next(((j, t) for j, t in live[pos + 1:] if getattr(t.step_cls, "makes_residual", False)),

@@ -188,7 +188,7 @@ class Step:
     #: one line for lists; the class docstring is the long help
     summary: ClassVar[str] = ""
     #: the step makes the cloud's ``residual`` channel, the form error (misalignment: z − sag in the
-    #: part frame; register: the distance to the mesh). docs/recipes.md "Step order".
+    #: part frame; register: the distance to the mesh). README, "Step order".
     makes_residual: ClassVar[bool] = False
     #: the step works on the form error: the ``residual`` channel when the cloud has one, else the
     #: heights z (its ``channel`` parameter, where it has one, left at "auto"). Such a step belongs

@@ -516,9 +516,9 @@ def test_digits_python_reads_but_the_readers_do_not_name_their_line(tmp_path):
             read_cloud(p)
 
 
-def test_a_matrix_of_one_row_is_refused(tmp_path):
+def test_a_matrix_cut_after_its_first_row_is_refused_a_profile_is_not(tmp_path):
     """A review: matrix-3.txt cut in its second line read as a one-row map, its cut last value
-    '1.9473e-0' taken as 1.9473 m; the format stores no counts, so one row is refused."""
+    '1.9473e-0' taken as 1.9473 m; the format stores no counts, but the header's Height does."""
     lines = (DATA / "matrix-3.txt").read_text(encoding="utf-8").splitlines()
     first = next(i for i, ln in enumerate(lines) if ln and not ln.startswith("#"))
     cut = tmp_path / "cut.txt"
@@ -527,5 +527,11 @@ def test_a_matrix_of_one_row_is_refused(tmp_path):
         read_cloud(cut)
     one = tmp_path / "one.txt"
     one.write_text("\n".join(lines[:first + 1]) + "\n", encoding="utf-8")
-    with pytest.raises(InputError, match=r"one\.txt: one row of heights — a height map needs at least 2 × 2"):
+    with pytest.raises(InputError, match=r"one\.txt: one row of heights, but the header's Height spans "
+                                         r"about 256 of its pixels — the file looks cut after its first line"):
         read_cloud(one)
+    # a profile — the header's Height one pixel of the width's — stays a profile (a review)
+    prof = tmp_path / "prof.txt"
+    prof.write_text("# Channel: Height\n# Width: 4.00 mm\n# Height: 0.01 mm\n# Value units: m\n"
+                    + "\t".join(f"{1e-9 * k:.5e}" for k in range(400)) + "\n", encoding="utf-8")
+    assert read_cloud(prof).n == 400

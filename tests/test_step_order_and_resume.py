@@ -34,6 +34,9 @@ def test_a_form_error_step_before_the_residual_is_made_is_refused(tmp_path, firs
 
 def test_the_order_rule_spares_disabled_steps_and_heights_asked_for_by_name(tmp_path):
     load_recipe(recipe(tmp_path, "bspline_map: {channel: z}", "misalignment: {}"))
+    # between two misalignments (a second pass on the kept points): a residual is there (a review)
+    load_recipe(recipe(tmp_path, "misalignment: {}", "bspline_map: {}", "aperture: {diameter: 1200}",
+                       "misalignment: {}", "zernike: {}"))
     load_recipe(recipe(tmp_path, "{zernike: {terms: 4}, enabled: false}", "misalignment: {}"))
     load_recipe(recipe(tmp_path, "misalignment: {}", "zernike: {}", "bspline_map: {}"))
 
@@ -57,8 +60,26 @@ def test_moving_the_points_after_the_residual_was_made_is_refused(run_cli, tmp_p
     code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none", "--quiet")
     assert code != 0
     assert ("step 2 'probe_radius': this step moves the points, but their residual (the form error) "
-            "was made before the move and would no longer match them — move 'probe_radius' before "
-            "step 1 'misalignment'") in err
+            "was made before the move and would no longer match them, and it would be written as the "
+            "form error — move 'probe_radius' before step 1 'misalignment', or make the residual again "
+            "right after it (misalignment, register)") in err
+    # a step after it using the stale residual is named
+    r = recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}", "zernike: {terms: 4}",
+               name="z.yaml")
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o3", "--figures", "none", "--quiet")
+    assert code != 0 and "and step 3 'zernike' would use it — move 'probe_radius' before step 1" in err
+    # made again right after the move (a review: refused at first), or a residual column in the input
+    # that misalignment replaces (a PointsPro cloud.csv read again): fine
+    again = recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}", "misalignment: {}",
+                   "zernike: {terms: 4}", name="again.yaml")
+    assert run_cli("--batch", again, DATA, "--out", tmp_path / "o4", "--figures", "none", "--quiet")[0] == 0
+    lines = DATA.read_text(encoding="utf-8").splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("x,"))
+    rows = [ln + ",0.0" for ln in lines[head + 1:] if ln.strip()]
+    with_res = write(tmp_path / "with_res.csv", "\n".join([lines[head] + ",residual", *rows]) + "\n")
+    code, out, err = run_cli("--batch", EXAMPLE / "recipe.yaml", with_res, "--out", tmp_path / "o5",
+                             "--figures", "none")
+    assert code == 0, err
     # moved and the residual made again after it: fine
     ok = recipe(tmp_path, "probe_radius: {radius: 4.0, side: 1}", "misalignment: {}", name="ok.yaml")
     assert run_cli("--batch", ok, DATA, "--out", tmp_path / "o2", "--figures", "none", "--quiet")[0] == 0
@@ -99,7 +120,13 @@ def test_simple_polygons_pass_the_crossing_test():
     assert self_intersection([[0, 0], [4, 0], [4, 4], [2, 1], [0, 4]]) is None  # concave
     assert self_intersection([[0, 0], [1, 0], [0, 1]]) is None
     assert self_intersection([[0, 0], [1, 1], [1, 0], [0, 1]]) == (0, 2)
-    assert self_intersection([[0, 0], [2, 0], [1, 0], [1, 1]]) is not None  # doubles back on itself
+    # touching and running along are allowed (a review): a ring closed on its first vertex, a repeated
+    # vertex, a keyhole (a hole joined to the outline by a cut walked both ways)
+    assert self_intersection([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]) is None
+    assert self_intersection([[0, 0], [1, 0], [1, 0], [1, 1], [0, 1]]) is None
+    assert self_intersection([[0, 0], [10, 0], [10, 10], [0, 10], [0, 5], [4, 5], [4, 6], [6, 6], [6, 4],
+                              [4, 4], [4, 5], [0, 5]]) is None
+    assert self_intersection([[0, 0], [10, 0], [10, 10], [0, 10], [0, 5], [12, 6]]) is not None
 
 
 @pytest.mark.parametrize("text, pattern", [
@@ -136,12 +163,17 @@ def test_resume_runs_again_what_is_incomplete_or_drawn_with_fewer_figures(run_cl
         return json.loads((out / "summary.json").read_text(encoding="utf-8"))["inputs"][0]["status"]
 
     assert status("--figures", "none") == "ok"
+    rep = json.loads((out / "asphere_cmm" / "report.json").read_text(encoding="utf-8"))
+    assert set(rep["files"]) == {p.name for p in (out / "asphere_cmm").iterdir()}
     assert status("--figures", "none") == "skipped"
     (out / "asphere_cmm" / "map.csv").unlink()  # a review: reported "skipped" with map.csv missing
     assert status("--figures", "none") == "ok"
     assert (out / "asphere_cmm" / "map.csv").is_file()
     assert status("--figures", "all") == "ok"  # drawn with none before: run again to draw them
     assert (out / "asphere_cmm" / "map.png").is_file()
+    (out / "asphere_cmm" / "form_error.png").unlink()  # the summary's figure, no step's (a review)
+    assert status("--figures", "all") == "ok"
+    assert (out / "asphere_cmm" / "form_error.png").is_file()
     assert status("--figures", "none") == "skipped"  # more figures than asked: still complete
 
 

@@ -47,9 +47,11 @@ def in_rectangle(x, y, x0, x1, y0, y1) -> np.ndarray:
 
 def self_intersection(poly) -> tuple[int, int] | None:
     """(i, j) of two edges of the closed polygon ``poly`` (n × 2, edge i from vertex i to i + 1) that
-    cross or touch, not being neighbours; None for a simple polygon. A bow-tie "aperture" has no
-    inside its user can mean (even-odd would keep one lobe, non-zero both). O(n²): apertures have
-    tens of vertices."""
+    cross properly — each passing through the other's interior — or None. A bow-tie "aperture" has
+    no inside its user can mean. Edges that only touch or run along each other are allowed: a ring
+    whose last vertex repeats the first, a repeated vertex, and a keyhole (a hole joined to the
+    outline by a cut walked both ways) are what even-odd filling reads as meant (a review).
+    O(n²): apertures have tens of vertices."""
     p = np.asarray(poly, dtype=np.float64)
     n = len(p)
     a, b = p, np.roll(p, -1, axis=0)
@@ -58,22 +60,11 @@ def self_intersection(poly) -> tuple[int, int] | None:
         return np.sign((q[..., 0] - o[..., 0]) * (r[..., 1] - o[..., 1])
                        - (q[..., 1] - o[..., 1]) * (r[..., 0] - o[..., 0]))
 
-    for i in range(n):
-        j = np.arange(i + 2, n)
-        if i == 0:
-            j = j[j != n - 1]  # the last edge shares vertex 0 with the first
-        if not j.size:
-            continue
+    for i in range(n - 1):
+        j = np.arange(i + 1, n)
         d1, d2 = orient(a[i], b[i], a[j]), orient(a[i], b[i], b[j])
         d3, d4 = orient(a[j], b[j], a[i]), orient(a[j], b[j], b[i])
-        cross = (d1 * d2 <= 0) & (d3 * d4 <= 0)
-        # collinear edges apart on their line: orient is 0 throughout; they meet only if they overlap
-        col = (d1 == 0) & (d2 == 0)
-        if col.any():
-            lo_i, hi_i = np.minimum(a[i], b[i]), np.maximum(a[i], b[i])
-            lo_j, hi_j = np.minimum(a[j], b[j]), np.maximum(a[j], b[j])
-            overlap = np.all((lo_j <= hi_i) & (hi_j >= lo_i), axis=1)
-            cross &= ~col | overlap
+        cross = (d1 * d2 < 0) & (d3 * d4 < 0)
         if cross.any():
             return i, int(j[np.argmax(cross)])
     return None

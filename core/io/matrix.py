@@ -208,12 +208,36 @@ def _check_rows(path: Path):
             rows += 1
     if rows == 0:
         raise InputError(f"{path}: a matrix header but no rows of heights")
-    if rows == 1 or ncols == 1:
-        # a map of one line has no area (and is what is left of a file cut in its second line: a
-        # review's cut "1.9473e-0" read as 1.9473 m); the format stores no counts to check against
-        raise InputError(f"{path}: one {'row' if rows == 1 else 'column'} of heights — a height map "
-                         "needs at least 2 × 2 (a truncated file?)")
     return rows, ncols
+
+
+_SIZE = re.compile(r"^#\s*(Width|Height)\s*:\s*([-+0-9.eE]+)\s*(\S*)", re.MULTILINE)
+
+
+def _check_single_line(path: Path, text: str, ny: int, nx: int) -> None:
+    """One row (or column) of heights is a profile when the header's other size is about one pixel
+    (a Gwyddion profile: Width 4 mm over 400 values, Height 0.01 mm); when it spans many pixels the
+    file is what is left of a map cut after its first line (a review: matrix-3.txt cut there read
+    as one row, its cut last value "1.9473e-0" as 1.9473 m). The format stores no counts."""
+    if ny > 1 and nx > 1:
+        return
+    sizes = {k: (float(v), u) for k, v, u in _SIZE.findall(text[:4096]) if _num(v)}
+    if "Width" not in sizes or "Height" not in sizes or sizes["Width"][1] != sizes["Height"][1]:
+        return
+    px, py = sizes["Width"][0] / nx, sizes["Height"][0] / ny
+    if min(px, py) > 0 and max(px, py) > 2.0 * min(px, py):
+        across = round(max(sizes["Height"][0] / px, sizes["Width"][0] / py))
+        raise InputError(f"{path}: one {'row' if ny == 1 else 'column'} of heights, but the header's "
+                         f"{'Height' if ny == 1 else 'Width'} spans about {across} of its pixels — the "
+                         "file looks cut after its first line")
+
+
+def _num(v: str) -> bool:
+    try:
+        float(v)
+    except ValueError:
+        return False
+    return True
 
 
 def read_matrix(path: Path, opts):
@@ -221,6 +245,7 @@ def read_matrix(path: Path, opts):
     from .instruments import _short, _topography_to_cloud, check_map_geometry, quiet
 
     ny, nx = _check_rows(path)
+    _check_single_line(path, path.read_bytes()[:4096].decode("utf-8", "replace"), ny, nx)
     with quiet():
         from SurfaceTopography.IO import open_topography
 
