@@ -419,3 +419,24 @@ def test_a_programmed_surface_bending_the_other_way_is_refused():
         _run(cloud, nominal, cutoff_mm=4.0, programmed_surface={"type": "even_asphere", "R": -500.0})
     ok = _run(cloud, nominal, cutoff_mm=4.0, programmed_surface={"type": "even_asphere", "R": 501.0})
     assert "cutting" in ok.report["outputs"]
+
+
+def test_the_parts_tilt_changes_no_correction_inside_or_beyond_the_rim():
+    """Tilt is set-up, not form: the same bump with and without 2e-4 rad of tilt gives the same dz over
+    the whole written region. The plane was removed after the continuation past the rim, so the rim's
+    tilted values minus the extrapolated plane made a ramp there (a review: dz −0.43…+0.53 µm beyond
+    the rim of a 1 µm bump; a removal map ≥ 0.36 µm deep everywhere)."""
+    from pointspro.core.correction.compute import compute_correction, error_map
+
+    def bump(x, y):
+        return 1e-3 * np.exp(-((x - 8) ** 2 + y ** 2) / (2 * 4.0 ** 2))
+
+    res = {}
+    for tilt in (0.0, 2e-4):
+        cloud = _map_cloud(lambda x, y, t=tilt: bump(x, y) + t * (x + 0.5 * y), half=25.0, h=0.5, radius=25.0)
+        em = error_map(cloud.x, cloud.y, cloud["residual"], center=(0.0, 0.0), radius=25.0, outer=28.0,
+                       spacing=0.5)
+        res[tilt] = compute_correction(em, center=(0.0, 0.0), radius=25.0, extend=3.0, cutoff=2.0).dz
+    ok = np.isfinite(res[0.0])
+    assert np.array_equal(ok, np.isfinite(res[2e-4]))
+    assert np.max(np.abs(res[0.0][ok] - res[2e-4][ok])) < 1e-9  # mm: 1 pm
