@@ -259,3 +259,15 @@ def test_one_wild_height_is_named_not_read_as_a_line(run_cli, tmp_path):
     assert code != 0
     assert "1 point(s) lie absurdly far from the others in z (z = 1e+12 mm" in err
     assert "line" not in err.split("absurdly")[0]
+
+
+@pytest.mark.parametrize("step, name", [("zernike: {}", "zernike"), ("bspline_map: {}", "bspline_map")])
+def test_the_sag_of_a_curved_part_is_not_taken_for_its_form_error(run_cli, tmp_path, step, name):
+    """A review: zernike alone on the example (no misalignment) reported the sag less its Zernike terms
+    as a 13.9 µm RMS form error, exit 0. An instrument's height map under a curved nominal (µm against
+    the sag's mm) is still mapped (tests/test_pupil.py)."""
+    code, _, err = run_cli("--batch", recipe(tmp_path, step), DATA, "--out", tmp_path / "o", "--figures", "none",
+                           "--quiet")
+    assert code != 0
+    assert (f"step 1 '{name}': the cloud has no residual, and its heights z are the part's sag, not its "
+            "form error") in err

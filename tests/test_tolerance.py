@@ -65,6 +65,9 @@ def test_the_notation_is_read_as_written_on_a_drawing(text, sag, irr, rsi, rms, 
     ("3/2(0.5) λ = 632.8", 19, None, "'nm' after the wavelength"),
     ("3/-(-/-)", 9, None, "none is toleranced"),
     ("", 1, None, "code number 3"),
+    # a superscript digit is no digit of a number (str.isdigit took it: an internal error, a review)
+    ("3/2(0.5/0.2) RMSi < 0.05²", 25, "²", "';' between items"),
+    ("3/²(0.5)", 3, "²", "sagitta deviation A"),
 ])
 def test_a_string_that_does_not_parse_names_the_character_its_position_and_what_was_expected(
         text, position, char, expected):

@@ -53,10 +53,9 @@ class Case:
     def recipe(self, uncertainty: str | None = None):
         d = self.diameter
         steps = []
-        if self.probe_radius:
+        if self.probe_radius:  # contact points, still in the measuring frame: the pose comes next
             steps.append(f"  - probe_radius: {{radius: {self.probe_radius}, side: 1}}")
-        else:
-            steps.append("  - misalignment: {}")
+        steps.append("  - misalignment: {}")
         steps.append(f"  - aperture: {{diameter: {d * 0.98:.6g}}}")
         steps.append("  - zernike: {ordering: fringe, terms: 36, remove: [piston, tilt]}")
         s = self.surface

@@ -62,6 +62,23 @@ def is_flat(surface) -> bool:
     return False
 
 
+def heights_are_sag(surface, x, y, z) -> bool:
+    """True when the heights z of a cloud with no residual are the part's surface — their spread at
+    least half the nominal's sag spread over the same x, y (the probe points of a curved part) —
+    rather than a form-error map an instrument wrote (µm against the sag's mm). A flat nominal, none,
+    or points beyond the nominal's domain: False."""
+    if is_flat(surface) or len(z) < 3:
+        return False
+    from ..errors import DomainError
+
+    try:
+        sag = np.asarray(surface.sag(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)))
+    except (DomainError, ValueError):
+        return False
+    span = float(np.nanmax(sag) - np.nanmin(sag)) if np.isfinite(sag).any() else 0.0
+    return span > 0 and float(np.ptp(z)) >= 0.5 * span
+
+
 def pupil_of(x, y, surface=None, center=None, radius: float | None = None) -> Pupil:
     """The pupil of points (x, y) (mm) by the rules in the module doc."""
     x = np.asarray(x, dtype=np.float64)

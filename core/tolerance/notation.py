@@ -16,6 +16,10 @@ from dataclasses import dataclass, field
 RMS_KINDS = ("t", "i", "a")
 
 
+#: ASCII digits only: str.isdigit takes "²" too, which float() refuses (a review: an internal error)
+_DIGITS = frozenset("0123456789")
+
+
 @dataclass(frozen=True)
 class Form:
     """A parsed ``3/A(B/C) RMSx < D`` string: the limits in the string's unit (None: not toleranced)."""
@@ -66,18 +70,18 @@ class _Reader:
     def number(self) -> float | None:
         """A number written 2, 0.5, .5 or 2. ; None (nothing taken) when none starts here."""
         t, j = self.t, self.i
-        while j < len(t) and t[j].isdigit():
+        while j < len(t) and t[j] in _DIGITS:
             j += 1
         whole = j > self.i
         if j < len(t) and t[j] in ".,":
             if t[j] == ",":  # a decimal comma (written on many drawings) is refused with its place
-                if whole and j + 1 < len(t) and t[j + 1].isdigit():
+                if whole and j + 1 < len(t) and t[j + 1] in _DIGITS:
                     self.i = j
                     self.fail("a decimal point '.' (not a comma)")
                 j_end = j
             else:
                 k = j + 1
-                while k < len(t) and t[k].isdigit():
+                while k < len(t) and t[k] in _DIGITS:
                     k += 1
                 if k == j + 1 and not whole:
                     return None

@@ -74,6 +74,12 @@ class BSplineMapStep(Step):
         channel = params.channel
         if channel == "auto":
             channel = "residual" if "residual" in cloud.channels else "z"
+            from pointspro.core.metrics.pupil import heights_are_sag
+
+            if channel == "z" and heights_are_sag(ctx.surface, cloud.x, cloud.y, cloud.z):  # a map of the sag
+                raise StepError("the cloud has no residual, and its heights z are the part's sag, not its "
+                                "form error: run misalignment (or register) before bspline_map, or give "
+                                "channel: z for heights that are already a form-error map")
         if channel == "residual" and "residual" not in cloud.channels:
             raise StepError("channel 'residual' asked for, but the cloud has none (run misalignment "
                             "first, or map z)")

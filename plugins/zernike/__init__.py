@@ -76,6 +76,13 @@ class ZernikeStep(Step):
         from pointspro.core.figures import before_after, png_artifact, zernike_bars
 
         channel = "residual" if "residual" in cloud.channels else "z"
+        from pointspro.core.metrics.pupil import heights_are_sag
+
+        if channel == "z" and heights_are_sag(ctx.surface, cloud.x, cloud.y, cloud.z):
+            # a curved part's heights are its sag: fitted, they were reported as a 13.9 µm RMS "form
+            # error" of the example with exit 0 (a review); correction and bspline_map refuse alike
+            raise StepError("the cloud has no residual, and its heights z are the part's sag, not its form "
+                            "error: run misalignment (or register) before zernike")
         v = cloud[channel] if channel == "residual" else cloud.z
         x, y = cloud.x, cloud.y
         pupil = pupil_of(x, y, ctx.surface, params.given_centre, params.norm_radius)
