@@ -67,3 +67,30 @@ def test_bad_calibrations(tmp_path):
     with pytest.raises(StepError, match="found 0 step"):
         ZScaleStep().run(cloud, ZScaleStep.Params(calibration="flat.csv", heights=[0.2, 2.0]),
                          Context(base_dir=tmp_path))
+
+
+@pytest.mark.parametrize("heights, pattern", [
+    ([200.0, 2000.0, 5000.0, 11000.0], r"amplification 0\.0009754, outside 0\.5…2"),   # nm taken for µm
+    ([11.0, 5.0, 2.0, 0.2], r"amplification -0\.\d+, outside 0\.5…2"),                # reversed
+    ([2.0, 5.0, 11.0], r"found more than 3 steps where 3 calibrated heights were given"),
+])
+def test_calibrations_a_review_found_accepted(tmp_path, heights, pattern):
+    """Heights in the wrong unit or order gave amplifications of 975 or −0.85, three heights for a
+    four-step artefact were matched to its three tallest steps — all with exit 0 (a review)."""
+    artefact(tmp_path)
+    cloud = PointCloud.from_xyz(np.zeros(3), np.zeros(3), np.zeros(3))
+    with pytest.raises(StepError, match=pattern):
+        ZScaleStep().run(cloud, ZScaleStep.Params(calibration="steps.csv", heights=heights),
+                         Context(base_dir=tmp_path))
+
+
+def test_after_the_pose_of_a_curved_part_is_refused():
+    """In the part frame a curved part's heights are its sag: scaled about their mean they no longer
+    match the residual (a review: z − sag − residual 7 µm PV). Heights of a flat or a map still scale."""
+    from pointspro.core.surfaces import surface_from_spec
+
+    cloud = PointCloud.from_xyz(np.zeros(3), np.zeros(3), np.array([0.0, 0.01, 0.02]), residual=np.zeros(3))
+    sphere = surface_from_spec({"type": "even_asphere", "c": 0.01, "k": 0})
+    with pytest.raises(StepError, match="put it before misalignment"):
+        ZScaleStep().run(cloud, ZScaleStep.Params(amplification=0.98), Context(surface=sphere))
+    ZScaleStep().run(cloud, ZScaleStep.Params(amplification=0.98), Context())

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import model_validator
 
+from pointspro.core.errors import StepError
 from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
@@ -50,6 +51,9 @@ class ZScaleStep(Step):
             scan = cols.get("scan", np.zeros(cols["x"].size))
             cal = calibrate(cols["x"], cols["z"], scan, np.asarray(params.heights) * 1e-3)
             m = cal.amplification
+            if not 0.5 < m < 2.0:  # the bounds a given amplification has (a review: 975, −0.85, exit 0)
+                raise StepError(f"the calibration gives amplification {m:.4g}, outside 0.5…2: check that "
+                                "the heights are in µm, positive, and in their order along x")
             report.update(cal.describe())
             import json
 
@@ -57,6 +61,14 @@ class ZScaleStep(Step):
         else:
             m = params.amplification
             report["amplification"] = m
+        from pointspro.core.metrics.pupil import is_flat
+
+        if "residual" in cloud.channels and not is_flat(ctx.surface):
+            # in the part frame a curved part's heights are its sag: scaling them about their mean
+            # changes z − sag by µm while the residual scales its own deviations (a review: z − sag −
+            # residual 7 µm PV after it) — the machine's heights are scaled before the pose fit
+            raise StepError("z_scale corrects the measuring machine's heights: put it before misalignment "
+                            "(or register)")
         z = cloud.z
         zbar = float(z.mean()) if cloud.n else 0.0
         znew = zbar + (z - zbar) / m
