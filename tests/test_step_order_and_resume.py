@@ -271,3 +271,14 @@ def test_the_sag_of_a_curved_part_is_not_taken_for_its_form_error(run_cli, tmp_p
     assert code != 0
     assert (f"step 1 '{name}': the cloud has no residual, and its heights z are the part's sag, not its "
             "form error") in err
+
+
+def test_an_uncertainty_block_with_the_dynamic_step_is_refused(tmp_path):
+    """The Monte Carlo adds noise to z, which dynamic rebuilds from xd and xc: every sample failed,
+    blaming the data, or with tiny noise u read 4e-15 µm (a review)."""
+    r = write(tmp_path / "d.yaml", "pointspro: 1\nuncertainty: {samples: 50, noise: \"5 nm\"}\nsteps:\n"
+                                   "  - dynamic: {model: m.json}\n")
+    (tmp_path / "m.json").write_text("{}", encoding="utf-8")
+    with pytest.raises(RecipeError, match=r"d\.yaml, line 2: uncertainty: the Monte Carlo perturbs the heights "
+                                          r"z, which the recipe's 'dynamic' step rebuilds"):
+        load_recipe(r)

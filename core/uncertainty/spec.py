@@ -89,6 +89,12 @@ class UncertaintySpec:
     def check_steps(self, steps, at: str) -> None:
         """A source that needs a step the recipe lacks (probe_radius without its step): one line."""
         ids = {s.id for s in steps if getattr(s, "enabled", True)}
+        if "dynamic" in ids:
+            # the samples add noise to z, which dynamic rebuilds from its xd and xc channels: every
+            # sample failed, or (tiny noise) the noise vanished and u read 4e-15 µm (a review)
+            raise RecipeError(f"{at}: uncertainty: the Monte Carlo perturbs the heights z, which the "
+                              "recipe's 'dynamic' step rebuilds from its xd and xc channels — not supported "
+                              "with dynamic (state its uncertainty from repeated scans)")
         for s in self.sources:
             need = SOURCES[s.name][1]
             if need is not None and need not in ids:
