@@ -282,3 +282,14 @@ def test_an_uncertainty_block_with_the_dynamic_step_is_refused(tmp_path):
     with pytest.raises(RecipeError, match=r"d\.yaml, line 2: uncertainty: the Monte Carlo perturbs the heights "
                                           r"z, which the recipe's 'dynamic' step rebuilds"):
         load_recipe(r)
+
+
+def test_a_bad_surface_in_a_measurement_model_is_one_line(run_cli, tmp_path):
+    """A review: `R: 0` in a model file was "internal error: ValidationError" from explain and a
+    multi-line pydantic dump from simulate."""
+    m = write(tmp_path / "m.yaml", "pointspro_model: 1\nsurface: {type: even_asphere, R: 0, k: -0.5}\n"
+                                   "scan: {type: raster, radius: 20.0}\n")
+    code, _, err = run_cli("simulate", m, "--out", tmp_path / "s.csv")
+    assert code == 2 and "internal error" not in err
+    assert err.strip().splitlines() == [f"pointspro: {m}, line 2: surface: key 'even_asphere': Value error, "
+                                        "R must not be 0 (use c: 0 for a flat)"]

@@ -130,7 +130,7 @@ def test_project_read_by_yaml_1_2(tmp_path):
 
 
 MODEL = """pointspro_model: 1
-surface: {type: even_asphere, R: 200, c: 3e-4, k: -1, aperture: 50}
+surface: {type: even_asphere, c: 3e-4, k: -1, aperture: 50}
 scan: {type: spiral, radius: 20, rpm: 30, pitch: 1e-1, fs: 5e2}
 probe: {noise: 2e-6}
 seed: 010

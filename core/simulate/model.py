@@ -88,7 +88,7 @@ def load_model(path) -> ModelSpec:
     path = Path(path)
     data = read_yaml_mapping(path, "measurement model", "pointspro_model", 1, RecipeError)
     try:
-        return ModelSpec.model_validate(data)
+        model = ModelSpec.model_validate(data)
     except ValidationError as e:
         err = e.errors()[0]
         key = ".".join(str(k) for k in err["loc"])
@@ -96,6 +96,17 @@ def load_model(path) -> ModelSpec:
         at = f", line {line}" if line else ""
         msg = err["msg"].removeprefix("Value error, ")  # a validator's own words, without pydantic's tag
         raise RecipeError(f"{path}{at}: key '{key}': {msg}") from None
+    # the surface is checked now, as a recipe's is (a review: `R: 0` was an internal error of explain
+    # and a pydantic dump from simulate)
+    from ..recipe import format_validation_error
+    from ..surfaces.spec import parse_surface_spec
+
+    try:
+        parse_surface_spec(model.surface)
+    except ValidationError as e:
+        line = data.key_lines.get("surface")
+        raise RecipeError(format_validation_error(e, f"{path}{f', line {line}' if line else ''}: surface: ")) from None
+    return model
 
 
 def effects_dz(ctx: ScanContext, effects: list[dict]) -> np.ndarray:
