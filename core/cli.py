@@ -856,6 +856,14 @@ def cmd_window(args) -> int:
 
 
 def console() -> None:  # pragma: no cover - the console-script wrapper
+    # under a C/POSIX locale (no UTF-8 mode) stdout is ASCII: the "ok → folder" line of a finished
+    # input raised UnicodeEncodeError — an internal error, exit 2, after its outputs were written.
+    # Characters the terminal cannot show become '?'; files are written as UTF-8 regardless
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(errors="replace")
+        except (AttributeError, ValueError):  # not a text stream of io's
+            pass
     code = main()
     argv = sys.argv[1:]
     if "--batch" in argv and not any(a.startswith("--scheduler") for a in argv):

@@ -350,3 +350,17 @@ def test_the_command_ends_without_teardown_yet_everything_is_written(tmp_path):
     summary = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert [e["status"] for e in summary["inputs"]] == ["ok", "failed"]
     assert (tmp_path / "o" / "asphere_cmm" / "report.json").is_file()
+
+
+def test_an_ascii_terminal_gets_its_lines_not_an_internal_error(tmp_path):
+    """Under a C/POSIX locale stdout is ASCII: the "ok → folder" line raised UnicodeEncodeError after
+    the outputs were written — "internal error", exit 2 (found by CI's LC_ALL=C run)."""
+    import os
+
+    env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0"}
+    env.pop("PYTHONIOENCODING", None)
+    res = subprocess.run([sys.executable, "-m", "pointspro.core.cli", "--batch", str(RECIPE), str(DATA),
+                          "--out", str(tmp_path / "o"), "--figures", "none"],
+                         capture_output=True, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr.decode("ascii", "replace")
+    assert b"asphere_cmm.csv: ok ? " in res.stdout and b"internal error" not in res.stderr
