@@ -221,7 +221,7 @@ def _check_single_line(path: Path, text: str, ny: int, nx: int) -> None:
     as one row, its cut last value "1.9473e-0" as 1.9473 m). The format stores no counts."""
     if ny > 1 and nx > 1:
         return
-    sizes = {k: (float(v), u) for k, v, u in _SIZE.findall(text[:4096]) if _num(v)}
+    sizes = {k: (float(v), u) for k, v, u in _SIZE.findall(text[:4096]) if re.fullmatch(_NUM, v)}
     if "Width" not in sizes or "Height" not in sizes or sizes["Width"][1] != sizes["Height"][1]:
         return
     px, py = sizes["Width"][0] / nx, sizes["Height"][0] / ny
@@ -231,13 +231,6 @@ def _check_single_line(path: Path, text: str, ny: int, nx: int) -> None:
                          f"{'Height' if ny == 1 else 'Width'} spans about {across} of its pixels — the "
                          "file looks cut after its first line")
 
-
-def _num(v: str) -> bool:
-    try:
-        float(v)
-    except ValueError:
-        return False
-    return True
 
 
 def read_matrix(path: Path, opts):
