@@ -210,6 +210,17 @@ class Step:
         return cloud
 
 
+def with_example_residual(cloud: PointCloud) -> PointCloud:
+    """The contract test's generic raster (the 002 asphere) as misalignment leaves it: a smooth form
+    error of ~0.1 µm (power and astigmatism) as its residual — for the steps that work on the form
+    error and refuse a curved part's sag (zernike, bspline_map, correction)."""
+    import numpy as np
+
+    r = np.hypot(cloud.x, cloud.y) / 650.0
+    return cloud.replace(channels={**cloud.channels, "residual": 1e-4 * (2 * r**2 - 1)
+                                   + 5e-5 * r**2 * np.cos(2 * np.arctan2(cloud.y, cloud.x))})
+
+
 class _StepModule(types.ModuleType):
     """This module is also the Python API's ``pp.step(step_id, **params)`` (core/api.py): the name
     ``pointspro.core.step`` is both the step contract (``from pointspro.core.step import Step``, what

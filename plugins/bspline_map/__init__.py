@@ -64,6 +64,12 @@ class BSplineMapStep(Step):
     summary = "Smoothing bicubic B-spline of the residual on a grid: map.csv, map.x3p, map.asc."
     Params = BSplineMapParams
 
+    @classmethod
+    def example_cloud(cls, cloud):
+        from pointspro.core.step import with_example_residual
+
+        return with_example_residual(cloud)
+
     def run(self, cloud, params: BSplineMapParams, ctx: Context) -> StepResult:
         from pointspro.core.figures import grid_map_figure, png_artifact, profiles_figure, psd_figure
         from pointspro.core.maps import fit_bspline, grid_map

@@ -456,10 +456,9 @@ class CorrectionStep(Step):
 
     @classmethod
     def example_cloud(cls, cloud):
-        # the generic raster on the 002 asphere, with a smooth form error as its residual
-        r = np.hypot(cloud.x, cloud.y) / 650.0
-        return cloud.replace(channels={**cloud.channels, "residual": 1e-4 * (2 * r**2 - 1)
-                                       + 5e-5 * r**2 * np.cos(2 * np.arctan2(cloud.y, cloud.x))})
+        from pointspro.core.step import with_example_residual
+
+        return with_example_residual(cloud)
 
 
 def _surface_yaml(surface, info, comments) -> str:

@@ -72,6 +72,12 @@ class ZernikeStep(Step):
     summary = "Fit Zernike terms over the aperture; remove piston, tilt, power… from the residual."
     Params = ZernikeParams
 
+    @classmethod
+    def example_cloud(cls, cloud):
+        from pointspro.core.step import with_example_residual
+
+        return with_example_residual(cloud)
+
     def run(self, cloud, params: ZernikeParams, ctx: Context) -> StepResult:
         from pointspro.core.figures import before_after, png_artifact, zernike_bars
 
