@@ -718,6 +718,7 @@ def _check_simulate_out(out: Path, model: Path) -> None:
 
 def cmd_simulate(args) -> int:
     from .cloud import PointCloud
+    from .errors import RecipeError
     from .io import write_cloud
     from .simulate.model import load_model, simulate
 
@@ -725,13 +726,15 @@ def cmd_simulate(args) -> int:
     try:
         sim = simulate(model, Path(args.model).parent)
     except (ValueError, KeyError) as e:
-        from .errors import RecipeError
-
         raise RecipeError(f"{args.model}: {e}") from None
     extra = {"fiducial": sim["fiducial"]} if "fiducial" in sim else {}
     cloud = PointCloud.from_xyz(sim["x"], sim["y"], sim["z"], t=sim["t"], c=sim["c"], xd=sim["xd"], **extra)
     cloud.meta["channel_units"] = {"t": "s", "c": "deg"}  # written `t [s]`, `c [deg]` (docs/formats.md)
     _check_simulate_out(Path(args.out), Path(args.model))
+    mesh = model.surface.get("path") if isinstance(model.surface, dict) else None
+    if mesh is not None and Path(args.out).resolve() == (Path(args.model).parent / mesh).resolve():
+        # a review: `--out partmesh.ply` replaced the model's nominal mesh with a point cloud
+        raise RecipeError(f"--out {args.out}: is the model's nominal mesh ({mesh}); choose another file name")
     write_cloud(cloud, args.out)
     print(f"{args.out}: {cloud.n} simulated points")
     return EXIT_OK

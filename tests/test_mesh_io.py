@@ -278,3 +278,15 @@ def test_a_mesh_that_fails_to_read_leaves_the_working_folder_alone(tmp_path, mon
     with pytest.raises(InputError, match=r"cut\.ply: cannot read the mesh: the file is damaged or truncated"):
         read_mesh("sub/cut.ply", reader="pymeshlab")
     assert os.getcwd() == str(tmp_path)
+
+
+def test_simulate_never_writes_over_the_models_nominal_mesh(run_cli, tmp_path):
+    """A review: `simulate m.yaml --out part.ply` replaced the model's nominal mesh with a point cloud."""
+    V, F = sheet(n=21, off=(-10.0, -10.0), f=lambda x, y: 0.001 * (x * x + y * y))
+    write_mesh(tmp_path / "part.ply", V, F)
+    before = (tmp_path / "part.ply").read_bytes()
+    (tmp_path / "m.yaml").write_text("pointspro_model: 1\nsurface: {type: mesh, path: part.ply}\n"
+                                     "scan: {type: raster, radius: 5.0}\n", encoding="utf-8")
+    code, _, err = run_cli("simulate", tmp_path / "m.yaml", "--out", tmp_path / "part.ply")
+    assert code == 2 and "is the model's nominal mesh (part.ply)" in err
+    assert (tmp_path / "part.ply").read_bytes() == before
