@@ -293,3 +293,25 @@ def test_a_bad_surface_in_a_measurement_model_is_one_line(run_cli, tmp_path):
     assert code == 2 and "internal error" not in err
     assert err.strip().splitlines() == [f"pointspro: {m}, line 2: surface: key 'even_asphere': Value error, "
                                         "R must not be 0 (use c: 0 for a flat)"]
+
+
+@pytest.mark.parametrize("edit, pattern", [
+    (lambda rows: rows[:3] + [rows[2]] + rows[3:], r"fiducial 3 has 2 rows; give each ball's calibrated centre once"),
+    (lambda rows: rows[:2] + [rows[2].replace("3,", "3.6,", 1)] + rows[3:], r"fiducial id 3\.6 \(row 3 of the data\) "
+                                                                             r"is not a whole number"),
+])
+def test_a_reference_with_a_repeated_or_fractional_ball_id_is_refused(tmp_path, edit, pattern):
+    """A review: of two rows of one id the first was taken (Ev 4.5 µm, χ² 1e9, exit 0); 3.6 became 3."""
+    from pointspro.core import PointCloud
+    from pointspro.core.calibration.fiducial_sim import case_000
+    from pointspro.core.errors import InputError
+    from pointspro.core.step import Context
+    from pointspro.plugins.fiducials import FiducialsStep
+
+    c = case_000(0, "fourier")
+    head, *rows = c.reference_csv().strip().splitlines()
+    assert rows[2].startswith("3,")
+    (tmp_path / "reference.csv").write_text("\n".join([head, *edit(rows)]) + "\n", encoding="utf-8")
+    cloud = PointCloud.from_xyz(*c.points.T, fiducial=c.ids)
+    with pytest.raises(InputError, match=pattern):
+        FiducialsStep().run(cloud, FiducialsStep.Params(reference="reference.csv"), Context(base_dir=tmp_path))

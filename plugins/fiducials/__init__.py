@@ -126,7 +126,18 @@ class FiducialsStep(Step):
         ctx.progress.check()
         p = ctx.resolve(params.reference, "reference")
         ref_cols = read_table(p, ("fiducial", "x", "y", "z"))
-        ref_ids = ref_cols["fiducial"].astype(int).tolist()
+        fid = np.asarray(ref_cols["fiducial"], dtype=np.float64)
+        # a ball id is a whole number, each ball once (a review: 3.6 was taken as 3, and of two rows of
+        # one id the first, silently — an Ev of 4.5 µm and χ² 1e9 with exit 0)
+        frac = np.flatnonzero(fid != np.round(fid))
+        if frac.size:
+            raise InputError(f"{p}: fiducial id {fid[frac[0]]:g} (row {frac[0] + 1} of the data) is not a "
+                             "whole number")
+        uniq, counts = np.unique(fid, return_counts=True)
+        if (counts > 1).any():
+            raise InputError(f"{p}: fiducial {uniq[counts > 1][0]:g} has {counts[counts > 1][0]} rows; "
+                             "give each ball's calibrated centre once")
+        ref_ids = fid.astype(int).tolist()
         centres = fit_centres(cloud, params.diameter)
         missing = sorted(set(centres) - set(ref_ids))
         if missing:
