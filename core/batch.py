@@ -306,9 +306,13 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
 
 
 def step_warnings(result) -> list[str]:
-    """Each step's report warnings, "'step_id': text", in the order the steps ran."""
-    return [f"'{rec.id}': {w}" for rec in result.steps
-            for w in (rec.report.get("warnings") or []) if isinstance(w, str)]
+    """Each step's report warnings, "'step_id': text", in the order the steps ran, then the
+    uncertainty's ("'uncertainty': text")."""
+    out = [f"'{rec.id}': {w}" for rec in result.steps
+           for w in (rec.report.get("warnings") or []) if isinstance(w, str)]
+    block = result.summary().get("uncertainty") if result.uncertainty is not None else None
+    meta = (block or {}).get("_meta") or {}
+    return out + [f"'uncertainty': {w}" for w in meta.get("warnings") or [] if isinstance(w, str)]
 
 
 def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0,

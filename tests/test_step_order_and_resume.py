@@ -315,3 +315,12 @@ def test_a_reference_with_a_repeated_or_fractional_ball_id_is_refused(tmp_path, 
     cloud = PointCloud.from_xyz(*c.points.T, fiducial=c.ids)
     with pytest.raises(InputError, match=pattern):
         FiducialsStep().run(cloud, FiducialsStep.Params(reference="reference.csv"), Context(base_dir=tmp_path))
+
+
+def test_a_noise_far_below_the_datas_is_warned_of(run_cli, tmp_path):
+    """A review: noise "1e-9 nm" on the example (~0.3 µm of noise) gave U95 7e-13 µm and "conforms"."""
+    text = (EXAMPLE / "recipe.yaml").read_text(encoding="utf-8") + 'uncertainty: {samples: 50, noise: "1e-9 nm"}\n'
+    r = write(tmp_path / "u.yaml", text)
+    code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none")
+    assert code == 0
+    assert "asphere_cmm.csv: warning: 'uncertainty': the given noise σ 1e-09 nm is below a tenth of" in err

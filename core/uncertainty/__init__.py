@@ -127,6 +127,16 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
             warnings.append(f"the given noise σ {format_length(sigma)} exceeds the spread of {of} "
                             f"({format_length(spread)}), which holds that noise: check its unit — the "
                             "figures are then mostly noise bias")
+        seen = estimate_sigma(nominal.x, nominal.y, v) if v.size > 8 else 0.0
+        if seen > 0 and sigma < 0.1 * seen:
+            # a review: "1e-9 nm" gave U95 7e-13 µm and "conforms", no bias removed, with ~0.3 µm of
+            # noise in the data (as estimated for noise: auto, which reads form at the neighbours'
+            # scale as noise too — so a warning, not a refusal)
+            from ..units import format_length
+
+            warnings.append(f"the given noise σ {format_length(sigma)} is below a tenth of what {of} shows "
+                            f"between neighbouring points ({format_length(seen)}, as noise: auto would "
+                            "take it): check its unit — U95 and the bias correction are then too small")
     names = _ordered(list(f0))
     kinds = getattr(extra_figures, "kinds", None)
     extreme = [n for n in names if est.kind_of(n, kinds) == "extreme"]
