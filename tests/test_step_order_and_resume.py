@@ -324,3 +324,34 @@ def test_a_noise_far_below_the_datas_is_warned_of(run_cli, tmp_path):
     code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none")
     assert code == 0
     assert "asphere_cmm.csv: warning: 'uncertainty': the given noise σ 1e-09 nm is below a tenth of" in err
+
+
+def test_a_simulation_on_other_positions_is_carried_along_its_slope_and_must_cover_the_scan(tmp_path):
+    """explain --simulated matched each measured point to the nearest simulated one and took its height
+    as it was: 0.35 mm on a sloped part made an 8 µm "gap" and five effects named; a simulation of a
+    5 mm disc "explained" a measurement 15 mm across (a review)."""
+    import numpy as np
+
+    from pointspro.core import PointCloud
+    from pointspro.core.errors import InputError
+    from pointspro.core.explain.workflow import against_simulation
+    from pointspro.core.io import write_cloud
+
+    def f(x, y):
+        return 0.01 * x + 0.002 * (x * x + y * y)   # 10 mrad of slope, gentle curvature (mm)
+
+    g = np.arange(-10.0, 10.01, 0.5)
+    X, Y = (a.ravel() for a in np.meshgrid(g, g))
+    t = np.arange(X.size) / 100.0
+    sim = PointCloud.from_xyz(X, Y, f(X, Y), t=t, c=np.degrees(np.arctan2(Y, X)) % 360)
+    sim.meta["channel_units"] = {"t": "s", "c": "deg"}
+    write_cloud(sim, tmp_path / "sim.csv")
+    xm, ym = X[:-60] + 0.2, Y[:-60] + 0.15
+    meas = PointCloud.from_xyz(xm, ym, f(xm, ym))
+    ctx, z_sim, match = against_simulation(meas, tmp_path / "sim.csv")
+    assert "carried to the measured point along the simulation's slope" in match
+    nearest_error = np.max(np.abs(f(X[:-60], Y[:-60]) - f(xm, ym)))   # what the nearest height was off by
+    assert nearest_error > 2e-3 and np.max(np.abs(z_sim - f(xm, ym))) < 0.05 * nearest_error
+    far = PointCloud.from_xyz(xm * 3, ym * 3, f(xm * 3, ym * 3))
+    with pytest.raises(InputError, match=r"sim\.csv: \d+ measured point\(s\) lie up to .* mm from any simulated point"):
+        against_simulation(far, tmp_path / "sim.csv")
