@@ -163,3 +163,27 @@ def test_spectral_mixture_gradients_match_finite_differences():
     k1 = SpectralMixture([1.0], [0.3, 0, 0], [0.05, 0.05, 0.05])
     tau = np.array([[0.0, 0, 0], [1.0, 0, 0]])
     assert k1(tau)[0, 1] == pytest.approx(np.exp(-2 * np.pi**2 * 0.05) * np.cos(2 * np.pi * 0.3))
+
+
+@pytest.mark.parametrize("scale, flip, match", [
+    (1e-3, False, r"scaled by 999\.9.*perhaps the measured centres are in mm and the reference in metres"),
+    (25.4, False, r"scaled by 0\.0393.*perhaps the measured centres are in inches"),
+    (1.15, False, r"scaled by 0\.8695.*a machine frame's scale differs from 1 by less than 10 %; give both"),
+    (1.0, True, r"mirror image of the reference"),
+])
+def test_reference_in_another_unit_or_mirrored_is_refused(tmp_path, scale, flip, match):
+    """A reference in metres fitted exactly (D ≈ 1000·R absorbs the unit) and calibrated silently (a
+    review); so did an axis of the other sign. The 12-parameter transform is a machine frame's small
+    distortion: its scales must be near 1 and its determinant positive."""
+    ref, cloud = setup_000(tmp_path, n=8)
+    bad = ref * scale
+    if flip:
+        bad[:, 1] = -bad[:, 1]
+    np.savetxt(tmp_path / "other.csv", np.column_stack([np.arange(1, 9), bad]), delimiter=",",
+               header="fiducial,x,y,z", comments="", fmt="%.12g")
+    with pytest.raises(InputError, match=r"other\.csv: .*" + match):
+        FiducialsStep().run(cloud, FiducialsStep.Params(reference="other.csv", monte_carlo_runs=0, Q=2),
+                            Context(base_dir=tmp_path))
+    # the true reference still calibrates (its scales differ from 1 by parts per 10⁵)
+    FiducialsStep().run(cloud, FiducialsStep.Params(reference="reference.csv", monte_carlo_runs=0, Q=2),
+                        Context(base_dir=tmp_path))

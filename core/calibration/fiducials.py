@@ -51,6 +51,34 @@ def layout_check(ref) -> tuple[float, list[str]]:
     return cond, warnings
 
 
+#: how far a machine frame's scale may differ from the reference's: a CMM's scale errors are parts per
+#: million to a few per thousand; 10 % means the two files are not in the same unit or not the same balls
+SCALE_TOLERANCE = 0.1
+_UNIT_RATIOS = {1000.0: "the measured centres are in mm and the reference in metres",
+                1e-3: "the reference is in µm or the measured centres in metres",
+                25.4: "the reference is in inches", 1 / 25.4: "the measured centres are in inches"}
+
+
+def frame_check(D) -> str | None:
+    """Why the fitted D (X_c = D X_r + A) cannot be a machine frame's small distortion, or None.
+
+    Its singular values are the scales along the principal directions: a reference in metres against
+    centres in mm fits exactly with D ≈ 1000·R (a review: such a reference calibrated silently), and a
+    negative determinant is a mirror — an axis whose sign differs between the two files."""
+    s = np.linalg.svd(np.asarray(D, dtype=np.float64), compute_uv=False)
+    if s[-1] < 1 - SCALE_TOLERANCE or s[0] > 1 + SCALE_TOLERANCE:
+        mean = float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))))
+        hint = next((f" — perhaps {why}" for r, why in _UNIT_RATIOS.items() if abs(np.log(mean / r)) < 0.05),
+                    "")
+        return (f"the measured centres are the reference scaled by {s[-1]:.6g}…{s[0]:.6g}, where a machine "
+                f"frame's scale differs from 1 by less than {SCALE_TOLERANCE * 100:g} %{hint}; give both in mm, "
+                "for the same balls")
+    if np.linalg.det(D) < 0:
+        return ("the measured centres are a mirror image of the reference (the transform's determinant "
+                "is negative): an axis's sign differs between the two files")
+    return None
+
+
 def _solve(ref, meas):
     X = np.column_stack([ref, np.ones(len(ref))])
     theta, *_ = np.linalg.lstsq(X, meas, rcond=None)  # (4, 3): column k = (D_k1, D_k2, D_k3, A_k)

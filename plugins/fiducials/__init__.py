@@ -117,7 +117,7 @@ class FiducialsStep(Step):
 
     def run(self, cloud, params: FiducialsParams, ctx: Context) -> StepResult:
         from pointspro.core.calibration import volumetric_model as vm
-        from pointspro.core.calibration.fiducials import count_study, fit_affine, monte_carlo
+        from pointspro.core.calibration.fiducials import count_study, fit_affine, frame_check, monte_carlo
         from pointspro.core.figures import png_artifact
         from pointspro.core.io.text import read_table
         from pointspro.core.units import format_length
@@ -155,6 +155,9 @@ class FiducialsStep(Step):
         sr = params.sigma_reference * 1e-3
         ctx.progress.update(0.2, "transform")
         fit = fit_affine(ref, meas, sm, sr)
+        why = frame_check(fit.D)
+        if why:
+            raise InputError(f"{p}: {why}")
         warnings += fit.warnings
         e = fit.volumetric_errors
         ev = np.linalg.norm(e, axis=1)
