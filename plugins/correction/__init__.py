@@ -152,11 +152,13 @@ class CorrectionStep(Step):
         channel = params.channel
         if channel == "auto":
             channel = "residual" if "residual" in cloud.channels else "z"
-            from pointspro.core.metrics.pupil import is_flat
+            from pointspro.core.metrics.pupil import heights_are_sag
 
-            if channel == "z" and not is_flat(ctx.surface):
+            if channel == "z" and heights_are_sag(ctx.surface, cloud.x, cloud.y, cloud.z):
                 # the heights of a curved part are its sag, not its form error: a "correction" of
-                # them is the whole surface (a 624 µm removal map of a sphere with 0.1 µm of error)
+                # them is the whole surface (a 624 µm removal map of a sphere with 0.1 µm of error);
+                # an instrument's map of deviations under a curved nominal is corrected as zernike and
+                # bspline_map map it (the same test: core/metrics/pupil.py heights_are_sag)
                 raise StepError("the cloud has no residual, and its heights z are the part's sag, not its "
                                 "form error: run misalignment (or register) before correction, or give "
                                 "channel: z for heights that are already a form-error map")
