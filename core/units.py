@@ -163,3 +163,76 @@ def format_keyed(name: str, v: float, digits: int = 6) -> str:
         return format_length(float(v) * SHOWN_LENGTH_MM[unit], digits)
     text = f"{v:.{digits}g}" if isinstance(v, float) else str(v)
     return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")
+
+
+# --- the on-machine clock and spindle angle (channels t and c, docs/formats.md) ---------------------
+# The steps read a time in s and the spindle angle in degrees; a unit a file states is converted like a
+# length (an exact division for a power of ten below the unit, none for the unit itself). Only units
+# that mean one thing: "grad" (gon in English, degree in German) or "sec" of arc are not guessed.
+_TIME_DIVIDE = {"ms": 1e3, "us": 1e6, "µs": 1e6, "μs": 1e6}
+_TIME_MULTIPLY = {"s": 1.0, "sec": 1.0, "min": 60.0, "h": 3600.0}
+_ANGLE_DIVIDE = {"mrad": 1e3}
+_ANGLE_MULTIPLY = {"deg": 1.0, "°": 1.0, "degree": 1.0, "degrees": 1.0, "rad": 180.0 / math.pi,
+                   "mrad": 180.0 / math.pi, "gon": 0.9}
+#: the units a step may read a column in: name → (what it is, divisors, multipliers)
+READ_UNITS = {"s": ("time", _TIME_DIVIDE, _TIME_MULTIPLY), "deg": ("angle", _ANGLE_DIVIDE, _ANGLE_MULTIPLY)}
+
+
+def _in_unit(values, stated: str | None, unit: str):
+    """``values`` stated in ``stated`` as ``unit`` ("s" or "deg"); as they are with no stated unit or
+    the unit itself. KeyError for a stated unit that is not a ``unit`` of READ_UNITS."""
+    import numpy as np
+
+    a = np.asarray(values, dtype=np.float64)
+    if not stated or not str(stated).strip():
+        return a
+    _, divide, multiply = READ_UNITS[unit]
+    k = _unit_key(str(stated))
+    if k not in divide and k not in multiply:
+        raise KeyError(k)
+    a = a / divide[k] if k in divide else a
+    mul = multiply.get(k, 1.0)
+    return a if mul == 1.0 else a * mul
+
+
+def unit_problem(stated: str, unit: str, reader: str = "it", quote: bool = True) -> str:
+    """Why a column stated in ``stated`` cannot be read in ``unit`` ("s" or "deg"): the message's tail,
+    naming the units accepted. ``quote=False``: the stated unit is named only when it is one PointsPro
+    knows (a parameter file's messages quote none of its content)."""
+    what, divide, multiply = READ_UNITS[unit]
+    known = ", ".join(dict.fromkeys([*multiply, *divide]))
+    k = _unit_key(str(stated))
+    if is_length_unit(stated):
+        kind = f"a length ({k})"
+    elif k in _TIME_MULTIPLY or k in _TIME_DIVIDE:
+        kind = f"a time ({k})"
+    elif k in _ANGLE_MULTIPLY:
+        kind = f"an angle ({k})"
+    else:
+        kind = f"'{stated}', a unit PointsPro does not know" if quote else "a unit PointsPro does not know"
+    return (f"the unit stated is {kind}; {reader} reads this column as {'an' if what == 'angle' else 'a'} "
+            f"{what} in {unit}: state one of {known}, or no unit for {unit}")
+
+
+def read_in(values, stated: str | None, unit: str, where: str, column: str, reader: str = "it",
+            quote: bool = True):
+    """``values`` of ``column`` as ``unit`` ("s" or "deg") from the unit the file stated (None: in
+    ``unit`` already); InputError naming ``where`` (the file), the column, ``reader`` (the step) and
+    the units accepted otherwise — a stated unit is never ignored."""
+    try:
+        return _in_unit(values, stated, unit)
+    except KeyError:
+        from .errors import InputError
+
+        name = f"{column} [{stated}]" if quote else column
+        raise InputError(f"{where}: column '{name}': {unit_problem(stated, unit, reader, quote)}") from None
+
+
+def channel_in(cloud, name: str, unit: str, step: str):
+    """Channel ``name`` of ``cloud`` as ``unit`` ("s" or "deg"), converted from the unit its file
+    stated (``meta["channel_units"]``: ``t [ms]``, ``c [rad]``); InputError naming the file, the column
+    and the step otherwise."""
+    stated = cloud.meta.get("channel_units") or {}
+    stated = stated.get(name) if isinstance(stated, dict) else None
+    return read_in(cloud[name], stated, unit, cloud.meta.get("source") or "the input", name,
+                   f"the {step} step")

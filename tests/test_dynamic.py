@@ -146,3 +146,51 @@ def test_a_real_pole_is_no_resonance_not_even_a_negative_one():
     modes = LoopModel(np.array([a.sum()]), a, fs).modes()
     assert len(modes) == 1 and modes[0]["frequency_hz"] == pytest.approx(f, rel=1e-9)
     assert modes[0]["damping"] == pytest.approx(zeta, rel=1e-9)
+
+
+def test_time_read_in_the_unit_its_header_states(tmp_path):
+    """`t [ms]` was read as seconds: dynamic_id identified a 1 Hz loop and dynamic refused a 1 kHz scan
+    as 'sampled at 1 Hz'. Now converted (ms, µs, min, h), or refused naming the file and the column."""
+    from pointspro.core.dynamics.identify import write_example_calibration
+    from pointspro.core.io import read_cloud
+
+    write_example_calibration(tmp_path)  # t in s, 1 kHz
+    a = np.loadtxt(tmp_path / "calibration.csv", delimiter=",", skiprows=1)
+    k = np.arange(len(a), dtype=np.float64)  # the example's t is k / 1000 s
+    assert np.array_equal(a[:, 0], k / 1000.0)
+    for name, header, t in (("ms.csv", "t [ms],xd,ref", k), ("us.csv", "t [µs],xd,ref", k * 1000.0)):
+        np.savetxt(tmp_path / name, np.column_stack([t, a[:, 1:]]), delimiter=",", header=header,
+                   comments="", fmt="%.17g")
+    ctx, one = Context(base_dir=tmp_path), PointCloud.from_xyz([0.0], [0.0], [0.0])
+    s = DynamicIdStep().run(one, DynamicIdStep.Params(calibration="calibration.csv"), ctx).report
+    for name in ("ms.csv", "us.csv"):
+        r = DynamicIdStep().run(one, DynamicIdStep.Params(calibration=name), ctx).report
+        assert r["fs_hz"] == s["fs_hz"] == pytest.approx(1000.0)
+        assert r["b"] == s["b"] and r["a"] == s["a"]
+    np.savetxt(tmp_path / "bad.csv", np.column_stack([k, a[:, 1:]]), delimiter=",", header="t [mm],xd,ref",
+               comments="", fmt="%.17g")
+    with pytest.raises(InputError, match=r"bad\.csv, line 1: column 't': the unit stated is a length \(mm\); "
+                                         "the dynamic_id step reads this column as a time in s"):
+        DynamicIdStep().run(one, DynamicIdStep.Params(calibration="bad.csv"), ctx)
+    # a scan at 1 kHz written in ms, corrected as the same scan in s
+    rng = np.random.default_rng(4)
+    n = 600
+    xd = 12.5 + 0.01 * np.sin(2 * np.pi * 3.0 * k[:n] / 1000.0)
+    xc = 1e-5 * rng.normal(size=n)
+    x, y, z = np.linspace(0, 6, n), np.zeros(n), xd + xc
+    in_s = DynamicStep().run(PointCloud.from_xyz(x, y, z, t=k[:n] / 1000.0, xd=xd, xc=xc),
+                             DynamicStep.Params(calibration="calibration.csv"), ctx)
+    for unit in ("ms", "furlong"):
+        np.savetxt(tmp_path / "scan.csv", np.column_stack([x, y, z, k[:n], xd, xc]), delimiter=",",
+                   header=f"x,y,z,t [{unit}],xd,xc", comments="", fmt="%.17g")
+        scan = read_cloud(tmp_path / "scan.csv")
+        if unit == "furlong":
+            with pytest.raises(InputError, match=r"scan\.csv: column 't \[furlong\]': the unit stated is "
+                                                 "'furlong', a unit PointsPro does not know; the dynamic step "
+                                                 "reads this column as a time in s"):
+                DynamicStep().run(scan, DynamicStep.Params(calibration="calibration.csv"), ctx)
+            continue
+        out = DynamicStep().run(scan, DynamicStep.Params(calibration="calibration.csv"), ctx)
+        assert out.report["fs_hz"] == pytest.approx(1000.0)
+        assert out.report["scan_speed_mm_s"] == pytest.approx(in_s.report["scan_speed_mm_s"])
+        assert np.array_equal(out.cloud.z, in_s.cloud.z)

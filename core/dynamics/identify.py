@@ -225,13 +225,14 @@ def identify(t, xd, ref, max_order: int = 5, order: int | None = None,
 LAG_FREQUENCIES = (1.0, 5.0, 15.0, 50.0)
 
 
-def identify_from_file(path, names, order, max_order, ctx):
+def identify_from_file(path, names, order, max_order, ctx, step: str = "dynamic_id"):
     """Gm from a calibration file (columns ``names`` = time, encoder, reference): (LoopModel, the
-    columns read). ``ctx``: the step's Context (progress and cancel)."""
+    columns read, time in s whatever unit its header states: ``t [ms]``). ``ctx``: the step's Context
+    (progress and cancel); ``step``: the step's id, for messages."""
     from ..io.text import read_table
 
     ctx.progress.check()
-    cols = read_table(path, names)
+    cols = read_table(path, names, units={names[0]: "s"}, reader=f"the {step} step")
     ctx.progress.update(0.2, "identifying Gm")
     model = identify(cols[names[0]], cols[names[1]], cols[names[2]], max_order=max_order, order=order,
                      what=str(path))

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..cloud import INTEGER_CHANNELS
 from ..errors import InputError
-from ..units import LENGTH_UNITS, UNITLESS_CHANNELS, is_length_unit, length_to_mm
+from ..units import LENGTH_UNITS, UNITLESS_CHANNELS, is_length_unit, length_to_mm, read_in
 
 COMMENTS = ("#", "//", "%", "!")
 _AXIS_ALIASES = {"x": "x", "y": "y", "z": "z", "px": "x", "py": "y", "pz": "z", "pos_x": "x",
@@ -133,11 +133,14 @@ def _header_name(tok: str) -> tuple[str, bool, str | None]:
     return name, is_length_unit(unit), unit
 
 
-def read_table(path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
+def read_table(path: Path, required: tuple[str, ...], units: dict[str, str] | None = None,
+               reader: str = "it") -> dict[str, np.ndarray]:
     """A headed text table of a recipe's parameter (e.g. a calibration series ``t, xd, ref``) as
-    columns by name, parsed as point files are; ``required`` names must be in the header. Its
-    messages name the file, line and column but never quote its content: a recipe may name any
-    file, and the message goes into logs and summary.json."""
+    columns by name, parsed as point files are; ``required`` names must be in the header. ``units``:
+    columns read as a time ("s") or an angle ("deg"), converted from the unit the header states
+    (``t [ms]``, ``c [rad]``) or refused naming the file, the column and ``reader`` (the step) when it
+    is no such unit (core.units.read_in). Its messages name the file, line and column but never quote
+    its content: a recipe may name any file, and the message goes into logs and summary.json."""
     path = Path(path)
     _check_readable(path)
     try:
@@ -149,6 +152,10 @@ def read_table(path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
     missing = [n for n in required if n not in cols]
     if missing:
         raise InputError(f"{path}, line {meta['header_line']}: no {'/'.join(missing)} column")
+    for n, unit in (units or {}).items():
+        if n in cols:
+            cols[n] = read_in(cols[n], meta["channel_units"].get(n), unit,
+                              f"{path}, line {meta['header_line']}", n, reader, quote=False)
     return cols
 
 
@@ -214,6 +221,7 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
         names, lengths, units = _header_columns(path, lay, need_xyz, quote)
         if not need_xyz:
             _check_finite(path, lines, lay.first_data, data, names, quote)
+            meta["channel_units"] = {n: u for n, u in zip(names, units) if u}
             return None, {n: (length_to_mm(data[:, j], u) if is_len and n not in UNITLESS_CHANNELS
                               else data[:, j])
                           for j, (n, is_len, u) in enumerate(zip(names, lengths, units))}, meta

@@ -13,6 +13,10 @@ from ..errors import InputError
 from .htm import selective_error
 
 ARCSEC = np.pi / 180 / 3600
+#: the undulations per revolution undulations_per_rev resolves (1 … MAX_UPR)
+MAX_UPR = 15
+#: the facial reversal's spindle angles must leave no gap this wide (deg): MAX_UPR sampled at Nyquist
+MAX_GAP_DEG = 180.0 / MAX_UPR
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,30 @@ def periodic(c_samples, values):
     return lambda q: np.interp(np.mod(np.asarray(q, dtype=np.float64), 360.0), cc, vv)
 
 
+def facial_coverage(c_samples, path, step: str = "kinematic_map") -> None:
+    """Refuse facial readings that do not go round the spindle: EZC(c) and EBC(c) are identified,
+    mapped and analysed for undulations over the whole revolution, and a gap of MAX_GAP_DEG or more
+    between successive angles (around the circle) leaves them undetermined there — half a turn gave
+    EBC harmonics of 2.7e6″ for 0.1″ and the other half of the map interpolated. InputError naming
+    the file, the step, the coverage found and the one needed."""
+    c = np.unique(np.mod(np.asarray(c_samples, dtype=np.float64), 360.0))
+    if c.size == 0:
+        raise InputError(f"{path}: no facial readings")
+    gaps = np.diff(np.r_[c, c[0] + 360.0])
+    i = int(np.argmax(gaps))
+    if gaps[i] < MAX_GAP_DEG:
+        return
+    start, end = float(c[i]), float(c[(i + 1) % c.size])  # the gap runs from start to end
+    end_at = end + 360.0 if end <= start else end
+    found = (f"one angle ({start:g}°)" if c.size == 1 else
+             f"c from {end:g}° {'round ' if start < end else ''}to {start:g}° ({c.size} angles): a gap of "
+             f"{gaps[i]:.4g}°, from {start:g}° to {end_at:g}°")
+    raise InputError(f"{path}: the {step} step needs facial readings all round the spindle, no gap of "
+                     f"{MAX_GAP_DEG:g}° or more between successive angles c (EZC and EBC are mapped over the "
+                     f"whole revolution and analysed up to {MAX_UPR} undulations per revolution); the file "
+                     f"covers {found}")
+
+
 def build_map(x_samples, ezx_values, c_samples, ezc_values, ebc_values, eb0c: float, r_max: float,
               n_r: int = 101, n_c: int = 360) -> KinematicMap:
     """The table of e(r, c) = −EZX(r) + EZC(c) − r(EBC(c) + EB0C) over 0 ≤ r ≤ r_max."""
@@ -91,7 +119,7 @@ def undulations_per_rev(c_samples, values, top: int = 3) -> list[dict]:
     """The largest harmonics (undulations per revolution) of a periodic error over the spindle angle."""
     c = np.mod(np.asarray(c_samples, dtype=np.float64), 360.0)
     v = np.asarray(values, dtype=np.float64)
-    k = np.arange(1, 16)
+    k = np.arange(1, MAX_UPR + 1)
     A = np.column_stack([np.ones_like(c)] + [f(np.deg2rad(c) * kk) for kk in k for f in (np.cos, np.sin)])
     coef, *_ = np.linalg.lstsq(A, v, rcond=None)
     amp = np.hypot(coef[1::2], coef[2::2])

@@ -94,8 +94,11 @@ class DynamicStep(Step):
         if missing:
             raise StepError(f"the scan has no {'/'.join(missing)} channel (on-machine data need time t, "
                             "encoder xd and sensor xc)")
+        from pointspro.core.units import channel_in
+
         src = cloud.meta.get("source", "scan")
-        fs = sampling_rate(cloud[params.t], src, row_offset=2)
+        t = channel_in(cloud, params.t, "s", self.id)  # s, from the unit the file states (t [ms])
+        fs = sampling_rate(t, src, row_offset=2)
         arts = {}
         if params.model is not None:
             from pointspro.core.io.text import read_parameter_text
@@ -106,7 +109,7 @@ class DynamicStep(Step):
             model = LoopModel.from_json(read_parameter_text(p, "dynamic model"), str(p))
         else:
             p = ctx.resolve(params.calibration, "calibration")
-            model, _ = identify_from_file(p, ("t", "xd", "ref"), params.order, 5, ctx)
+            model, _ = identify_from_file(p, ("t", "xd", "ref"), params.order, 5, ctx, self.id)
             arts["dynamic_model.json"] = model.to_json()
         if abs(model.fs - fs) > 0.01 * fs:
             raise StepError(f"the model was identified at {model.fs:g} Hz but the scan is sampled at "
@@ -125,7 +128,6 @@ class DynamicStep(Step):
         e = z_raw - z
         ctx.progress.update(0.8, "vibrations")
         f, ps = psd_time(xc, fs)
-        t = cloud[params.t]
         speed = float(np.sum(np.hypot(np.diff(cloud.x), np.diff(cloud.y))) / (t[-1] - t[0]))
         peaks = dominant_peaks(f, ps, 3, fmin=1.0)
         report = {

@@ -65,7 +65,7 @@ class DynamicIdStep(Step):
 
         path = ctx.resolve(params.calibration, "calibration")
         names = (params.t, params.xd, params.ref)
-        model, cols = identify_from_file(path, names, params.order, params.max_order, ctx)
+        model, cols = identify_from_file(path, names, params.order, params.max_order, ctx, self.id)
         report = {"calibration": str(path), **model_report(model), "warnings": []}
         if model.modes() and max(m["frequency_hz"] for m in model.modes()) > 0.8 * model.fs / 2:
             report["warnings"].append("a resonance lies near the Nyquist frequency: modes above it "

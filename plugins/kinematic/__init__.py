@@ -43,9 +43,12 @@ class KinematicStep(Step):
         if not p.is_file():
             raise InputError(f"{p}: kinematic map file not found")
         m = KinematicMap.from_json(read_parameter_text(p, "kinematic map"), str(p))
+        from pointspro.core.units import channel_in
+
+        c = channel_in(cloud, params.c, "deg", self.id)  # deg, from the unit the file states (c [rad])
         r = np.hypot(cloud.x, cloud.y)
         try:
-            e = m(r, cloud[params.c])
+            e = m(r, c)
         except InputError as err:
             raise StepError(str(err)) from None
         z = cloud.z - e

@@ -1,8 +1,9 @@
 """`kinematic_map`: the machine's kinematic error map from reversal measurements (paper 003 §4).
 
-Inputs (CSV files, relative to the recipe; lengths mm, angles deg):
+Inputs (CSV files, relative to the recipe; lengths mm, angles deg unless the header states a unit):
   straightness  x, m1, m2          forward and reversed scans of a flat along X   → EZX(x)
-  facial        c, m1, m2, m3, m4  facial reversal over the spindle angle          → EZC(c), EBC(c)
+  facial        c, m1, m2, m3, m4  facial reversal all round the spindle angle     → EZC(c), EBC(c)
+                (no gap of 12° or more: core.kinematics.errormap.facial_coverage)
   squareness    x, m1, m2          scans along X at c = 0° and c = 180°            → EB0C
 (core.kinematics.reversal for the measurement models). Writes ``kinematic_map.json`` — e(r, c) over
 0 ≤ r ≤ r_max by the selective model — that the `kinematic` step subtracts, and a polar figure.
@@ -51,7 +52,13 @@ class KinematicMapStep(Step):
     def run(self, cloud, params: KinematicMapParams, ctx: Context) -> StepResult:
         from pointspro.core.figures import png_artifact
         from pointspro.core.io.text import read_table
-        from pointspro.core.kinematics.errormap import ARCSEC, build_map, periodic, undulations_per_rev
+        from pointspro.core.kinematics.errormap import (
+            ARCSEC,
+            build_map,
+            facial_coverage,
+            periodic,
+            undulations_per_rev,
+        )
         from pointspro.core.kinematics.reversal import (
             facial_reversal,
             squareness_reversal,
@@ -60,7 +67,9 @@ class KinematicMapStep(Step):
         ctx.progress.check()
         st = read_table(ctx.resolve(params.straightness, "straightness"), ("x", "m1", "m2"))
         ezx, flat_s = straightness_reversal(st["m1"], st["m2"])
-        fa = read_table(ctx.resolve(params.facial, "facial"), ("c", "m1", "m2", "m3", "m4"))
+        fp = ctx.resolve(params.facial, "facial")
+        fa = read_table(fp, ("c", "m1", "m2", "m3", "m4"), units={"c": "deg"}, reader=f"the {self.id} step")
+        facial_coverage(fa["c"], fp, self.id)
         ezc, ebc, flat_f = facial_reversal(fa["m1"], fa["m2"], fa["m3"], fa["m4"], params.probe_distance)
         ctx.progress.update(0.4, "squareness")
         eb0c = 0.0
