@@ -8,6 +8,7 @@ valid file exactly its numbers.
 from __future__ import annotations
 
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -360,6 +361,43 @@ def test_pcd_binary_compressed(tmp_path):
     p.write_bytes(head + struct.pack("<II", len(comp), len(cols)) + bytes(bad))
     with pytest.raises(InputError, match=r"c\.pcd: the PCD's compressed point data are damaged"):
         read_cloud(p)
+
+
+def test_pcd_binary_compressed_zero_padding_after_the_points(tmp_path):
+    """PCL's writer leaves zero bytes after the compressed block: accepted; other bytes there are
+    more data than the header declares, and refused."""
+    cols = np.concatenate([XYZ[:, 0], XYZ[:, 1], XYZ[:, 2]]).astype("<f8").tobytes()
+    comp = lzf_literals(cols)
+    body = xyz_pcd(100, "binary_compressed") + struct.pack("<II", len(comp), len(cols)) + comp
+    p = tmp_path / "c.pcd"
+    p.write_bytes(body + bytes(3913))
+    assert np.array_equal(read_cloud(p).xyz, XYZ)
+    p.write_bytes(body + bytes(3000) + b"\x01" + bytes(912))
+    with pytest.raises(InputError, match=r"c\.pcd: the PCD header declares 100 points but the file "
+                                         r"holds more data \(3913 bytes after the compressed points, "
+                                         r"not all zero\)"):
+        read_cloud(p)
+
+
+def test_pcd_real_pcl_file_binary_compressed_reads_as_open3d_reads_it(tmp_path):
+    """PCL's test/car6.pcd (BSD-3, LICENSE-PCL.txt beside it): binary_compressed x y z, 10031
+    points, 3913 zero bytes after the compressed block (PCL's writer pads the file)."""
+    o3d = pytest.importorskip("open3d")
+    real = Path(__file__).parent / "data" / "realdata"
+    path = real / "pcl_car6.pcd"
+    data = path.read_bytes()
+    start = data.index(b"DATA binary_compressed\n") + len(b"DATA binary_compressed\n")
+    csize, _ = struct.unpack("<II", data[start:start + 8])
+    assert len(data) - start - 8 - csize == 3913 and not any(data[start + 8 + csize:])
+    c = read_cloud(path)
+    ref = np.asarray(o3d.io.read_point_cloud(str(path)).points)
+    assert c.n == len(ref) == 10031 and c.meta["pcd_data"] == "binary_compressed"
+    assert np.array_equal(c.xyz, ref)
+    assert (real / "LICENSE-PCL.txt").read_text(encoding="utf-8").startswith(
+        "Software License Agreement (BSD License)")
+    (tmp_path / "tail.pcd").write_bytes(data[:-1] + b"\x07")
+    with pytest.raises(InputError, match=r"tail\.pcd: .*3913 bytes after the compressed points, not all"):
+        read_cloud(tmp_path / "tail.pcd")
 
 
 def test_pcd_written_by_open3d_reads_as_open3d_reads_it(tmp_path):

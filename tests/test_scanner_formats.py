@@ -4,6 +4,7 @@ coordinates in metres become mm."""
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -77,6 +78,105 @@ def test_las_in_us_survey_feet(tmp_path):
     assert np.allclose(c.x, np.asarray(src.x) * 1200 / 3937 * 1e3, rtol=1e-15)
     assert np.array_equal(c.z, np.asarray(src.z) * 1e3)
     assert c.meta["instrument_unit"] == "US survey ft (x, y), m (z)"
+
+
+# --- the coordinate reference system's WKT: horizontal and vertical units ---------------------------
+REAL = Path(__file__).parent / "data" / "realdata"
+US_FT = 1200 / 3937  # the US survey foot in metres (EPSG 9003), exactly
+_ESRI_PROJCS = ('PROJCS["NAD_1983_StatePlane_New_Mexico_Central_FIPS_3002_Feet",GEOGCS["GCS_North_'
+                'American_1983",DATUM["D_North_American_1983",SPHEROID["GRS_1980",6378137.0,'
+                '298.257222101]],PRIMEM["Greenwich",0.0],UNIT["Degree",0.0174532925199433]],'
+                'PROJECTION["Transverse_Mercator"],PARAMETER["False_Easting",1640416.666666667],'
+                'UNIT["Foot_US",0.3048006096012192]]')
+_WKT2_PROJCRS = ('PROJCRS["NAD83(2011) / New Mexico Central (ftUS)",BASEGEOGCRS["NAD83(2011)",DATUM['
+                 '"NAD83 (National Spatial Reference System 2011)",ELLIPSOID["GRS 1980",6378137,'
+                 '298.257222101,LENGTHUNIT["metre",1]]],PRIMEM["Greenwich",0,ANGLEUNIT["degree",'
+                 '0.0174532925199433]]],CONVERSION["SPCS83 New Mexico Central zone (US survey foot)",'
+                 'METHOD["Transverse Mercator"],PARAMETER["False easting",1640416.667,LENGTHUNIT['
+                 '"US survey foot",0.304800609601219]]],CS[Cartesian,2],AXIS["easting (X)",east,'
+                 'LENGTHUNIT["US survey foot",0.304800609601219]],AXIS["northing (Y)",north,'
+                 'LENGTHUNIT["US survey foot",0.304800609601219]]]')
+WKTS = {  # (WKT, x/y metres per unit, z metres per unit, instrument_unit)
+    # ESRI: the vertical CRS follows the PROJCS at the top level, spelt VERTCS
+    "esri": (_ESRI_PROJCS + ',VERTCS["NAVD_1988",VDATUM["North_American_Vertical_Datum_1988"],'
+             'PARAMETER["Vertical_Shift",0.0],PARAMETER["Direction",1.0],UNIT["Meter",1.0]]',
+             0.3048006096012192, 1.0, "US survey ft (x, y), m (z)"),
+    "ogc": ('COMPD_CS["NM Central (ftUS) + NAVD88 height (ftUS)",' + _ESRI_PROJCS
+            + ',VERT_CS["NAVD88 height (ftUS)",VERT_DATUM["North American Vertical Datum 1988",2005],'
+            'UNIT["US survey foot",0.304800609601219],AXIS["Up",UP]]]',
+            0.3048006096012192, 0.304800609601219, "US survey ft"),
+    "wkt2": ('COMPOUNDCRS["NM Central (ftUS) + NAVD88 height",' + _WKT2_PROJCRS
+             + ',VERTCRS["NAVD88 height",VDATUM["North American Vertical Datum 1988"],CS[vertical,1],'
+             'AXIS["gravity-related height (H)",up,LENGTHUNIT["metre",1]]]]',
+             0.304800609601219, 1.0, "US survey ft (x, y), m (z)"),
+    "wkt2_vertical_first": ('COMPOUNDCRS["c",VERTICALCRS["v",VDATUM["d"],CS[vertical,1],AXIS["H",up],'
+                            'LENGTHUNIT["foot",0.3048]],' + _WKT2_PROJCRS + "]",
+                            0.304800609601219, 0.3048, "US survey ft (x, y), ft (z)"),
+}
+
+
+def _las_wkt(path, wkt, evlr=False):
+    xyz, _ = _points(50)
+    h = laspy.LasHeader(point_format=6, version="1.4")
+    h.scales = np.array([1e-3, 1e-3, 1e-3])
+    vlr = laspy.vlrs.known.WktCoordinateSystemVlr(wkt)
+    if evlr:
+        h.evlrs = laspy.vlrs.vlrlist.VLRList([vlr])
+    else:
+        h.vlrs.append(vlr)
+    las = laspy.LasData(h)
+    las.x, las.y, las.z = xyz[:, 0] + 1.7e6, xyz[:, 1] + 1.8e6, xyz[:, 2] + 5600.0
+    las.write(str(path))
+    return laspy.read(str(path))
+
+
+@pytest.mark.parametrize("kind", list(WKTS))
+def test_las_wkt_gives_x_y_the_horizontal_unit_and_z_the_vertical_one(tmp_path, kind):
+    wkt, hm, vm, unit = WKTS[kind]
+    src = _las_wkt(tmp_path / "w.las", wkt)
+    c = read_cloud(tmp_path / "w.las")
+    assert np.allclose(c.x, np.asarray(src.x) * hm * 1e3, rtol=1e-15, atol=0)
+    assert np.allclose(c.y, np.asarray(src.y) * hm * 1e3, rtol=1e-15, atol=0)
+    assert np.allclose(c.z, np.asarray(src.z) * vm * 1e3, rtol=1e-15, atol=0)
+    assert c.meta["instrument_unit"] == unit
+
+
+def test_las_wkt_in_an_extended_vlr(tmp_path):
+    """LAS 1.4 may keep its WKT in an EVLR after the points: read as from a VLR."""
+    src = _las_wkt(tmp_path / "e.las", WKTS["esri"][0], evlr=True)
+    c = read_cloud(tmp_path / "e.las")
+    assert np.allclose(c.x, np.asarray(src.x) * 0.3048006096012192e3, rtol=1e-15, atol=0)
+    assert np.array_equal(c.z, np.asarray(src.z) * 1e3)
+    assert c.meta["instrument_unit"] == "US survey ft (x, y), m (z)"
+
+
+def test_las_real_file_with_vertcs_inside_its_projcs():
+    """laspy's tests/data/test1_4.las (BSD, LICENSE-laspy.txt): a WKT PROJCS "NAD83(HARN) / New
+    Mexico Central (ftUS)" (EPSG 2903) whose UNIT["US survey foot",0.3048006096012192] is x and y's,
+    with a VERTCS (NAVD88, EPSG 5703) nested at its end, UNIT["US survey foot",1.0].
+
+    The truth, read here from the WKT text with plain string search (no pyproj in the venv): x, y
+    in US survey feet by the PROJCS's own factor. z: the VERTCS's unit *names* the US survey foot but
+    writes 1.0 as its factor (a placeholder; a metre is written "metre"); the heights, 5592–5599,
+    are US survey feet: 1704–1707 m lies in New Mexico's range (859–4013 m), 5599 m lies above
+    any point of it. So z is converted as US survey feet too, and the report says how it was read."""
+    las = laspy.read(str(REAL / "laspy_test1_4.las"))
+    (wkt,) = [v.string for v in las.header.vlrs if getattr(v, "string", None)]
+    h_part, v_part = wkt.split("VERTCS[", 1)
+    assert 'UNIT["US survey foot",0.3048006096012192,AUTHORITY["EPSG","9003"]],AXIS["X",EAST]' in h_part
+    assert 'UNIT["US survey foot",1.0]' in v_part and "UNIT" not in v_part.replace(
+        'UNIT["US survey foot",1.0]', "")
+    z_m = np.asarray(las.z) * US_FT
+    assert 859 < z_m.min() and z_m.max() < 4013 < np.asarray(las.z).min()
+    c = read_cloud(REAL / "laspy_test1_4.las")
+    assert c.n == 1000
+    assert np.allclose(c.x, np.asarray(las.x) * 0.3048006096012192e3, rtol=1e-15, atol=0)
+    assert np.allclose(c.y, np.asarray(las.y) * 0.3048006096012192e3, rtol=1e-15, atol=0)
+    assert np.allclose(c.z, np.asarray(las.z) * US_FT * 1e3, rtol=1e-15, atol=0)
+    assert 5.16e8 < c.x.min() and c.x.max() < 5.17e8  # ≈ 1694038 ft, not 1.694e9 mm (read as m)
+    assert c.meta["instrument_unit"] == (
+        'US survey ft (z: WKT UNIT["US survey foot",1.0] read as the unit it names)')
+    assert (REAL / "LICENSE-laspy.txt").read_text(encoding="utf-8").startswith("laspy License")
 
 
 def test_las_truncated_is_named(tmp_path):

@@ -5,8 +5,10 @@ Coordinates: laspy's *scaled* x, y, z (the stored integer counts × scale + offs
 states no unit of its own; the unit is the coordinate reference system's:
 
 - the GeoTIFF keys ``ProjLinearUnitsGeoKey`` (x, y) and ``VerticalUnitsGeoKey`` (z) — metre, foot,
-  US survey foot — or the WKT's ``UNIT``/``LENGTHUNIT`` (its own factor to metres; a ``VERT_CS`` /
-  ``VERTCRS`` part gives z its own);
+  US survey foot — or the WKT's ``UNIT``/``LENGTHUNIT`` (its own factor to metres), in a VLR or an
+  EVLR: x, y the horizontal CRS's own unit, z the vertical CRS's (``VERT_CS``, ESRI ``VERTCS``, WKT2
+  ``VERTCRS``/``VERTICALCRS``, wherever it stands); a factor of exactly 1 beside a unit named
+  otherwise (``UNIT["US survey foot",1.0]``) is read as the named unit, and the report says so;
 - none stated (a scanner's local frame, the common case): **metres** — the convention of LAS and of
   scanner software; ``meta["instrument_unit"]`` (in the report's ``input_file``) then says
   "m (assumed: the file states no unit)".
@@ -31,10 +33,9 @@ MAGIC = b"LASF"
 _ALWAYS = ("intensity", "classification")
 _RENAME = {"scan_angle_rank": "scan_angle"}
 #: EPSG unit codes of the GeoTIFF keys → metres
-_GEOKEY_UNITS = {9001: ("m", 1.0), 9002: ("ft", 0.3048), 9003: ("US survey ft", 1200 / 3937),
-                 9030: ("nautical mile", 1852.0), 9036: ("km", 1000.0)}
+_GEOKEY_UNITS = {9001: ("m", 1.0, ""), 9002: ("ft", 0.3048, ""), 9003: ("US survey ft", 1200 / 3937, ""),
+                 9030: ("nautical mile", 1852.0, ""), 9036: ("km", 1000.0, "")}
 _ANGULAR = re.compile(r"degree|radian|grad|arc|minute|second", re.I)
-_WKT_UNIT = re.compile(r'(?:LENGTHUNIT|UNIT)\[\s*"([^"]+)"\s*,\s*([0-9.eE+-]+)')
 
 
 def _laspy():
@@ -61,7 +62,7 @@ def read_las(path: Path):
     n = len(las.points)
     if n == 0:
         raise InputError(f"{path}: a LAS/LAZ file with no points")
-    (hname, hm), (vname, vm), stated = _units(las.header)
+    (hname, hm, hnote), (vname, vm, vnote), stated = _units(las.header)
     xyz = np.column_stack([np.asarray(las.x, dtype=np.float64) * (hm * 1e3),
                            np.asarray(las.y, dtype=np.float64) * (hm * 1e3),
                            np.asarray(las.z, dtype=np.float64) * (vm * 1e3)])
@@ -81,6 +82,10 @@ def read_las(path: Path):
             continue
         _add(cols, _RENAME.get(dim, dim), a)
     unit = hname if hname == vname else f"{hname} (x, y), {vname} (z)"
+    notes = [f"{axes}: {note}" for axes, note in (("x, y", hnote), ("z", vnote)) if note]
+    if hnote and hnote == vnote:
+        notes = [hnote]
+    unit += f" ({'; '.join(notes)})" if notes else ""
     meta = {"format": "laz" if las.header.are_points_compressed else "las",
             "las_version": str(las.header.version), "las_point_format": int(las.point_format.id),
             "instrument_unit": unit if stated else f"{unit} (assumed: the file states no unit)",
@@ -97,10 +102,11 @@ def _add(cols: dict, name: str, a: np.ndarray) -> None:
     cols[name] = a.astype(np.float64) if a.dtype.kind in "fb" else a.astype(np.int64)
 
 
-def _units(header) -> tuple[tuple[str, float], tuple[str, float], bool]:
-    """((horizontal unit, metres), (vertical unit, metres), whether the file states them)."""
+def _units(header) -> tuple[tuple[str, float, str], tuple[str, float, str], bool]:
+    """((horizontal unit, metres, note), (vertical unit, metres, note), whether the file states
+    them); a note says how a unit was read when that is not plain."""
     horizontal = vertical = None
-    for vlr in getattr(header, "vlrs", []):
+    for vlr in [*getattr(header, "vlrs", []), *(getattr(header, "evlrs", None) or [])]:
         keys = getattr(vlr, "geo_keys", None)
         if keys is not None:
             for k in keys:
@@ -113,21 +119,130 @@ def _units(header) -> tuple[tuple[str, float], tuple[str, float], bool]:
         if isinstance(wkt, bytes):
             wkt = wkt.decode("utf-8", "replace")
         if isinstance(wkt, str) and wkt.strip() and horizontal is None:
-            m = re.search(r"VERT_CS|VERTCRS|VERTICALCRS", wkt)
-            h_part, v_part = (wkt[:m.start()], wkt[m.start():]) if m else (wkt, "")
-            horizontal = _wkt_unit(h_part)
-            vertical = vertical or _wkt_unit(v_part)
+            h, v = _wkt_units(wkt)
+            horizontal = h
+            vertical = vertical or v
     if horizontal is None and vertical is None:
-        return ("m", 1.0), ("m", 1.0), False
+        return ("m", 1.0, ""), ("m", 1.0, ""), False
     horizontal = horizontal or vertical
     return horizontal, vertical or horizontal, True
 
 
-def _wkt_unit(wkt: str) -> tuple[str, float] | None:
-    """The last linear unit a WKT part names, with its factor to metres."""
-    found = [(name, float(f)) for name, f in _WKT_UNIT.findall(wkt) if not _ANGULAR.search(name)]
-    if not found:
+# --- WKT -------------------------------------------------------------------------------------------
+#: a vertical CRS: WKT1 OGC (VERT_CS), WKT1 ESRI (VERTCS), WKT2 (VERTCRS, VERTICALCRS)
+_VERTICAL = {"VERT_CS", "VERTCS", "VERTCRS", "VERTICALCRS"}
+#: a CRS whose axes x, y (and z when no vertical CRS is given) are lengths or angles
+_HORIZONTAL = {"PROJCS", "PROJCRS", "PROJECTEDCRS", "GEOCCS", "GEODCRS", "GEODETICCRS", "LOCAL_CS",
+               "ENGCRS", "ENGINEERINGCRS", "GEOGCS", "GEOGCRS", "GEOGRAPHICCRS"}
+_UNIT_KEYS = {"UNIT", "LENGTHUNIT"}
+_WKT_TOKEN = re.compile(r'\s*(?:"((?:[^"]|"")*)"|([A-Za-z_][A-Za-z0-9_]*)\s*[\[(]|([\])])|(,)|'
+                        r'([^\s,\[\]()"]+))')
+#: linear units by name (lower case, "_" as " ") → metres: a factor of exactly 1 written beside a
+#: name that is not metres is a writer's placeholder (libLAS-era VERTCS[…UNIT["US survey foot",1.0]]),
+#: not a statement that the unit is a metre
+_FT, _US_FT = 0.3048, 1200 / 3937
+_NAMED = {"foot": _FT, "international foot": _FT, "foot international": _FT, "us survey foot": _US_FT,
+          "foot us": _US_FT, "us foot": _US_FT, "survey foot": _US_FT, "millimetre": 1e-3,
+          "millimeter": 1e-3, "centimetre": 1e-2, "centimeter": 1e-2, "kilometre": 1e3, "kilometer": 1e3}
+_SHORT = {_FT: "ft", _US_FT: "US survey ft", 1e-3: "mm", 1e-2: "cm", 1e3: "km"}
+
+
+def _wkt_tree(wkt: str) -> list:
+    """The WKT as nested [keyword, arg, …] lists (strings, numbers as text, nodes); forgiving: an
+    unclosed bracket closes at the end, stray text is skipped."""
+    top: list = []
+    stack = [top]
+    pos = 0
+    while pos < len(wkt):
+        m = _WKT_TOKEN.match(wkt, pos)
+        if not m or m.end() == pos:
+            pos += 1
+            continue
+        pos = m.end()
+        quoted, key, close, _comma, bare = m.groups()
+        if key is not None:
+            node = [key.upper()]
+            stack[-1].append(node)
+            stack.append(node)
+        elif close is not None:
+            if len(stack) > 1:
+                stack.pop()
+        elif quoted is not None:
+            stack[-1].append(quoted.replace('""', '"'))
+        elif bare is not None:
+            stack[-1].append(bare)
+    return top
+
+
+def _find(nodes: list, keys: set, skip: set = frozenset()) -> list | None:
+    """The first node (depth first) whose keyword is in ``keys``, not looking inside ``skip``
+    (iterative: a WKT of thousands of nested brackets is no recursion error)."""
+    stack = [iter(nodes)]
+    while stack:
+        node = next(stack[-1], None)
+        if node is None:
+            stack.pop()
+        elif isinstance(node, list):
+            if node[0] in keys:
+                return node
+            if node[0] not in skip:
+                stack.append(iter(node[1:]))
+    return None
+
+
+def _crs_unit(crs: list) -> tuple[str, float, str] | None:
+    """A CRS node's linear unit: its own UNIT/LENGTHUNIT (WKT1; WKT2 for all axes), else its first
+    axis's (WKT2) — never one of a base CRS, datum, ellipsoid or parameter inside it."""
+    units = [n for n in crs[1:] if isinstance(n, list) and n[0] in _UNIT_KEYS]
+    axes = [n for n in crs[1:] if isinstance(n, list) and n[0] == "AXIS"]
+    for node in units + [u for a in axes for u in a[1:] if isinstance(u, list) and u[0] in _UNIT_KEYS]:
+        unit = _linear(node)
+        if unit is not None:
+            return unit
+    return None
+
+
+def _linear(node: list) -> tuple[str, float, str] | None:
+    """(short name, metres, note) of a UNIT/LENGTHUNIT node; None for an angular or unreadable one."""
+    if len(node) < 3 or not isinstance(node[1], str) or not isinstance(node[2], str) \
+            or _ANGULAR.search(node[1]):
         return None
-    name, f = found[-1]
-    short = {"metre": "m", "meter": "m", "foot": "ft", "us survey foot": "US survey ft"}
-    return short.get(name.lower(), name), f
+    try:
+        f = float(node[2])
+    except ValueError:
+        return None
+    if not (np.isfinite(f) and f > 0):
+        return None
+    name = node[1]
+    named = _NAMED.get(re.sub(r"[_\s]+", " ", name).strip().lower())
+    if f == 1.0 and named is not None:
+        return _short(name), named, f'WKT UNIT["{name}",{node[2]}] read as the unit it names'
+    return _short(name), f, ""
+
+
+def _short(name: str) -> str:
+    key = re.sub(r"[_\s]+", " ", name).strip().lower()
+    return "m" if key in ("metre", "meter") else _SHORT.get(_NAMED.get(key), name)
+
+
+def _wkt_units(wkt: str) -> tuple[tuple[str, float, str] | None, tuple[str, float, str] | None]:
+    """(horizontal unit, vertical unit) of a WKT coordinate system — OGC or ESRI WKT1, WKT2. The
+    vertical CRS is found wherever it stands (in a COMPD_CS/COMPOUNDCRS, after the PROJCS as ESRI
+    writes it, or even inside the PROJCS); x, y take the horizontal CRS's own unit."""
+    tree = _wkt_tree(wkt)
+    vert = _find(tree, _VERTICAL)
+    vertical = _crs_unit(vert) if vert is not None else None
+    horiz = _find(tree, _HORIZONTAL, skip=_VERTICAL)
+    if horiz is not None:
+        return _crs_unit(horiz), vertical
+    # no CRS keyword known here: the last linear unit outside the vertical CRS, as before
+    found, stack = None, [iter(tree)]
+    while stack:
+        node = next(stack[-1], None)
+        if node is None:
+            stack.pop()
+        elif isinstance(node, list) and node[0] not in _VERTICAL:
+            if node[0] in _UNIT_KEYS:
+                found = _linear(node) or found
+            stack.append(iter(node[1:]))
+    return found, vertical
