@@ -73,6 +73,9 @@ def test_pv_is_corrected_and_its_coverage_stated(runs):
 #: so zernike had fitted the contact points' heights — the sag — and these figures were of that).
 #: Measured then (16 repeats, 50 samples): PVr plain +54 nm, corrected −62 nm (scatter 56 nm); PV
 #: +52 → −130 nm (scatter 188 nm); coverage PVr 94 %, PV 100 %, RMS 88 %, slope 81 %.
+#: Why (docs/uncertainty.md, "Known gap"): with probe compensation PVr's and slope RMS's bias grows
+#: faster than σ² (+70 → +163 nm from σ² to 2σ²), so the samples' step over-estimates it; PV's grows as
+#: σ² where its correction may assume σ.
 OVER_CORRECTED = {("star_probe", "pvr_um"), ("star_probe", "pv_um")}
 
 
