@@ -99,6 +99,16 @@ def test_transform_matrix_and_its_checks():
         TransformStep.Params(matrix=[[1, 0], [0, 1]])
     with pytest.raises(ValidationError, match="last row"):
         TransformStep.Params(matrix=[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 1]])
+    # singular relative to its scale (a review: |det| < 1e-12 passed a flattening matrix of scale 1e3,
+    # det 1e-4 but condition number 3e13, which puts every point on a plane)
+    with pytest.raises(ValidationError, match="singular .*condition number is 3e\\+13"):
+        TransformStep.Params(matrix=[[1e3, 0, 0, 0], [0, 1e3, 0, 0], [1e3, 1e3, 1e-10, 0]])
+    with pytest.raises(ValidationError, match="singular"):
+        TransformStep.Params(matrix=[[1, 2, 3, 0], [2, 4, 6, 0], [0, 0, 1, 0]])
+    tiny = _run(TransformStep, c, matrix=[[1e-3, 0, 0, 0], [0, 1e-3, 0, 0], [0, 0, 1e-3, 0]])  # µm → mm
+    assert np.allclose(tiny.cloud.xyz, c.xyz * 1e-3, rtol=1e-15)
+    mirror = _run(TransformStep, c, matrix=[[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 1, 0]])
+    assert any("mirrors the points" in w for w in mirror.report["warnings"])
 
 
 def test_runner_writes_step_artifacts(tmp_path):

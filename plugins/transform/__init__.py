@@ -47,8 +47,13 @@ class TransformParams(Params):
             raise ValueError("matrix holds NaN/inf")
         if a.shape == (4, 4) and not np.allclose(a[3], [0, 0, 0, 1]):
             raise ValueError("the last row of an affine matrix must be [0, 0, 0, 1]")
-        if abs(np.linalg.det(a[:3, :3])) < 1e-12:
-            raise ValueError("matrix is singular")
+        # singular relative to its own scale: |det| < 1e-12 let a rank-2 matrix of 1e-5 rounding
+        # pass and refused a well-conditioned one of scale 1e-4 (a review); a condition number above
+        # 1e12 leaves fewer than 4 significant digits of the flattest axis
+        cond = np.linalg.cond(a[:3, :3])
+        if not np.isfinite(cond) or cond > 1e12:
+            raise ValueError(f"matrix is singular (the 3 × 3 part's condition number is {cond:.3g}): it "
+                             "would flatten the points onto a plane or a line")
         return m
 
     @model_validator(mode="after")
@@ -87,6 +92,11 @@ class TransformStep(Step):
             r = m[:3, :3]
             if not np.allclose(r.T @ r, np.eye(3), atol=1e-9):
                 report["warnings"].append("the matrix is not rigid (scale or shear): distances change")
+            if np.linalg.det(r) < 0:
+                # a mirror makes a left-handed frame: the part's z up and its probe side flip relative
+                # to x, y (docs/conventions.md, Frames and signs)
+                report["warnings"].append("the matrix mirrors the points (determinant < 0): the frame "
+                                          "becomes left-handed")
             report["matrix"] = m.tolist()
         ctx.progress.update(1.0, "transformed")
         # a residual channel refers to the old frame's nominal; it no longer holds after a move
