@@ -281,10 +281,15 @@ def _zip_has(path: Path, name: str) -> bool:
 
     try:
         with zipfile.ZipFile(path) as zf:
-            return name in zf.namelist()
+            names = zf.namelist()
     except (zipfile.BadZipFile, OSError, ValueError):
         # a damaged X3P or PointsPro .npz: its own reader names the damage
         return (name, path.suffix.lower()) in (("main.xml", ".x3p"), ("pointspro_meta.npy", ".npz"))
+    if name == "main.xml":  # an X3P zipped with its folder (x3ptools: csafe-logo/main.xml) too:
+        from .instruments import x3p_main_xml_names  # read_x3p reads it or says where main.xml is
+
+        return bool(x3p_main_xml_names(n.replace("\\", "/") for n in names))
+    return name in names
 
 
 def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOptions):
@@ -299,10 +304,12 @@ def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOpti
         return read_surface_topography(path, opts, head=head)
     if matrix.has_matrix_header(text_head):
         return matrix.read_matrix(path, opts)
-    from .text import read_text
+    from .text import MatrixInText, read_text
 
     try:
         got = read_text(path, invalid=opts.invalid, profile_angle_deg=opts.profile_angle_deg)
+    except MatrixInText as e:  # rows too wide for points, without a header: a height matrix
+        return matrix.read_headerless(path, e.data, e.first_line, opts, text_head)
     except InputError as e:
         what = foreign_kind(head)
         if what:

@@ -5,12 +5,16 @@ Readers (maintained, not ours), each chosen by the file's content, never by its 
   .x3p  ISO 25178-72 — x3pio (the 2000 and the Amd 1:2020 revisions). Files whose main.xml root is
         a namespace-less ``<ISO5436>`` (Sensofar) are refused by x3pio and SurfaceTopography; we read
         those ourselves (:func:`read_x3p_plain`: the same Record1/Record3 layout, binary point data).
+        main.xml may lie in the one folder the file was zipped with (:func:`_x3p_folder`); absolute
+        x/y axes give the stored coordinates (:func:`_x3p_absolute_axes`).
   everything else — SurfaceTopography (ContactEngineering/SurfaceTopography): Zygo .datx / MetroPro
         .dat, Digital Surf .sur, ISO 25178-71 .sdf, Wyko/Bruker .opd, Bruker .di, Sensofar .plu/.plux,
         Keyence .vk3/.vk4/.zon, Gwyddion .gwy, FRT .frt, Alicona .al3d, Igor .ibw, Agilent .mi, NMM,
         Dektak .opdx … with each file's lateral calibration and height unit. Its own detection tries
-        the readers by content (magic bytes first); multi-channel files give their default height
-        channel.
+        the readers by content (magic bytes first); where no magic matches and one format alone uses
+        the extension (.nms, .mat …), that reader is tried first (:func:`_open_by_extension`).
+        Multi-channel files give their default height channel. Corrected here: NanoFocus .nms pixel
+        in nm (:func:`_nms_lateral`), FRT's valid range (:func:`_frt_in_valid_range`).
   Zygo .datx whose heights are in fringes or waves (SurfaceTopography refuses the unit): read here
         with h5py, heights × λ/2 (fringe) or × λ (wave) with the reader option ``wavelength_nm``.
 
@@ -181,41 +185,116 @@ def _grid_cloud(z_mm, dx_mm, dy_mm, path, x0=0.0, y0=0.0, valid=None):
 def read_x3p(path: Path):
     import x3pio
 
+    folder = _x3p_folder(path)  # "" (main.xml at the root, as ISO 25178-72 has it) or "name/"
     try:
-        f = x3pio.read(str(path))
+        f = x3pio.read(str(path))  # x3pio 2.0 itself finds main.xml in a single folder
     except (x3pio.X3pError, OSError, ValueError, KeyError, EOFError) as e:
-        plain = _plain_iso5436_root(path)
+        plain = _plain_iso5436_root(path, folder)
         if plain:
-            return read_x3p_plain(path)
+            return read_x3p_plain(path, folder)
         raise InputError(f"{path}: not a readable X3P file ({_short(e)})") from None
-    ftype = _x3p_feature_type(path)
+    ftype = _x3p_feature_type(path, folder)
     if ftype == "PRF" or type(f).__name__ == "Profile":
         raise InputError(f"{path}: an X3P of feature type PRF (a line profile), not an areal map; "
                          "profiles are not yet supported as input")
+    where = _x3p_folder_note(folder)
+    layer = f.layers[0]
     if isinstance(f, x3pio.PointCloud):
-        p = np.asarray(f.layers[0].points, dtype=np.float64) * 1e3
+        # x3pio 2.0: ``points`` is a method (the placement applied); 1.x had an attribute
+        pts = layer.points() if callable(layer.points) else layer.points
+        p = np.asarray(pts, dtype=np.float64).reshape(-1, 3) * 1e3
         ok = np.all(np.isfinite(p), axis=1)
-        return p[ok], {}, {"instrument_format": "x3p point cloud", "invalid_dropped": int((~ok).sum())}
-    z = np.asarray(f.layers[0].z, dtype=np.float64)
+        return p[ok], {}, {"instrument_format": "x3p point cloud", **where,
+                           "invalid_dropped": int((~ok).sum())}
+    z = np.asarray(layer.z, dtype=np.float64)
     if z.ndim == 1:
         z = z[None, :]
+    if f.header.y is not None and not (f.header.x.is_incremental and f.header.y.is_incremental):
+        return _x3p_absolute_axes(path, layer, z.shape, where)
     hx = f.header.x.increment * 1e3
     hy = (f.header.y.increment if f.header.y is not None else f.header.x.increment) * 1e3
     off = getattr(f, "placement", None)
     ox, oy, oz = (0.0, 0.0, 0.0) if off is None else tuple(np.asarray(off.offset) * 1e3)
     xyz, ch, m = _grid_cloud(z * 1e3 + oz, hx, hy, path, ox, oy)
     check_map_geometry(path, xyz, ch, heights=False)  # x3pio refuses a zero or NaN increment itself
-    return xyz, ch, {"instrument_format": "x3p", **m}
+    return xyz, ch, {"instrument_format": "x3p", **where, **m}
 
 
-def _x3p_feature_type(path: Path) -> str:
+def _x3p_absolute_axes(path: Path, layer, shape, where: dict):
+    """A surface whose x or y axis is absolute (AxisType A): each point's stored coordinate, never
+    its index × increment. ISO 25178-72 (Amd 1:2020, which x3pio follows for both revisions): an
+    absolute axis's coordinate is the stored value × its Increment + its Offset, so CY with
+    Increment 2, Offset 1 and stored 1, 2, 3, 4 is y = 3, 5, 7, 9 m (an incremental axis would give
+    Offset + index × Increment = 1, 3, 5, 7: what PointsPro read before). x3pio's ``points()``
+    applies this and the placement; a point whose coordinate or height is missing is dropped."""
+    p = np.asarray(layer.points(), dtype=np.float64).reshape(-1, 3) * 1e3  # row-major: x fastest
+    ny, nx = shape
+    rows, cols = np.divmod(np.arange(ny * nx, dtype=np.int64), nx)
+    ok = np.all(np.isfinite(p), axis=1)
+    if not ok.any():
+        raise InputError(f"{path}: no valid pixel (every height is marked invalid)")
+    xyz, ch = p[ok], {"row": rows[ok], "col": cols[ok]}
+    check_map_geometry(path, xyz, ch, heights=False)
+    # no pixel_mm: along an absolute axis the points need not be evenly spaced
+    return xyz, ch, {"instrument_format": "x3p (absolute x/y axis: stored coordinates)", **where,
+                     "grid": [int(nx), int(ny)], "invalid_dropped": int((~ok).sum())}
+
+
+#: what operating systems add to a folder they zip (x3pio 2.0 drops the same)
+_ZIP_JUNK_NAMES = (".ds_store", "thumbs.db", "desktop.ini")
+
+
+def _zip_junk(name: str) -> bool:
+    *dirs, base = name.lower().split("/")
+    return "__macosx" in dirs or base in _ZIP_JUNK_NAMES or base.startswith("._")
+
+
+def x3p_main_xml_names(names) -> list[str]:
+    """The members of a zip named main.xml (at any depth), leaving out what an operating system
+    adds (``__MACOSX/``, ``._`` files)."""
+    return [n for n in names if not _zip_junk(n) and (n == "main.xml" or n.endswith("/main.xml"))]
+
+
+def _x3p_folder(path: Path) -> str:
+    """Where the X3P's main.xml lies: '' at the archive's root (ISO 25178-72), 'name/' when the whole
+    content was zipped with its folder (x3ptools' examples: ``csafe-logo/main.xml``,
+    ``csafe-logo/bindata/data.bin``), which x3pio 2.0 reads and so do we, the links in main.xml then
+    being relative to that folder. Several such folders, or one deeper down, are refused saying
+    where main.xml is. '' too when the archive cannot be listed (x3pio's message says why)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            mains = x3p_main_xml_names(n.replace("\\", "/") for n in zf.namelist())
+    except Exception:  # noqa: BLE001 - not a zip, damaged: x3pio names it
+        return ""
+    if "main.xml" in mains or not mains:
+        return ""
+    folders = [m[:-len("main.xml")] for m in mains]
+    if len(folders) > 1:
+        raise InputError(f"{path}: not a readable X3P file — the archive holds main.xml in "
+                         f"{len(folders)} folders ({', '.join(folders[:3])}), where ISO 25178-72 "
+                         "puts one main.xml at the archive's root")
+    if folders[0].count("/") > 1:
+        raise InputError(f"{path}: not a readable X3P file — main.xml is in folder {folders[0]} of "
+                         "the archive, where ISO 25178-72 puts it at the root (a file zipped with "
+                         "its one folder is read; not one nested deeper)")
+    return folders[0]
+
+
+def _x3p_folder_note(folder: str) -> dict:
+    return {"instrument_reader": f"main.xml in folder {folder}, not at the archive's root"} \
+        if folder else {}
+
+
+def _x3p_feature_type(path: Path, folder: str = "") -> str:
     """Record1/FeatureType of an X3P's main.xml ("SUR", "PRF", "PCL"), '' when unreadable (x3pio
     infers a surface from the data's shape whatever the header says)."""
     import xml.etree.ElementTree as ET
     import zipfile
 
     try:  # parsed up to the element only: main.xml may hold the data inline (DataList)
-        with zipfile.ZipFile(path) as zf, zf.open("main.xml") as f:
+        with zipfile.ZipFile(path) as zf, zf.open(folder + "main.xml") as f:
             for _, node in ET.iterparse(f, events=("end",)):
                 if isinstance(node.tag, str) and node.tag.rsplit("}", 1)[-1] == "FeatureType":
                     return (node.text or "").strip().upper()
@@ -224,14 +303,14 @@ def _x3p_feature_type(path: Path) -> str:
     return ""
 
 
-def _plain_iso5436_root(path: Path) -> bool:
+def _plain_iso5436_root(path: Path, folder: str = "") -> bool:
     """Whether main.xml's root is ``<ISO5436>`` without the ISO 5436-2 namespace (Sensofar)."""
     import xml.etree.ElementTree as ET
     import zipfile
 
     try:
         with zipfile.ZipFile(path) as zf:
-            root = ET.fromstring(zf.read("main.xml"))
+            root = ET.fromstring(zf.read(folder + "main.xml"))
     except Exception:  # noqa: BLE001 - not a zip, no main.xml, bad XML: x3pio's message stands
         return False
     return root.tag in ("ISO5436", "ISO5436_2")
@@ -240,9 +319,11 @@ def _plain_iso5436_root(path: Path) -> bool:
 _X3P_TYPES = {"D": "<f8", "F": "<f4", "L": "<i4", "I": "<i2"}
 
 
-def read_x3p_plain(path: Path):
+def read_x3p_plain(path: Path, folder: str = ""):
     """An X3P whose main.xml has no namespace: Record1 axes (CX, CY incremental), Record3 matrix
-    size and a binary PointDataLink (optional ValidPointsLink bit mask), heights × CZ increment."""
+    size and a binary PointDataLink (optional ValidPointsLink bit mask), heights × CZ increment.
+    ``folder``: where main.xml lies in the archive ('' at the root, see :func:`_x3p_folder`); the
+    links are relative to it."""
     import xml.etree.ElementTree as ET
     import zipfile
 
@@ -251,8 +332,8 @@ def read_x3p_plain(path: Path):
 
     try:
         with zipfile.ZipFile(path) as zf:
-            root = ET.fromstring(zf.read("main.xml"))
-            names = set(zf.namelist())
+            root = ET.fromstring(zf.read(folder + "main.xml"))
+            names = {n[len(folder):] for n in zf.namelist() if n.startswith(folder)}
             r1, r3 = root.find("Record1"), root.find("Record3")
             if r1 is None or r3 is None:
                 fail("main.xml has no Record1/Record3")
@@ -294,11 +375,11 @@ def read_x3p_plain(path: Path):
                      "binary PointDataLink")
             if link not in names:
                 fail(f"its point data {link} is missing from the archive")
-            raw = zf.read(link)
+            raw = zf.read(folder + link)
             valid_link = (r3.findtext("DataLink/ValidPointsLink") or "").strip()
             if valid_link and valid_link not in names:
                 fail(f"its validity mask {valid_link} (ValidPointsLink) is missing from the archive")
-            valid_raw = zf.read(valid_link) if valid_link else None
+            valid_raw = zf.read(folder + valid_link) if valid_link else None
     except zipfile.BadZipFile as e:
         raise InputError(f"{path}: not a readable X3P file ({_short(e)})") from None
     except ET.ParseError as e:
@@ -323,7 +404,8 @@ def read_x3p_plain(path: Path):
     xyz, ch, m = _grid_cloud(z * 1e3, inc["CX"] * 1e3, inc["CY"] * 1e3, path, off["CX"] * 1e3,
                              off["CY"] * 1e3, valid)
     check_map_geometry(path, xyz, ch, heights=False)  # the increments are checked above
-    return xyz, ch, {"instrument_format": "x3p (namespace-less ISO5436, own reader)", **m}
+    return xyz, ch, {"instrument_format": "x3p (namespace-less ISO5436, own reader)",
+                     **_x3p_folder_note(folder), **m}
 
 
 # --- SurfaceTopography ----------------------------------------------------------------------------
@@ -413,11 +495,13 @@ def _read_surface_topography(path: Path, opts, head: bytes):
             from SurfaceTopography.IO import open_topography
         except Exception as e:  # noqa: BLE001
             raise InputError(f"{path}: SurfaceTopography cannot be imported ({_short(e)})") from None
-        try:
-            reader = open_topography(str(path))
-        except Exception as e:  # noqa: BLE001 - the library raises many classes
-            raise _not_readable(path, head, e) from None
         magic = _magic_readers(head)
+        reader = _open_by_extension(path, magic)
+        if reader is None:
+            try:
+                reader = open_topography(str(path))
+            except Exception as e:  # noqa: BLE001 - the library raises many classes
+                raise _not_readable(path, head, e) from None
         if magic and type(reader) not in magic:
             # a reader without magic (NASA SRTM, NumPy …) took a file whose magic names another
             # format: that format's reader failed on it — say so, with its own words
@@ -442,6 +526,42 @@ def _read_surface_topography(path: Path, opts, head: bytes):
                 reader.close()
             except Exception:  # noqa: BLE001
                 pass
+
+
+#: readers never tried first for their extension: they take almost any text (a Wyko ASCII or SDF
+#: file named .txt must still reach its own reader)
+_NOT_BY_EXTENSION = ("asc", "xyz")
+
+
+def _extension_format(suffix: str) -> str | None:
+    """The one SurfaceTopography format that uses this extension ('nms' for .nms), None when none or
+    several do (.dat: MetroPro and plain text)."""
+    from SurfaceTopography.IO import readers
+
+    s = suffix.lower().lstrip(".")
+    fmts = {r.format() for r in readers if s and s in (r._file_extensions or [])}
+    return fmts.pop() if len(fmts) == 1 and not fmts & set(_NOT_BY_EXTENSION) else None
+
+
+def _open_by_extension(path: Path, magic):
+    """The reader of the file's extension when the extension names one format and no reader's
+    magic bytes claim the file, or None (then SurfaceTopography's detection decides).
+
+    Formats without magic bytes (NanoFocus NMS, MATLAB, NumPy …) are told apart only by trying each
+    reader in turn, and a reader that opens a file is not one that reads it: SurfaceTopography 1.27
+    opens a .nms (st_nms-2.nms) with its MATLAB reader, which then fails ("list index out of range")
+    while its NMS reader reads the file. The extension's own reader goes first; if it cannot open
+    the file, the detection by content runs as before — magic bytes still outrank an extension (a
+    .sur renamed .opd is read as a .sur)."""
+    from SurfaceTopography.IO import open_topography
+
+    fmt = None if magic else _extension_format(path.suffix)
+    if fmt is None:
+        return None
+    try:
+        return open_topography(str(path), format=fmt)
+    except Exception:  # noqa: BLE001 - not that format after all: the content decides
+        return None
 
 
 def _no_format() -> Exception:
@@ -560,12 +680,82 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
     # float files mark invalid pixels with NaN or with the type's extreme (surfalize writes −DBL_MAX
     # into .sdf, which SurfaceTopography 1.27 does not mask): no surface is 10³⁰ units high
     valid = ~mask & np.isfinite(h) & (np.abs(h) < 1e30)
+    if fmt == "frt":
+        valid &= _frt_in_valid_range(info, h)
+    X_mm, Y_mm, pixel = X * to_mm, Y * to_mm, [sx * to_mm, sy * to_mm]
+    if fmt == "nms":
+        X_mm, Y_mm, pixel = _nms_lateral(path, t.nb_grid_pts)
     # SurfaceTopography's arrays are (x, y): index [i, j] is column i, row j
-    xyz, chans = _to_cloud(X.T * to_mm, Y.T * to_mm, h.T * to_mm, valid.T, path)
+    xyz, chans = _to_cloud(X_mm.T, Y_mm.T, h.T * to_mm, valid.T, path)
     return xyz, chans, {"instrument_format": fmt, "instrument_reader": reader.name(),
-                        "instrument_unit": unit, "pixel_mm": [sx * to_mm, sy * to_mm],
+                        "instrument_unit": unit, "pixel_mm": pixel,
                         "grid": [int(t.nb_grid_pts[0]), int(t.nb_grid_pts[1])],
                         "invalid_dropped": int(valid.size - valid.sum())}
+
+
+#: NanoFocus .nms: the pixel size, two little-endian float64 (x, y) at this byte offset
+_NMS_PIXEL_OFFSET = 1376
+
+
+def _nms_lateral(path: Path, nb_grid_pts):
+    """(X mm, Y mm as (nx, ny) arrays, [Δx, Δy] mm) of a NanoFocus .nms map.
+
+    The header's pixel size (bytes 1376–1391, after nx, ny at 1368) is in **nanometres**.
+    SurfaceTopography 1.27's NMS reader takes it for mm (its field ``dx_mm``, × 1000 into µm), so
+    st_nms-1.nms's 312.4999 became a 312.5 mm pixel and a 160 m field. Decoded by hand: the only
+    lateral numbers in the header are those two doubles (312.4999911618964 for x and y, 512 × 512
+    pixels); surfalize reads them as nm (``step = dx * 1e-3`` µm: 0.3125 µm pixel, a 160 µm field);
+    the heights (zmin 2.69, zmax 6.01 in µm, at byte 16) span 3.3 µm — a confocal field of view of
+    160 µm fits them, 160 m does not. Read here from the file itself, so a later SurfaceTopography
+    that fixes the unit cannot make us scale it twice."""
+    import struct
+
+    with open(path, "rb") as f:
+        f.seek(_NMS_PIXEL_OFFSET)
+        b = f.read(16)
+    if len(b) < 16:
+        raise InputError(f"{path}: a damaged or truncated NanoFocus NMS file (no pixel size in its "
+                         "header)")
+    dx_nm, dy_nm = struct.unpack("<2d", b)
+    _raise_bad(path, (("pixel size x (offset 1376, nm)", dx_nm, "x positions", True),
+                      ("pixel size y (offset 1384, nm)", dy_nm, "y positions", True)))
+    px, py = dx_nm * 1e-6, dy_nm * 1e-6  # nm → mm
+    nx, ny = int(nb_grid_pts[0]), int(nb_grid_pts[1])
+    X = np.broadcast_to((np.arange(nx) * px)[:, None], (nx, ny))
+    Y = np.broadcast_to((np.arange(ny) * py)[None, :], (nx, ny))
+    return X, Y, [px, py]
+
+
+def _frt_in_valid_range(info: dict, h: np.ndarray) -> np.ndarray | bool:
+    """Pixels of an FRT MicroProf map whose stored value lies in the file's valid range.
+
+    What is established: block 0x0070 of the FRT format holds ``first_valid`` and ``last_valid``,
+    "the smallest valid value" and "the largest valid value" of the stored integers (Gwyddion's
+    microprof.c, from FRT's specification; it masks only the value 1 and notes "TODO: Use
+    first_valid and last_valid"; SurfaceTopography 1.27 follows it, value 1 only). st_frt-1.frt
+    (16-bit, valid 5 … 65529) holds 76,456 pixels of value 1 and a row of 500 pixels of value 0,
+    which both readers pass as heights of exactly 0.0 m while the surface lies near 79 µm — outside
+    the valid range, so invalid; st_frt-2.frt has no value outside the range but 1. Heights are
+    the stored value × the height scale of block 0x006C (no offset), so the stored value is
+    recovered exactly as height / scale. Applied to 16-bit (unsigned) data only: for 32-bit
+    (signed) data no file was at hand to show how the unsigned bounds compare, and the value-1
+    rule of the readers stands."""
+    rng, grid = info.get("0x70") or {}, info.get("0x66") or {}
+    scale = (info.get("0x6c") or {}).get("height_scale_factor")
+    try:
+        lo, hi, bits = int(rng["first_valid"]), int(rng["last_valid"]), int(grid["bytes_per_pixel"])
+        scale = float(scale)
+    except (KeyError, TypeError, ValueError):
+        return True  # no valid range in the header
+    if bits != 16 or not (0 <= lo <= hi <= 0xFFFF) or not np.isfinite(scale) or scale == 0:
+        return True
+    with np.errstate(invalid="ignore", over="ignore"):
+        stored = h / scale
+        r = np.rint(stored)
+        ok = ~np.isfinite(stored) | (np.abs(stored - r) < 1e-3)
+    if not ok.all():  # heights that are not stored integers × scale: the rule cannot be applied
+        return True
+    return (r >= lo) & (r <= hi)
 
 
 # --- Zygo .datx in fringes / waves ---------------------------------------------------------------------
