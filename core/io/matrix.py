@@ -29,6 +29,18 @@ for its values — SurfaceTopography would lend it that unit (or nm for SPIP), s
 ``pixel_size_um`` is given, which then replaces the sizes. A size of 0, below 0 or not finite, and a
 header's ``x-pixels``/``y-pixels`` that disagree with the rows, are refused naming the key. A file
 that names no unit at all reads its sizes in ``height_unit``, as SurfaceTopography does.
+
+The header of SurfaceTopography's ``matrix-2.txt`` / ``matrix-4.txt`` is read too (its keys as its
+reader has them, case-sensitive): ``h=650 w=650`` (rows, values a row: checked against the data),
+``pixel size=3.69862e-007 m`` (Δx = Δy, with its unit) and ``height conversion factor (-> m)=6.3e-8``
+(height = value × factor, in the unit after ``->``); ``data unit=rad`` says what the values are.
+A pixel size or factor that is no number, 0 or not finite, a unit that is no length, two pixel
+sizes, a pixel size without a unit beside a stated height unit, or values in a non-length ``data
+unit`` without a conversion factor are refused naming the line.
+
+Rows of many numbers without any header (``read_headerless``; which files, core.io.text) are a
+matrix too, read once the reader options ``pixel_size_um`` and ``height_unit`` give what the file
+does not state.
 """
 from __future__ import annotations
 
@@ -67,6 +79,17 @@ _UNIT_LINE = re.compile(rf"^\s*#?\s*(?P<key>x-unit|y-unit|Unit X|z-unit|Unit Dat
                         rf"{_KV}(?P<unit>\S*)")
 _PIXELS_LINE = re.compile(r"^\s*#?\s*(?P<key>x-pixels|y-pixels|NX|NY)\s*(?:=|:)\s*(?P<n>[0-9]+)\s*$")
 _SPIP = re.compile(r"^#\s*File Format\s*=\s*ASCII\s*$")
+# SurfaceTopography's asc reader also takes these keys (searched in any header line, case-sensitive):
+# `h=650 w=650` (rows, values a row), `pixel size=3.69862e-007 m` (Δx = Δy) and
+# `height conversion factor (-> m)=6.30079e-008` (heights = values × factor, in m). Only the
+# unambiguous forms count towards telling a matrix's header: h and w alone on their line, `pixel
+# size` and `height conversion factor` at the start of theirs (as the files have them).
+_HW_LINE = re.compile(r"^\s*#?\s*(?P<k1>[hw])\s*=\s*(?P<n1>[0-9]+)"
+                      r"(?:\s+(?P<k2>[hw])\s*=\s*(?P<n2>[0-9]+))?\s*$")
+_PIXEL_SIZE = re.compile(r"pixel\s+size\s*=\s*(?P<rest>.*)$")
+_HEIGHT_FACTOR = re.compile(r"height\s+conversion\s+factor\s+\(->\s+(?P<unit>.*)\)\s*=\s*(?P<rest>.*)$")
+_DATA_UNIT = re.compile(r"^\s*#?\s*data\s+unit\s*=\s*(?P<unit>.*?)\s*$")
+_ST_KEY_START = re.compile(r"^\s*#?\s*(?P<key>pixel\s+size|height\s+conversion\s+factor\s+\(->)")
 _STREAM = re.compile(r"<_io\.\w+ object at 0x[0-9a-fA-F]+>")
 
 
@@ -89,11 +112,36 @@ def _check_header(path: Path, text: str, opts, nrows: int, ncols: int) -> str:
 
     sizes: dict = {}   # "x" / "y" → (line, key, value text, unit text)
     units: dict = {}   # "x", "y", "z", "lateral" → unit
+    pixel: list = []   # (line, value text, unit text) of each `pixel size=`
+    factor = None      # (line, unit, value text) of `height conversion factor (-> unit)=`
+    data_unit = None   # (line, unit) of `data unit=`
     spip = False
     for i, line in _header(text):
         body = line.lstrip("\ufeff")
         if _SPIP.match(body.strip()):
             spip = True
+            continue
+        m = _HW_LINE.match(body)
+        if m:
+            for k, n in ((m.group("k1"), m.group("n1")), (m.group("k2"), m.group("n2"))):
+                have = ncols if k == "w" else nrows
+                if k and int(n) != have:
+                    raise InputError(f"{path}, line {i + 1}: the header's {k}={n} but the matrix has "
+                                     f"{have} {'values a row' if k == 'w' else 'rows'}")
+            continue
+        m = _PIXEL_SIZE.search(body)
+        if m:
+            v = _SIZE_VALUE.match(m.group("rest").strip())
+            pixel.append((i, v.group("value"), v.group("unit").strip()) if v else
+                         (i, m.group("rest").strip() or "(nothing)", ""))
+            continue
+        m = _HEIGHT_FACTOR.search(body)
+        if m:
+            factor = (i, m.group("unit").strip(), m.group("rest").strip() or "(nothing)")
+            continue
+        m = _DATA_UNIT.match(body)
+        if m:
+            data_unit = (i, m.group("unit"))
             continue
         m = _PIXELS_LINE.match(body)
         if m:
@@ -125,6 +173,51 @@ def _check_header(path: Path, text: str, opts, nrows: int, ncols: int) -> str:
                                positive=True)
         if err is not None:
             raise err
+    if factor is not None:
+        i, unit, value = factor
+        err = bad_header_scale(f"{path}, line {i + 1}", "height conversion factor", value, "heights")
+        if err is not None:
+            raise err
+        if not _is_length(unit):
+            raise InputError(f"{path}, line {i + 1}: the height conversion factor converts to "
+                             f"'{unit[:20]}', which is no length unit (nm, µm, mm, m …)")
+        units["z"] = unit
+    elif data_unit is not None and data_unit[1] and not _is_length(data_unit[1]):
+        i, unit = data_unit
+        raise InputError(f"{path}, line {i + 1}: the values are in '{unit[:20]}' (data unit), not a "
+                         "length, and the header gives no 'height conversion factor (-> m)=…' that "
+                         "makes them heights")
+    if pixel and sizes:  # SurfaceTopography would take the size in pixels and multiply it
+        (i, label, *_), k = min(sizes.values()), pixel[0][0]
+        raise InputError(f"{path}, line {max(i, k) + 1}: the header gives both a pixel size (line "
+                         f"{k + 1}) and the map's size ({label}, line {i + 1}); keep one of them")
+    pixel_unitless = False
+    if len(pixel) > 1:
+        if opts.pixel_size_um is None:
+            raise InputError(f"{path}, line {pixel[1][0] + 1}: a second pixel size (line "
+                             f"{pixel[0][0] + 1} has one) — which is x and which y is not said; give "
+                             "the reader option pixel_size_um ([x, y] in µm)")
+    elif pixel:
+        i, value, unit = pixel[0]
+        err = bad_header_scale(f"{path}, line {i + 1}", "pixel size", value, "x and y positions",
+                               positive=True)
+        if err is not None:
+            raise err
+        if unit and not _is_length(unit):
+            raise InputError(f"{path}, line {i + 1}: the pixel size's unit '{unit[:20]}' is no "
+                             "length unit (nm, µm, mm, m …)")
+        pixel_unitless = not unit
+    if opts.pixel_size_um is not None and (len(pixel) > 1 or pixel_unitless):
+        # SurfaceTopography would lend a unit-less pixel size the heights' unit (and take the last
+        # of two for both axes); the option replaces them: the lines go
+        lines = text.splitlines(keepends=True)
+        for i, *_ in pixel:
+            lines[i] = "\n"
+        text = "".join(lines)
+    elif pixel_unitless and "z" in units:
+        i, value, _ = pixel[0]
+        raise InputError(f"{path}, line {i + 1}: the pixel size has no unit ('pixel size={value}'); "
+                         f"write e.g. 'pixel size={value} µm' or give the reader option pixel_size_um")
     # the unit SurfaceTopography gives each size: its own, its axis's unit key, else the x one (Nova's
     # `Unit X`, `x-unit`) — except in SPIP files, where a y-length without y-unit is taken as nm
     lent = {"x": units.get("x") or units.get("lateral"),
@@ -153,11 +246,18 @@ def _check_header(path: Path, text: str, opts, nrows: int, ncols: int) -> str:
         raise InputError(f"{path}, line {i + 1}: the header gives the map's {axis} size ({label}) "
                          f"but not its {other} size; add it, or give the reader option "
                          "pixel_size_um")
-    if "z" not in units and opts.height_unit is not None and sizes and not unitless:
+    if "z" not in units and opts.height_unit is not None and (
+            (sizes and not unitless) or (len(pixel) == 1 and not pixel_unitless)):
         # SurfaceTopography converts the sizes' units only to a unit the file states
         unit = "µm" if opts.height_unit in ("um", "μm") else opts.height_unit
         return f"# Value units: {unit}\n" + text
     return text
+
+
+def _is_length(unit: str) -> bool:
+    from SurfaceTopography.Support.UnitConversion import is_length_unit, mangle_length_unit_utf8
+
+    return bool(unit) and is_length_unit(mangle_length_unit_utf8(unit))
 
 
 def _head_lines(text_head: str, n: int = 60) -> list[str]:
@@ -170,8 +270,9 @@ def is_st_text_format(text_head: str) -> bool:
     return any(r.match(first) for r in _ST_TEXT)
 
 
-def has_matrix_header(text_head: str) -> bool:
-    """A header naming a matrix's size and unit (two keys at least) before the first numbers."""
+def matrix_header_keys(text_head: str) -> set[str]:
+    """The keys of a matrix header (Gwyddion, SPIP, Nova, `h=`/`w=`, `pixel size=` …) before the
+    first numbers."""
     keys = set()
     for line in _head_lines(text_head):
         s = line.strip()
@@ -182,7 +283,18 @@ def has_matrix_header(text_head: str) -> bool:
         m = _HEADER.match(s)
         if m:
             keys.add(m.group("key").lower())
-    return len(keys) >= 2
+        m = _HW_LINE.match(s)
+        if m:
+            keys.update(k for k in (m.group("k1"), m.group("k2")) if k)
+        m = _ST_KEY_START.match(s)
+        if m:
+            keys.add(" ".join(m.group("key").split()))
+    return keys
+
+
+def has_matrix_header(text_head: str) -> bool:
+    """A header naming a matrix's size and unit (two keys at least) before the first numbers."""
+    return len(matrix_header_keys(text_head)) >= 2
 
 
 def _check_rows(path: Path):
@@ -271,3 +383,41 @@ def read_matrix(path: Path, opts):
     name = (reader.channels[0].info.get("raw_metadata") or {}).get("channel_name")
     return xyz, ch, {**meta, "format": "matrix", "instrument_format": "text matrix",
                      **({"channel": name} if name else {})}
+
+
+def read_headerless(path: Path, data, first_line: int, opts, text_head: str):
+    """(xyz mm, channels, meta) of rows of many numbers without a header naming columns (``data``:
+    the rows as parsed by core.io.text, which decided they are a matrix): a header with one matrix
+    key (``pixel size=`` alone …) goes to read_matrix, whose checks name what else is missing;
+    otherwise the reader options ``pixel_size_um`` and ``height_unit`` must give the pixel size and
+    the heights' unit — refused naming the one(s) missing. Pixel (i, j) at (i·Δx, j·Δy) as in every
+    map; NaN (and |h| ≥ 10³⁰) pixels are invalid, dropped and counted."""
+    import numpy as np
+
+    from .instruments import _grid_cloud, _unit_to_mm, check_map_geometry
+
+    if matrix_header_keys(text_head):
+        return read_matrix(path, opts)
+    ny, nx = data.shape
+    missing = [what for what, key in (("pixel size", "pixel_size_um"), ("height unit", "height_unit"))
+               if getattr(opts, key) is None]
+    if missing:
+        give = {"pixel size": "pixel_size_um (µm)",
+                "height unit": "height_unit (nm, µm, mm or m)"}
+        example = ", ".join(e for what, e in (("pixel size", "pixel_size_um: 1.1"),
+                                              ("height unit", "height_unit: nm")) if what in missing)
+        raise InputError(
+            f"{path}, line {first_line}: {ny} rows of {nx} numbers and no header naming the columns "
+            f"— a height matrix, not x y z points, and it states no {' and no '.join(missing)}: "
+            f"give the reader option{'s' if len(missing) > 1 else ''} "
+            f"{' and '.join(give[k] for k in missing)}, e.g. `input: {{{example}}}` in the recipe; "
+            "if the rows are points, add a header line naming the columns (x y z …)")
+    unit = "µm" if opts.height_unit in ("um", "μm") else opts.height_unit
+    z = np.asarray(data, dtype=np.float64) * _unit_to_mm(unit)  # as instrument maps are converted
+    valid = np.isfinite(z) & (np.abs(np.asarray(data)) < 1e30)
+    dx, dy = (p * 1e-3 for p in opts.pixel_size_um)  # µm → mm
+    xyz, ch, meta = _grid_cloud(z, dx, dy, path, valid=valid)
+    check_map_geometry(path, xyz, ch, heights=False)  # values are written as they are
+    return xyz, ch, {**meta, "format": "matrix", "instrument_format": "text matrix",
+                     "instrument_reader": "rows of heights without a header",
+                     "instrument_unit": unit}

@@ -24,7 +24,9 @@ reader option ``profile_angle_deg``, or the file's own ``angle`` column, default
 column keeps several profiles of one part apart (core.profiles). Each profile's x must be strictly
 monotonic: a repeated x or a scan that turns back is refused naming its line. On an x, y, z file
 ``profile_angle_deg`` names the scan direction of a line of points (the ``angle`` channel). Height
-matrices with a header are core.io.matrix's.
+matrices with a header are core.io.matrix's; headerless rows too wide for points (more than 10
+numbers, or 7–10 in no more than twice as many rows: ``_is_matrix_shape``) raise MatrixInText, a
+height matrix for core.io.matrix.read_headerless — never points with channels col4 … col650.
 Parsing is numpy's C reader (``np.loadtxt``); only when it fails do we walk the lines in Python to
 name the exact line and column at fault.
 """
@@ -46,6 +48,42 @@ _AXIS_ALIASES = {"x": "x", "y": "y", "z": "z", "px": "x", "py": "y", "pz": "z", 
                  "pos_y": "y", "pos_z": "z", "x_pos": "x", "y_pos": "y", "z_pos": "z",
                  "xcoord": "x", "ycoord": "y", "zcoord": "z", "x_coord": "x", "y_coord": "y",
                  "z_coord": "z", "meas_x": "x", "meas_y": "y", "meas_z": "z"}
+
+
+class MatrixInText(InputError):
+    """Rows of many numbers without a header naming the columns: a height matrix, not points
+    (``_is_matrix_shape``). Its message is the refusal for a matrix that states nothing;
+    core.io.formats passes ``data`` (the rows, parsed) and ``first_line`` (1-based) to
+    core.io.matrix.read_headerless, which reads it with the reader options or refuses."""
+
+    def __init__(self, message: str, data: np.ndarray, first_line: int):
+        super().__init__(message)
+        self.data, self.first_line = data, first_line
+
+
+# Rows without a header naming the columns are x, y, z (+ channels col4 …) only while they are no
+# wider than a point export writes them. The headerless point exports we know carry x y z and a few
+# channels: an intensity (4), r g b or normals (6), intensity + r g b (7), r g b + normals (9),
+# CloudCompare's r g b, a scalar field and normals (10) — never more than 10, and channels without
+# names would be of little use beyond that (a CMM export with more names them in a header, which
+# keeps it points at any width). A height matrix is a line of the map per row, as wide as the map
+# (SurfaceTopography's matrix-2.txt: 650 values a row). So, without a header:
+#   more than 10 columns          a matrix;
+#   7 to 10 columns               a matrix when there are at most twice as many rows as columns (a
+#                                 10 × 10 map: as points, 20 or fewer carrying 7+ unnamed channels,
+#                                 which is no measurement);
+#   6 or fewer                    points (a matrix that narrow needs a header saying so).
+# Wrongly a matrix costs a refusal that says how to read the rows as points (a header line); wrongly
+# points would be read silently, 650 rows as 650 points in mm — so the doubt goes to the matrix.
+_POINT_COLUMNS_MAX = 10
+_SMALL_MATRIX_COLUMNS = 7
+
+
+def _is_matrix_shape(nrows: int, ncols: int) -> bool:
+    """Whether headerless rows of ``ncols`` numbers (``nrows`` of them) are a height matrix."""
+    if ncols > _POINT_COLUMNS_MAX:
+        return True
+    return ncols >= _SMALL_MATRIX_COLUMNS and nrows <= 2 * ncols
 
 
 def _is_comment(line: str) -> bool:
@@ -214,6 +252,12 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
     lines = _LazyLines(text, head)
     lay = _find_layout(path, head, lines, quote)
     data = _parse_numbers(path, raw, text, lines, lay, encoding, quote, cr_only)
+    if need_xyz and lay.header is None and _is_matrix_shape(*data.shape):
+        first = lay.first_data + 1
+        raise MatrixInText(f"{path}, line {first}: {data.shape[0]} rows of {data.shape[1]} numbers "
+                           "and no header naming the columns — a height matrix, not x y z points; "
+                           "it states no pixel size and no height unit: give the reader options "
+                           "pixel_size_um and height_unit", data, first)
     meta: dict = {"format": "text", "delimiter": lay.delim or "whitespace",
                   "decimal_comma": lay.decimal_comma,
                   "header_line": lay.header[0] + 1 if lay.header else None}
