@@ -105,6 +105,8 @@ class ExplainPanel(QtWidgets.QWidget):
         self.log.emit(f"explain: {report['verdict']} — found {names}; gap RMS "
                       f"{format_length(report['gap_before']['rms_um'] * 1e-3, 4)} → "
                       f"{format_length(report['gap_after']['rms_um'] * 1e-3, 4)}")
+        for w in report.get("warnings") or []:
+            self.log.emit(f"explain: warning: {w}")
 
     def _failed(self, msg):
         self.run.setEnabled(True)

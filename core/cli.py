@@ -773,6 +773,8 @@ def cmd_explain(args) -> int:
                   Path(args.simulated) if args.simulated else None, bootstrap=args.bootstrap)
     from .explain.workflow import found_name
 
+    for w in rep.get("warnings") or []:  # as the batch prints a step's: the input, then the warning
+        print(f"{args.measured}: warning: {w}", file=sys.stderr)
     names = ", ".join(found_name(f) for f in rep["found"]) or "none"
     from .units import format_length
 

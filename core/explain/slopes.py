@@ -8,7 +8,9 @@ its penalty pulling towards a plane) leaves slope errors of ~2e-5 RMS on an asph
 surface is smooth over the aperture, so the slopes come from a global least-squares polynomial instead
 (Legendre products of total degree D in x, y scaled to [−1, 1]; D = 2…16 by BIC), and only what the
 polynomial leaves above the noise is taken up by a smoothing spline. On the surfaces of the tests the
-slope error is ~1e-7 (a probe_radius signature right to 0.01 nm).
+slope error is ~1e-7 (a probe_radius signature right to 0.01 nm). The same fit gives the simulation's
+heights and slopes at other positions than its own (smooth_fit; `explain --simulated` on a
+measurement taken elsewhere: core.explain.workflow.simulated_heights).
 """
 from __future__ import annotations
 
@@ -37,10 +39,30 @@ def _basis(u, v, D, deriv=None):
     return np.column_stack([Pu[:, i] * Pv[:, j] for i, j in _terms(D)])
 
 
-def cloud_slopes(x, y, z, order=None) -> tuple[np.ndarray, np.ndarray, dict]:
-    """∂z/∂x and ∂z/∂y of a smooth cloud at its own points, and how they were found: the degree, the
-    RMS the polynomial leaves, the noise σ of that rest along ``order`` (the scan), and whether a spline
-    took up a rest above the noise."""
+class SmoothFit:
+    """The smooth surface through a cloud (smooth_fit): the polynomial, plus the spline of its rest
+    when one was needed; values and first derivatives at any points (mm)."""
+
+    def __init__(self, cx, cy, s, D, coef, spline=None):
+        self.cx, self.cy, self.s, self.D, self.coef, self.spline = cx, cy, s, D, coef, spline
+
+    def __call__(self, x, y, dx: int = 0, dy: int = 0) -> np.ndarray:
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        u, v = (x - self.cx) / self.s, (y - self.cy) / self.s
+        deriv = "u" if dx else "v" if dy else None
+        out = np.concatenate([_basis(u[a:a + CHUNK], v[a:a + CHUNK], self.D, deriv) @ self.coef
+                              for a in range(0, x.size, CHUNK)] or [np.zeros(0)])
+        if deriv:
+            out = out / self.s
+        if self.spline is not None:
+            out = out + self.spline(x, y, dx=dx, dy=dy)
+        return out
+
+
+def smooth_fit(x, y, z, order=None) -> tuple[SmoothFit, dict]:
+    """The smooth surface through a cloud (module doc) and how it was found: the degree, the RMS the
+    polynomial leaves, the noise σ of that rest along ``order`` (the scan), and whether a spline took
+    up a rest above the noise."""
     from .select import noise_sigma
 
     x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
@@ -66,15 +88,19 @@ def cloud_slopes(x, y, z, order=None) -> tuple[np.ndarray, np.ndarray, dict]:
         if best is None or bic < best[0]:
             best = (bic, D, coef, rest)
     _, D, coef, rest = best
-    fx = np.concatenate([_basis(u[a:a + CHUNK], v[a:a + CHUNK], D, "u") @ coef for a in range(0, n, CHUNK)]) / s
-    fy = np.concatenate([_basis(u[a:a + CHUNK], v[a:a + CHUNK], D, "v") @ coef for a in range(0, n, CHUNK)]) / s
     rms = float(np.sqrt(np.mean(rest * rest)))
     sigma = noise_sigma(rest if order is None else rest[order])
     spline = rms > 1.5 * sigma and n >= 16
+    sp = None
     if spline:
         from ..maps.bspline import fit_bspline
 
         sp = fit_bspline(x, y, rest)
-        fx = fx + sp(x, y, dx=1)
-        fy = fy + sp(x, y, dy=1)
-    return fx, fy, {"degree": D, "rest_rms_um": rms * 1e3, "noise_um": sigma * 1e3, "spline": bool(spline)}
+    return SmoothFit(cx, cy, s, D, coef, sp), {"degree": D, "rest_rms_um": rms * 1e3, "noise_um": sigma * 1e3,
+                                               "spline": bool(spline)}
+
+
+def cloud_slopes(x, y, z, order=None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """∂z/∂x and ∂z/∂y of a smooth cloud at its own points, and how they were found (smooth_fit)."""
+    fit, how = smooth_fit(x, y, z, order)
+    return fit(x, y, dx=1), fit(x, y, dy=1), how

@@ -94,11 +94,12 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
         raise InputError(f"{measured}: {meas.n} point(s); explain compares a scan with its simulation "
                          f"and needs {MIN_POINTS} points at least to tell an effect from the noise")
     model = None
+    warnings: list[str] = []  # printed on stderr by `pointspro explain`, kept in explain.json
     if model_path is not None:
         model = load_model(model_path)
-        ctx, z_sim, match = against_model(meas, model, Path(model_path).parent, measured)
+        ctx, z_sim, match = against_model(meas, model, Path(model_path).parent, measured, warnings)
     elif simulated is not None:
-        ctx, z_sim, match = against_simulation(meas, simulated)
+        ctx, z_sim, match = against_simulation(meas, simulated, warnings)
     else:
         raise RecipeError("explain needs --model MODEL.yaml or --simulated FILE")
     gap = meas.z - z_sim
@@ -107,7 +108,9 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     effects = list(model.effects) if model is not None else []
     found, effects = found_effects(res, effects)
     ambiguous = ambiguities(res, sigma)
-    updated = model.model_copy(update={"effects": effects}) if model is not None else None
+    updated = None
+    if model is not None:
+        updated = with_absolute_paths(model.model_copy(update={"effects": effects}), Path(model_path).parent)
     after = gap_after(meas, res, updated, model_path, ctx)
     regs = regions(meas.x, meas.y, after - after.mean(), sigma)
     structure = bool(regs) or res["rms"] > 1.25 * sigma
@@ -124,7 +127,7 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
                    "dropped_under_correlated_noise": res["dropped_under_correlated_noise"]},
         "not_observable_on_this_scan": res["unobservable"], "points": int(meas.n), "match": match,
         "measured": str(measured), "model": str(model_path) if model_path else None,
-        "simulated": str(simulated) if simulated else None,
+        "simulated": str(simulated) if simulated else None, "warnings": warnings,
     }
     _write(Path(out_dir), report, updated, effects, ctx, gap, after, found, res["order"])
     return report
@@ -160,12 +163,73 @@ def clock_of(cloud, path) -> tuple[np.ndarray | None, np.ndarray | None]:
     return out[0], out[1]
 
 
-def against_model(meas, model, base: Path, measured="the measurement"):
+def with_absolute_paths(model, base: Path):
+    """The model with its nominal mesh's path made absolute (it is read relative to the model file's
+    folder, ``base``). model.updated.yaml is written with absolute paths rather than paths relative
+    to its own folder: the window saves it by copying it out of a temporary folder to wherever the
+    user chooses, so only an absolute path works from every folder it may end up in (a review:
+    written to another folder, the original's `path: part.stl` made `pointspro simulate` fail)."""
+    surf = model.surface
+    if isinstance(surf, dict) and isinstance(surf.get("path"), str) and not Path(surf["path"]).is_absolute():
+        surf = {**surf, "path": str((Path(base) / surf["path"]).resolve())}
+        return model.model_copy(update={"surface": surf})
+    return model
+
+
+#: a share of the measured points beyond the model's aperture above this is refused (see check_aperture)
+OUTSIDE_APERTURE_MAX = 0.01
+
+
+def model_aperture(model) -> tuple[float, str]:
+    """The radius (mm) the model describes and what it is: half the surface's `aperture` when it
+    states one, else the extent of the model's own scan (a spiral's, raster's or star's radius, the
+    fiducial patches' farthest corner)."""
+    ap = model.surface.get("aperture") if isinstance(model.surface, dict) else None
+    if isinstance(ap, (int, float)) and ap > 0:
+        return 0.5 * float(ap), f"the surface's aperture Ø {float(ap):.6g} mm"
+    sc = model.scan
+    if sc.type == "fiducials" and sc.centers:
+        r = max(float(np.hypot(cx, cy)) for cx, cy in sc.centers) + sc.patch / np.sqrt(2.0)
+        return r, f"the model's fiducial patches, out to a radius of {r:.6g} mm (the surface states no aperture)"
+    return float(sc.radius), f"the model's {sc.type} scan of radius {sc.radius:.6g} mm (the surface states no aperture)"
+
+
+def check_aperture(meas, model, measured, warnings: list[str]) -> None:
+    """Refuse a measurement of which more than OUTSIDE_APERTURE_MAX of the points lie outside the
+    model's aperture; warn of fewer. Why refuse rather than crop to the aperture and go on: the
+    model says nothing about the part there (an edge, a bevel, a mount, or another part), and a gap
+    there is not an error of the model — a review's measurement beyond the aperture was "explained"
+    with z_scale ≈ −1 found. Cropping would hide that the files do not belong together (a wrong
+    model, a wrong aperture, a measurement in another frame) behind a plausible report; the
+    --simulated path refuses a measurement its simulation does not cover for the same reason. A few
+    points just past the rim (a measurement's own centring) are kept, the model evaluated there,
+    and the user told."""
+    R, what = model_aperture(model)
+    r = np.hypot(meas.x, meas.y)
+    out = r > R * (1.0 + 1e-6)
+    if not out.any():
+        return
+    from ..units import format_length
+
+    n, beyond = int(out.sum()), float(r.max()) - R
+    text = (f"{n} of {meas.n} measured points ({100.0 * n / meas.n:.3g} %) lie outside the model's aperture, "
+            f"up to {format_length(beyond)} beyond it (radius {float(r.max()):.6g} mm against {what})")
+    if n > OUTSIDE_APERTURE_MAX * meas.n:
+        raise InputError(f"{measured}: {text}: the model says nothing about the part there, and explain "
+                         "compares only where it does — crop the measurement to the aperture, or give the "
+                         "model the aperture that was measured")
+    warnings.append(f"{text}; kept, the model evaluated there")
+
+
+def against_model(meas, model, base: Path, measured="the measurement", warnings: list[str] | None = None):
     """The model simulated at the measured positions, noise-free: (ScanContext, simulated z, how the
-    points were matched). Time and spindle angle come from the measurement, or else from the nearest
-    point of the model's scan path."""
+    points were matched). A measurement reaching beyond the model's aperture is refused
+    (check_aperture). Time and spindle angle come from the measurement, or else — said in
+    ``warnings``, never silently — from the nearest point of the model's scan path."""
     from ..simulate.model import simulate
 
+    warnings = [] if warnings is None else warnings
+    check_aperture(meas, model, measured, warnings)
     t, c = clock_of(meas, measured)
     if t is None or c is None:
         from scipy.spatial import cKDTree
@@ -173,7 +237,16 @@ def against_model(meas, model, base: Path, measured="the measurement"):
         from ..simulate.scan import scan_points
 
         sp = scan_points(model.scan)
-        _, j = cKDTree(np.column_stack([sp["x"], sp["y"]])).query(meas.xyz[:, :2])
+        d, j = cKDTree(np.column_stack([sp["x"], sp["y"]])).query(meas.xyz[:, :2])
+        from ..units import format_length
+
+        gone = [w for w, v in (("time 't'", t), ("spindle angle 'c'", c)) if v is None]
+        judged = [w for w, v in (("the effects in time (thermal_drift, dynamic_lag, vibration)", t),
+                                 ("the spindle errors", c)) if v is None]
+        warnings.append(f"no {' and no '.join(gone)} column: taken from the nearest point of the model's "
+                        f"{model.scan.type} scan path (up to {format_length(float(d.max()))} away), and "
+                        f"{' and '.join(judged)} are judged on those borrowed values; give the measurement's own "
+                        "columns for effects in time or angle")
         t = sp["t"][j] if t is None else t
         c = sp["c"][j] if c is None else c
     at = {"x": meas.x, "y": meas.y, "t": t, "c": c}
@@ -183,20 +256,24 @@ def against_model(meas, model, base: Path, measured="the measurement"):
     return ctx, sim["z"], "model evaluated at the measured positions"
 
 
-def against_simulation(meas, simulated: Path):
+def against_simulation(meas, simulated: Path, warnings: list[str] | None = None):
     """A simulated cloud (with t and c) matched to the measurement by row when the positions agree,
-    else by nearest position; its slopes from a global polynomial through it (core.explain.slopes:
+    else by position: the simulation's heights interpolated to the measured positions
+    (simulated_heights); its slopes from a global polynomial through it (core.explain.slopes:
     accurate enough for the probe_radius signature): (ScanContext, simulated z, how the points were
     matched and the slopes found)."""
     from ..io import read_cloud
-    from .slopes import cloud_slopes
+    from .slopes import cloud_slopes, smooth_fit
 
     simc = read_cloud(simulated)
     for ch in ("t", "c"):
         if ch not in simc.channels:
             raise InputError(f"{simulated}: the simulation has no '{ch}' channel")
+    t_sim, c_sim = clock_of(simc, simulated)
+    order = np.argsort(t_sim, kind="stable")
     if simc.n == meas.n and np.max(np.abs(simc.xyz[:, :2] - meas.xyz[:, :2])) < 1e-6:
-        j = np.arange(meas.n)
+        fx, fy, how = cloud_slopes(simc.x, simc.y, simc.z, order)
+        z_sim, j = simc.z, np.arange(meas.n)
         match = "by row"
     else:
         from scipy.spatial import cKDTree
@@ -210,18 +287,82 @@ def against_simulation(meas, simulated: Path):
             raise InputError(f"{simulated}: {int(far.sum())} measured point(s) lie up to {float(d.max()):.3g} mm "
                              f"from any simulated point (the simulation's spacing is {spacing:.3g} mm): simulate "
                              "the measured scan (or give --model to evaluate the model at the measured points)")
-        match = f"by position (nearest simulated point, up to {float(d.max()):.3g} mm away, its height " \
-                "carried to the measured point along the simulation's slope)"
-    t_sim, c_sim = clock_of(simc, simulated)
-    fx, fy, how = cloud_slopes(simc.x, simc.y, simc.z, np.argsort(t_sim, kind="stable"))
-    # the nearest simulated point's height carried along its slope to the measured position: taken
-    # as it is, 0.35 mm on a sloped part made an 8 µm "gap" and five effects named (a review)
-    z_sim = simc.z[j] + fx[j] * (meas.x - simc.x[j]) + fy[j] * (meas.y - simc.y[j])
+        fit, how = smooth_fit(simc.x, simc.y, simc.z, order)
+        z_sim = simulated_heights(fit, simc, meas.x, meas.y, j)
+        fx, fy = fit(meas.x, meas.y, dx=1), fit(meas.x, meas.y, dy=1)
+        match = f"by position (measured points up to {float(d.max()):.3g} mm from the nearest simulated point; the " \
+                "simulation's heights there from its smooth fit plus what the fit leaves, interpolated linearly " \
+                "between the simulated points)"
+        if warnings is not None:  # said, never borrowed silently
+            own = [ch for ch in ("t", "c") if ch in meas.channels]
+            warnings.append(f"the simulation was not made at the measured positions: each measured point's time and "
+                            f"spindle angle are the nearest simulated point's (up to {float(d.max()):.3g} mm away)"
+                            + (f"; the measurement's own {' and '.join(repr(c) for c in own)} not used" if own else ""))
     match += (f"; slopes from a degree-{how['degree']} polynomial through the simulation ({how['rest_rms_um'] * 1e3:.3g} "
               f"nm RMS left, its noise {how['noise_um'] * 1e3:.3g} nm"
               + ("; the rest by a smoothing spline)" if how["spline"] else ")"))
-    ctx = ScanContext(meas.x, meas.y, z_sim, fx[j], fy[j], t_sim[j], c_sim[j])
+    ctx = ScanContext(meas.x, meas.y, z_sim, fx, fy, t_sim[j], c_sim[j])
     return ctx, z_sim, match
+
+
+def simulated_heights(fit, simc, x, y, nearest) -> np.ndarray:
+    """The simulated cloud's heights at other positions (x, y): its smooth fit (core.explain.slopes:
+    a global polynomial, and a spline where that leaves more than the noise) evaluated there, plus
+    what the fit leaves at the simulated points (their noise, and detail finer than the fit)
+    interpolated linearly over their Delaunay triangulation — the nearest point's (``nearest``) where
+    (x, y) lies outside it. The nearest point's height carried along its slope left the curvature's
+    0.5·κ·d² (65 nm on a review's 0.35 mm on a sloped part, and a spindle_tilt named); the fit holds
+    the curvature, and the rest it leaves is nm at most, so interpolating it linearly errs far below."""
+    rest = simc.z - fit(simc.x, simc.y)
+    at = linear_interpolation(simc.xyz[:, :2], rest, np.column_stack([x, y]), nearest)
+    return fit(x, y) + np.where(np.isfinite(at), at, rest[nearest])
+
+
+def linear_interpolation(pts, values, q, nearest, chunk: int = 20_000) -> np.ndarray:
+    """``values`` at the points ``pts`` (n, 2) interpolated linearly to ``q`` (m, 2) over the Delaunay
+    triangulation of ``pts``, in the triangle holding q among those at its nearest point ``nearest``
+    (nearly always one of them: all but 136 of 290,000 points offset on a spiral); NaN where none
+    holds it (q outside the triangulation, or no triangulation: points all on a line). Not scipy's
+    LinearNDInterpolator: its search for the triangle took 90 s for those 290,000 points, most of it
+    on the points just outside the triangulation, where it tries every triangle."""
+    from scipy.spatial import Delaunay, QhullError
+
+    out = np.full(len(q), np.nan)
+    try:
+        tri = Delaunay(pts)
+    except (QhullError, ValueError):
+        return out
+    S = tri.simplices
+    flat = S.ravel()
+    by_vertex = np.argsort(flat, kind="stable")
+    simplex_of = by_vertex // 3  # the triangles at each vertex, vertex by vertex
+    start = np.searchsorted(flat[by_vertex], np.arange(len(pts) + 1))
+    K = int(min(np.max(np.diff(start)), 32))
+
+    def barycentric(tris, p):  # (…, 3) weights of p in triangles tris; NaN for a degenerate one
+        A, B, C = pts[S[tris, 0]], pts[S[tris, 1]], pts[S[tris, 2]]
+        v0, v1, v2 = B - A, C - A, p - A
+        det = v0[..., 0] * v1[..., 1] - v0[..., 1] * v1[..., 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            b = (v2[..., 0] * v1[..., 1] - v2[..., 1] * v1[..., 0]) / det
+            c = (v0[..., 0] * v2[..., 1] - v0[..., 1] * v2[..., 0]) / det
+        return np.stack([1.0 - b - c, b, c], axis=-1)
+
+    found = np.zeros(len(q), dtype=bool)
+    k = np.arange(K)
+    for a in range(0, len(q), chunk):
+        j, p = nearest[a:a + chunk], q[a:a + chunk]
+        s0, deg = start[j], start[j + 1] - start[j]
+        cand = simplex_of[np.minimum(s0[:, None] + k, len(simplex_of) - 1)]
+        w = barycentric(cand, p[:, None, :])
+        with np.errstate(invalid="ignore"):
+            inside = (k < deg[:, None]) & np.all(w >= -1e-9, axis=-1)
+        rows = np.flatnonzero(inside.any(axis=1))
+        first = np.argmax(inside[rows], axis=1)
+        tris = cand[rows, first]
+        out[a + rows] = np.sum(values[S[tris]] * w[rows, first], axis=1)
+        found[a + rows] = True
+    return out
 
 
 def found_effects(res: dict, effects: list[dict]) -> tuple[list[dict], list[dict]]:
@@ -323,10 +464,7 @@ def _figures(folder, ctx, gap, after, found, order):
     save_png(before_after(ctx.x, ctx.y, gap, after, what="adding the found effects"), folder / "gap_map.png")
     t = ctx.t[order]
     uniform = np.ptp(t) > 0 and np.std(np.diff(t)) < 1e-3 * np.mean(np.diff(t))
-    speed = np.zeros_like(ctx.x)
-    if np.ptp(ctx.t) > 0:
-        v = np.hypot(np.gradient(ctx.x[order], t), np.gradient(ctx.y[order], t))
-        speed[order] = v
+    speed = scan_speed(ctx.x, ctx.y, ctx.t)
     views = [("radius (mm)", ctx.r), ("spindle angle c (deg)", ctx.c), ("time (s)", ctx.t),
              ("scan speed (mm/s)", speed)]
     first = _view(found[0]["effect"]) if found else "radius"
@@ -362,6 +500,22 @@ def _figures(folder, ctx, gap, after, found, order):
     save_png(fig, folder / "gap_views.png")
 
 
+def scan_speed(x, y, t) -> np.ndarray:
+    """|d(x, y)/dt| along the scan (mm/s) at each point, in time order whatever the rows' order.
+    Points that share a time stamp (a clock written to the ms, a probe reading several points at once)
+    share their group's speed, from the group's mean position, as ScanContext.zdot shares their rate:
+    np.gradient over a repeated stamp divided by zero and printed numpy's RuntimeWarnings (a review)."""
+    speed = np.zeros_like(x)
+    if t.size < 2 or not np.ptp(t) > 0:
+        return speed
+    order = np.argsort(t, kind="stable")
+    tu, first, counts = np.unique(t[order], return_index=True, return_counts=True)
+    xu = np.add.reduceat(x[order], first) / counts
+    yu = np.add.reduceat(y[order], first) / counts
+    speed[order] = np.repeat(np.hypot(np.gradient(xu, tu), np.gradient(yu, tu)), counts)
+    return speed
+
+
 def _html(report: dict, folder: Path) -> str:
     import html
 
@@ -375,6 +529,7 @@ def _html(report: dict, folder: Path) -> str:
              f"{format_length(report['gap_before']['rms_um'] * 1e-3, 4)} RMS before, "
              f"{format_length(report['gap_after']['rms_um'] * 1e-3, 4)} after; noise "
              f"{format_length(report['noise_um'] * 1e-3, 3)}.</p>",
+             *(f"<p class='warn'>Warning: {html.escape(w)}.</p>" for w in report.get("warnings") or []),
              _img(folder, "gap_map.png"), _img(folder, "gap_views.png"), "<h2>Found (in the order added)</h2>"]
     for f in report["found"]:
         gap = (f"RMS {format_length(f['gap_after']['rms_um'] * 1e-3, 4)}, "
