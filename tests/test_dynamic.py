@@ -160,7 +160,7 @@ def test_time_read_in_the_unit_its_header_states(tmp_path):
     assert np.array_equal(a[:, 0], k / 1000.0)
     for name, header, t in (("ms.csv", "t [ms],xd,ref", k), ("us.csv", "t [µs],xd,ref", k * 1000.0)):
         np.savetxt(tmp_path / name, np.column_stack([t, a[:, 1:]]), delimiter=",", header=header,
-                   comments="", fmt="%.17g")
+                   comments="", fmt="%.17g", encoding="utf-8")
     ctx, one = Context(base_dir=tmp_path), PointCloud.from_xyz([0.0], [0.0], [0.0])
     s = DynamicIdStep().run(one, DynamicIdStep.Params(calibration="calibration.csv"), ctx).report
     for name in ("ms.csv", "us.csv"):

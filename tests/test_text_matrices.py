@@ -59,12 +59,12 @@ def test_matrix_4_matches_surfacetopography():
 def test_matrix_2_header_reads_as_a_matrix(tmp_path):
     """matrix-2.txt's header (650 × 650, 240.4 µm, RMS 277 nm) over a 4 × 5 cut of matrix-4's
     numbers: a matrix in m, not 5 points with channels col4 …"""
-    rows = (DATA / "matrix-4.txt").read_text().splitlines()[4:9]
+    rows = (DATA / "matrix-4.txt").read_text(encoding="utf-8").splitlines()[4:9]
     rows = [" ".join(r.split()[:4]) for r in rows]
     p = tmp_path / "m2.txt"
     head = ("h=5 w=4\npixel size=3.69862e-007 m\ndata unit=rad\n"
             "height conversion factor (-> m)=6.30079e-008\n")
-    p.write_text(head + "\n".join(rows) + "\n")
+    p.write_text(head + "\n".join(rows) + "\n", encoding="utf-8")
     c = read_cloud(p)
     t = st_topography(p)
     assert c.meta["format"] == "matrix" and c.meta["grid"] == [4, 5] == list(t.nb_grid_pts)
@@ -103,7 +103,7 @@ def test_matrix_2_header_reads_as_a_matrix(tmp_path):
 ])
 def test_st_matrix_header_refused_naming_the_line(tmp_path, head, pattern):
     p = tmp_path / "m.txt"
-    p.write_text(head + "".join(f"{j} {j + 1} {j + 2} {j + 3}\n" for j in range(5)))
+    p.write_text(head + "".join(f"{j} {j + 1} {j + 2} {j + 3}\n" for j in range(5)), encoding="utf-8")
     with pytest.raises(InputError, match=pattern) as e:
         read_cloud(p)
     assert "\n" not in str(e.value)
@@ -114,12 +114,12 @@ def test_st_matrix_header_with_the_options(tmp_path):
     stated unit takes height_unit for the heights only (SurfaceTopography would read the µm as nm)."""
     body = "".join(f"{j} {j + 1} {j + 2} {j + 3}\n" for j in range(5))
     p = tmp_path / "a.txt"
-    p.write_text("h=5 w=4\npixel size=0.37\nheight conversion factor (-> m)=1e-9\n" + body)
+    p.write_text("h=5 w=4\npixel size=0.37\nheight conversion factor (-> m)=1e-9\n" + body, encoding="utf-8")
     c = read_cloud(p, pixel_size_um=2.0)
     assert np.allclose(c.meta["pixel_mm"], [2e-3, 2e-3], rtol=1e-12)
     assert np.isclose(c.z.max(), 7e-6, rtol=1e-12)  # 7 × 1e-9 m
     p = tmp_path / "b.txt"
-    p.write_text("h=5 w=4\npixel size=0.5 µm\n" + body)
+    p.write_text("h=5 w=4\npixel size=0.5 µm\n" + body, encoding="utf-8")
     c = read_cloud(p, height_unit="nm")
     assert np.allclose(c.meta["pixel_mm"], [5e-4, 5e-4], rtol=1e-12)
     assert np.isclose(c.z.max(), 7e-6, rtol=1e-12)
@@ -177,7 +177,7 @@ def _rows(n, m, sep=" "):
 ])
 def test_headerless_width_decides(tmp_path, nrows, ncols, matrix):
     p = tmp_path / "r.txt"
-    p.write_text(_rows(nrows, ncols))
+    p.write_text(_rows(nrows, ncols), encoding="utf-8")
     if matrix:
         with pytest.raises(InputError, match=rf"r.txt, line 1: {nrows} rows of {ncols} numbers and no "
                                              r"header naming the columns — a height matrix"):
@@ -194,11 +194,11 @@ def test_wide_rows_with_a_header_are_points(tmp_path):
     """A CMM/CloudCompare export that names its columns stays points at any width."""
     names = ["x", "y", "z"] + [f"c{k}" for k in range(9)]
     p = tmp_path / "h.csv"
-    p.write_text(",".join(names) + "\n" + _rows(5, 12, ","))
+    p.write_text(",".join(names) + "\n" + _rows(5, 12, ","), encoding="utf-8")
     c = read_cloud(p)
     assert c.meta["format"] == "text" and c.n == 5 and "c8" in c.channels
     p = tmp_path / "cc.txt"
-    p.write_text("//X Y Z R G B SF1 SF2 Nx Ny Nz W\n" + _rows(5, 12))
+    p.write_text("//X Y Z R G B SF1 SF2 Nx Ny Nz W\n" + _rows(5, 12), encoding="utf-8")
     c = read_cloud(p)
     assert c.meta["format"] == "text" and c.n == 5 and "nz" in c.channels
 
@@ -209,7 +209,7 @@ def test_headerless_matrix_in_csv_with_a_title_and_nan(tmp_path):
     text = "".join(",".join("NaN" if (j, i) == (2, 5) else repr(float(v)) for i, v in enumerate(row)) + "\n"
                    for j, row in enumerate(z))
     p = tmp_path / "w.csv"
-    p.write_text("surface 7\n" + text)
+    p.write_text("surface 7\n" + text, encoding="utf-8")
     with pytest.raises(InputError, match=r"w.csv, line 2: 4 rows of 12 numbers"):
         read_cloud(p)
     c = read_cloud(p, pixel_size_um=0.5, height_unit="mm")
@@ -221,7 +221,7 @@ def test_headerless_matrix_in_csv_with_a_title_and_nan(tmp_path):
 def test_headerless_rows_with_one_matrix_key_go_to_the_matrix_reader(tmp_path):
     """`pixel size=` alone above rows of 12: the matrix reader says what is still missing."""
     p = tmp_path / "k.txt"
-    p.write_text("pixel size=0.5 µm\n" + _rows(12, 12))
+    p.write_text("pixel size=0.5 µm\n" + _rows(12, 12), encoding="utf-8")
     with pytest.raises(InputError, match=r"k.txt: the Plain text file gives no length unit for its "
                                          r"heights; give the reader option height_unit"):
         read_cloud(p)
@@ -234,6 +234,6 @@ def test_parameter_tables_are_not_matrices(tmp_path):
     from pointspro.core.io.text import read_table
 
     p = tmp_path / "t.csv"
-    p.write_text(",".join(f"c{k}" for k in range(12)) + "\n" + _rows(3, 12, ","))
+    p.write_text(",".join(f"c{k}" for k in range(12)) + "\n" + _rows(3, 12, ","), encoding="utf-8")
     cols = read_table(p, ("c0", "c11"))
     assert len(cols) == 12 and len(cols["c0"]) == 3
