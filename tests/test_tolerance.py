@@ -507,3 +507,64 @@ def test_too_few_points_for_spherical_aberration_are_refused(n):
     x, y = 20 * r * np.cos(t), 20 * r * np.sin(t)
     q = iso_quantities(x, y, 0.15e-3 * zk.zernike(4, 0, *polar(x, y)), (0.0, 0.0))
     assert abs(q["sag_um"]) < 1e-6 and q["rsi_um"] > 0.1  # 40 points: Z9 fitted, C is there
+
+
+def test_z37_of_the_joint_fit_is_the_twelfth_order_spherical_term():
+    """ISO 14999-4's m = 0 terms run to n = 12: the classical Fringe Z37 is (12, 0), not the (6, 6)
+    the Fringe formula continues with (a review: 5 nm of Z37 read C 83 nm for a true 107 nm)."""
+    from pointspro.core.tolerance.quantities import fit_terms
+
+    assert fit_terms(37)[-1] == (12, 0) and fit_terms(37)[:36] == zk.terms(36, "fringe")
+    assert (6, 6) not in fit_terms(37) and fit_terms(25) == zk.terms(25, "fringe")
+    x, y = layout("random", 3)
+    rho, t = polar(x, y)
+    w = 0.05e-3 * zk.zernike(12, 0, rho, t) + 0.08e-3 * zk.zernike(4, 0, rho, t)
+    q = iso_quantities(x, y, w, (0.0, 0.0))
+    r = np.linspace(0, 1, 2001)
+    truth = np.ptp(0.05e-3 * zk.zernike(12, 0, r, 0.0) + 0.08e-3 * zk.zernike(4, 0, r, 0.0)) * 1e3
+    assert q["rsi_um"] == pytest.approx(truth, rel=2e-3) and abs(q["sag_um"]) < 1e-9
+
+
+def _square_map(n=160, half=10.0):
+    g = (np.arange(n) - (n - 1) / 2) * (2 * half / n)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    return x, y
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_rectangular_map_gets_the_best_fit_plane_and_sphere_of_its_own_area(seed):
+    """A pixel map samples its rectangle evenly: ISO 14999-4's area-weighted best fits are the plain
+    least-squares plane and sphere over its pixels. The joint Z1–Z37 fit over the disk about it took
+    higher terms for tilt and power (a review: a square map's A read 0.139 µm against −0.009 µm,
+    RMSt 0.060 µm against the 0.035 µm the summary's plane removal gives)."""
+    rng = np.random.default_rng(seed)
+    x, y = _square_map(120 + 20 * seed)
+    u, v = x / 10.0, y / 10.0
+    w = (rng.normal(0, 1e-4) * u + rng.normal(0, 1e-4) * v + 0.05e-3 * (u**4 + v**4)
+         + 0.03e-3 * np.cos(3 * u) * np.sin(2 * v) + 0.02e-3 * (u**2 + v**2) + rng.normal(0, 2e-6, x.size))
+    q = iso_quantities(x, y, w, (0.0, 0.0))
+    R = np.hypot(x, y).max()
+    plane = np.column_stack([np.ones_like(x), x, y])
+    d_t = w - plane @ np.linalg.lstsq(plane, w, rcond=None)[0]
+    assert q["rmst_um"] == pytest.approx(np.std(d_t) * 1e3, rel=1e-9)
+    sphere = np.column_stack([plane, (x**2 + y**2) / R**2])   # power over the test disk's radius R
+    c = np.linalg.lstsq(sphere, w, rcond=None)[0]
+    assert q["sag_um"] == pytest.approx(c[3] * 1e3, rel=1e-9)       # P(ρ = 1) − P(0)
+    irr = w - sphere @ c
+    assert q["irr_um"] == pytest.approx(np.ptp(irr) * 1e3, rel=1e-9)
+    assert q["rmsi_um"] == pytest.approx(np.std(irr) * 1e3, rel=1e-9)
+
+
+def test_uniform_sampling_tells_maps_from_stars_and_spirals():
+    from pointspro.core.tolerance.quantities import uniform_sampling
+
+    assert uniform_sampling(*_square_map(563 // 4))
+    xs, ys = _square_map(200)
+    keep = np.hypot(xs, ys) <= 10.0
+    assert uniform_sampling(xs[keep], ys[keep])            # a map with the part's disk valid
+    r = np.tile(np.linspace(0, 10, 400), 36)
+    t = np.repeat(np.arange(36) * np.pi / 18, 400)
+    assert not uniform_sampling(r * np.cos(t), r * np.sin(t))     # a star crowds its centre
+    s = np.linspace(0, 1, 40_000)
+    assert not uniform_sampling(10 * s * np.cos(400 * s), 10 * s * np.sin(400 * s))  # even angle steps
+    assert not uniform_sampling(*_square_map(20))          # too few points to tell: the joint fit
