@@ -93,11 +93,16 @@ text-align:left;vertical-align:top} td.num{text-align:right;font-variant-numeric
 def _fmt_keyed(key, v) -> str:
     """``v`` under report key ``key``: a number with the unit the key names (core.units.format_keyed:
     "797.536 µm" for a pose's dx in mm, "297.595 nm" for robust_sigma_um), anything else as ``_fmt``."""
-    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-        from .units import format_keyed, unit_of_key
+    from .units import format_keyed, unit_of_key
 
+    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
         if unit_of_key(str(key)):
             return html.escape(format_keyed(str(key), v))
+    if (isinstance(v, list) and v and len(v) <= 12 and unit_of_key(str(key))
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
+        # a pair or triple of lengths (pixel_mm, centre_mm) as each alone: "[78.125 nm, 78.125 nm]",
+        # not "[7.8125e-05, 7.8125e-05]" (a review)
+        return "[" + ", ".join(html.escape(format_keyed(str(key), x)) for x in v) + "]"
     return _fmt(v)
 
 
@@ -105,6 +110,9 @@ def _label(key, v) -> str:
     """A table's key as shown: without its unit suffix where the number beside it says the unit
     ("rms_after 13.335 nm", not "rms_after_um 13.335 nm")."""
     k = str(key)
+    if isinstance(v, list) and v and len(v) <= 12 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
+        v = v[0]  # a short list of lengths is shown with its unit too (_fmt_keyed)
     if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
         from .units import KEY_UNITS
 
@@ -149,14 +157,29 @@ def _records(v: list) -> str:
             heads.append(str(k))
             scales.append(None)
 
-    def cell(x, scale):
+    # a length column is printed with the decimals its largest value's 6 significant digits ask for,
+    # so that every row reads in the column's unit: a 0.048 nm coefficient under "coefficient (µm)"
+    # beside 50.7318 read "4.78859e-05" (a review); now 0.0000
+    decimals = []
+    for k, scale in zip(keys, scales):
+        vals = [abs(float(r.get(k)) * scale) for r in v if scale is not None
+                and isinstance(r.get(k), (int, float)) and not isinstance(r.get(k), bool)
+                and math.isfinite(r.get(k))]
+        top = max(vals, default=0.0)
+        decimals.append(None if not top else int(min(max(5 - math.floor(math.log10(top)), 0), 12)))
+
+    def cell(x, scale, dec):
         if scale is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
+            if dec is not None and math.isfinite(x):
+                t = f"{float(x) * scale:.{dec}f}"
+                t = t.rstrip("0").rstrip(".") if "." in t else t
+                return "0" if t in ("-0", "") else t
             return _fmt(float(x) * scale)
         return _fmt(x)
 
     head = "".join(f"<th>{html.escape(h)}</th>" for h in heads)
-    body = "".join("<tr>" + "".join(f"<td>{cell(r.get(k), s)}</td>" for k, s in zip(keys, scales)) + "</tr>"
-                   for r in v)
+    body = "".join("<tr>" + "".join(f"<td>{cell(r.get(k), s, d)}</td>" for k, s, d in zip(keys, scales, decimals))
+                   + "</tr>" for r in v)
     return f"<table><tr>{head}</tr>{body}</table>"
 
 

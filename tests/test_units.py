@@ -95,8 +95,10 @@ def test_report_keys_read_with_their_unit():
     assert ">True<" in page and ">nan<" in page  # not numbers with a unit
     page = table_html({"rms_after_um": 0.013335, "points": 307200, "centre_mm": [0.35, 0.26]})
     assert "<th>rms_after</th><td class=\"num\">13.335 nm</td>" in page  # not "rms_after_um 13.335 nm"
-    assert ">307,200<" in page and "<th>centre_mm</th>" in page  # a list: its key keeps the unit
-    assert ">[0.35, 0.26]<" in table_html({"centre_mm": [0.3500000000000001, 0.26]})  # 6 digits, not 17
+    assert ">307,200<" in page and "<th>centre</th>" in page  # a short list of lengths: each with its unit
+    assert ">[350 µm, 260 µm]<" in table_html({"centre_mm": [0.3500000000000001, 0.26]})  # not 17 digits
+    # a 78 nm pixel read "[7.8125e-05, 7.8125e-05]" (a review)
+    assert ">[78.125 nm, 78.125 nm]<" in table_html({"pixel_mm": [7.8125e-05, 7.8125e-05]})
     page = table_html({"norm_radius": 0.0140869, "norm_radius_mm": 0.0140869})
     assert "<th>norm_radius</th>" in page and "<th>norm_radius_mm</th>" in page  # never two alike
 
@@ -138,7 +140,12 @@ def test_a_column_of_lengths_reads_in_the_unit_of_its_largest_value():
             {"j": 2, "name": "tilt x", "coefficient_nm": -12.3456789, "uncertainty_nm": 0.25}]
     page = table_html({"coefficients": rows})
     assert "<th>coefficient (µm)</th>" in page and "<th>uncertainty (nm)</th>" in page
-    assert "<td>50.7318</td>" in page and "<td>-0.0123457</td>" in page and "<td>5.5</td>" in page
+    # every row in the column's unit with the decimals of its largest value (6 significant digits):
+    # -0.0123 µm, not -0.0123457, and a 0.048 nm coefficient under µm reads 0, not "4.78859e-05"
+    assert "<td>50.7318</td>" in page and "<td>-0.0123</td>" in page and "<td>5.5</td>" in page
+    tiny = table_html({"coefficients": [*rows, {"j": 3, "name": "tilt y", "coefficient_nm": 0.0478859,
+                                                 "uncertainty_nm": 0.1}]})
+    assert "e-0" not in tiny and "<td>0</td>" in tiny
     small = table_html({"coefficients": [{"j": 4, "coefficient_nm": 3.2}, {"j": 5, "coefficient_nm": -0.4}]})
     assert "<th>coefficient (nm)</th>" in small and "<td>3.2</td>" in small
     assert column_unit([0.0, float("nan")], default="nm") == "nm"
