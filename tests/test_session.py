@@ -8,6 +8,7 @@ import yaml
 
 from pointspro.core.errors import InputError, RecipeError
 from pointspro.core.io import read_cloud
+from pointspro.core.pipeline import run_pipeline
 from pointspro.core.session import Session
 
 from .conftest import EXAMPLE
@@ -34,9 +35,10 @@ def test_edit_run_select_delete_undo_redo(session):
     assert 0 < k < n0
     assert session.delete(mask, "centre") == k
     assert session.shown.n == n0 - k
-    assert session.steps[-1]["manual_edit"]["note"] == "centre"
+    # recorded before every step but the recipe's own leading edit: the fits run without the points
+    assert session.steps[1]["manual_edit"]["note"] == "centre" and "manual_edit" in session.steps[0]
     session.undo()
-    assert session.shown.n == n0 and "manual_edit" not in session.steps[-1]
+    assert session.shown.n == n0 and "manual_edit" not in session.steps[1]
     session.redo()
     assert session.shown.n == n0 - k
     # threshold on ω: how many go
@@ -69,6 +71,7 @@ def test_pipeline_editing_is_validated_and_undoable(session):
 def test_project_round_trip_and_batch_replays_the_cleanup(session, tmp_path, run_cli):
     session.run()
     session.delete(session.select_rectangle(200, 400, -50, 50), "probe slipped")
+    session.run()  # the steps again without the deleted points (the views showed them gone at once)
     shown = session.shown
     session.save_project(tmp_path / "p.pointspro.yaml")
     s2 = Session()
@@ -221,3 +224,36 @@ def test_selection_and_history_parts():
     assert not h.can_redo
     h.clear()
     assert h.undo(states[0]) is None
+
+
+def test_a_deletion_after_a_run_is_fitted_without_the_points_and_restore_keeps_the_recipes_edit():
+    """A review: a deletion made after a run went to the end of the recipe, so the pose, the Zernike fit
+    and the exported map still held the deleted points (map PV 16.9 µm for 3.9 µm with four spikes
+    deleted). It goes before the steps now: the run equals a recipe with the edit first. Restore all
+    drops the window's deletions, not the recipe's own edit ("probe slipped off the edge")."""
+    s = Session()
+    s.open(EXAMPLE / "asphere_cmm.csv")
+    s.load_recipe(EXAMPLE / "recipe.yaml")
+    steps = [st for st in s.recipe.steps if st.id not in ("knn_denoise", "bspline_map")]
+    s.set_recipe(s.recipe.with_steps(steps))
+    s.run()
+    spikes = np.abs(s.shown["residual"]) > 3e-3
+    assert 0 < spikes.sum() < 10
+    gone = set(s.shown.index[spikes].tolist())
+    s.delete(spikes)
+    assert [st.id for st in s.recipe.steps][:2] == ["manual_edit", "manual_edit"]
+    s.run()
+    first = s.recipe  # the same edit written first by hand
+    ref = run_pipeline(s.input_cloud, first)
+    assert s.shown.equals(ref.cloud) and not gone & set(s.shown.index.tolist())
+    before = Session()
+    before.open(EXAMPLE / "asphere_cmm.csv")
+    before.set_recipe(s.recipe.with_steps([st for st in s.recipe.steps if st.params.__dict__.get("note")
+                                           != "deleted in the window"]))
+    before.run()
+    # the spikes pulled the fit: without them the residual's RMS drops
+    assert np.std(s.shown["residual"]) < 0.8 * np.std(before.shown["residual"])
+    s.restore_all()
+    ids = [st.id for st in s.recipe.steps]
+    assert ids.count("manual_edit") == 1 and s.recipe.steps[0].params.note == "probe slipped off the edge"
+    assert s.shown.n == s.input_cloud.n - 2  # the recipe's own two rows stay removed in the view

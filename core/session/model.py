@@ -30,6 +30,8 @@ from .history import History, Snapshot
 log = logging.getLogger(__name__)
 
 #: events that say the model changed (the window redraws on each)
+#: the note of the manual_edit steps the window's deletions make (Restore all drops those alone)
+WINDOW_NOTE = "deleted in the window"
 CHANGES = ("opened", "recipe", "steps", "ran", "deleted", "restored", "undo", "redo")
 EVENTS = CHANGES + ("warning",)
 
@@ -209,7 +211,7 @@ class Session:
     def select_threshold(self, channel: str, value: float, above: bool = True) -> np.ndarray:
         return selection.threshold(self.shown, channel, value, above)
 
-    def delete(self, mask, note: str = "deleted in the window") -> int:
+    def delete(self, mask, note: str = WINDOW_NOTE) -> int:
         """Remove the selected points; recorded as a manual_edit step (their input rows).
 
         ``mask`` is over the shown cloud, or over ``view``'s cloud (what the views select in): the
@@ -232,10 +234,21 @@ class Session:
         new_keep[pos] = False
         step = self._manual_edit(rows, note)
         self.history.push(self._snapshot())
-        self.recipe = self.recipe.inserted(step)
+        # first, after the recipe's own leading manual edits: the step removes input rows, so every
+        # step — the pose, the Zernike fit, the map — must run without them (put last, as it was, the
+        # exported map.csv of a review's run still held four deleted spikes: map PV 16.9 µm for 3.9).
+        # The views show the deletion at once; the steps' numbers change at the next run
+        self.recipe = self.recipe.inserted(step, self._edit_position())
         self._set_view(base, new_keep)
         self.events.deleted(n)
         return n
+
+    def _edit_position(self) -> int:
+        """Where a deletion's manual_edit goes: after the leading manual_edit steps (0 when none)."""
+        i = 0
+        while i < len(self.recipe.steps) and self.recipe.steps[i].id == "manual_edit":
+            i += 1
+        return i
 
     def _manual_edit(self, rows: np.ndarray, note: str):
         """The manual_edit step removing ``rows`` (sorted, distinct input rows), in its compact form:
@@ -256,11 +269,21 @@ class Session:
         return dataclasses.replace(step, params=step.params.model_copy(update=update))
 
     def restore_all(self) -> None:
-        """Drop every manual_edit step (undoable)."""
-        recipe = self.recipe.with_steps([s for s in self.recipe.steps if s.id != "manual_edit"])
+        """Drop the manual_edit steps deletions in the window made (undoable); a recipe's own edit with
+        another note (the example's "probe slipped off the edge") stays — a review found Restore all
+        dropping it with the window's deletions."""
+        recipe = self.recipe.with_steps([s for s in self.recipe.steps if not (
+            s.id == "manual_edit" and getattr(s.params, "note", None) == WINDOW_NOTE)])
         self.history.push(self._snapshot())
         self.recipe = recipe
-        self._set_view(self.input_cloud, None)
+        view = self.input_cloud
+        if view is not None:  # the input less the rows the recipe's own edits still remove
+            from ..step import Context
+
+            for st in recipe.steps:
+                if st.id == "manual_edit" and st.enabled:
+                    view = self.registry.load("manual_edit")().run(view, st.params, Context()).cloud
+        self._set_view(view, None)
         self.events.restored()
 
     # -- projects -----------------------------------------------------------------------------------

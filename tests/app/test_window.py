@@ -219,7 +219,7 @@ def test_select_delete_undo_redo_project_and_batch_replay(qtbot, tmp_path, run_c
     assert win.view3d._sel_actor is not None  # highlighted in 3D
     actor, clim = win.view3d._actor, tuple(win.view3d._actor.mapper.scalar_range)
     win.delete_selection()
-    assert win.session.shown.n == n0 - k and "manual_edit" in win.session.steps[-1]
+    assert win.session.shown.n == n0 - k and "manual_edit" in win.session.steps[1]  # before the fits
     assert win.view3d.mesh.n_points == n0 - k and win.selection is None
     # an edit updates the drawn points in place: the same actor and colour limits, the highlight
     # gone, and no deleted point among those drawn
@@ -239,11 +239,12 @@ def test_select_delete_undo_redo_project_and_batch_replay(qtbot, tmp_path, run_c
     win.redo_action.trigger()
     assert win.session.shown.n == n0 - k
     # the pipeline form marks an invalid value and keeps the old one
-    win.pipeline.list.setCurrentRow(4)
+    win.pipeline.list.setCurrentRow(5)  # the aperture: the deletion's step stands second
     win.pipeline.fields["diameter"].enter(-5.0)
     assert "ffd6d6" in win.pipeline.fields["diameter"].styleSheet()
     assert "diameter must be > 0 mm (got -5 mm)" in win.pipeline.message.text()
-    assert win.session.steps[4] == {"aperture": {"diameter": 1290}}
+    assert win.session.steps[5] == {"aperture": {"diameter": 1290}}
+    win.session.run()  # the steps without the deleted points
     # save, reopen in a new window: the same cloud
     win.session.save_project(tmp_path / "p.pointspro.yaml")
     w2 = _window(qtbot)
@@ -465,3 +466,19 @@ def test_the_map_colour_bar_shows_values_beyond_its_range(qtbot, tmp_path):
     r[:3] = 5e-3  # three 5 µm spikes beyond the robust limits
     write_csv(PointCloud.from_xyz(x, y, (x * x + y * y) / 2000, residual=r), tmp_path / "s.csv")
     assert _window(qtbot, [tmp_path / "s.csv"]).map.cbar.extend == "max"
+
+
+def test_a_deletion_waits_for_the_running_pipeline(qtbot, monkeypatch):
+    """A review: points deleted while a run was going reappeared when it finished (its result replaced
+    the view) and the manual_edit stayed in the recipe, saying otherwise. Delete is refused then."""
+    win = _example_window(qtbot)
+    win.session.run()
+    c = win.session.shown
+    win.set_selection(np.abs(c.x) < 100)
+    steps = len(win.session.steps)
+    monkeypatch.setattr(type(win.runner), "busy", property(lambda self: True))
+    win.delete_selection()
+    assert len(win.session.steps) == steps and win.session.shown.n == c.n
+    monkeypatch.undo()
+    win.delete_selection()
+    assert len(win.session.steps) == steps + 1 and win.session.shown.n < c.n
