@@ -191,6 +191,14 @@ def test_zernike_bad_input():
     x, y, z = raster_620(step=20.0)
     with pytest.raises(StepError, match="term 40 is not among the 36"):
         _run(ZernikeStep, PointCloud.from_xyz(x, y, z), remove=[40])
+    # a name none of whose terms was fitted: removed nothing, silently, while the figure's title
+    # named it (a review); now refused as an index is
+    with pytest.raises(StepError, match="remove: spherical is not among the 4 fitted fringe terms"):
+        _run(ZernikeStep, PointCloud.from_xyz(x, y, z), terms=4, remove=["piston", "tilt", "spherical"])
+    # a name partly fitted (tilt's two terms within 3) still removes what was fitted
+    assert _run(ZernikeStep, PointCloud.from_xyz(x, y, z), terms=3, remove=["piston", "tilt"]).report
+    # the default list (piston, tilt, power) takes what a fit of 3 terms has
+    assert _run(ZernikeStep, PointCloud.from_xyz(x, y, z), terms=3).report["removed_terms"] == [1, 2, 3]
 
 
 def test_report_html_is_self_contained_with_figures(tmp_path, run_cli):

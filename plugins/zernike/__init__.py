@@ -49,11 +49,19 @@ class ZernikeParams(PupilCentreParams):
         return v
 
 
-def removed_pairs(remove, ordering, pairs) -> list[tuple[int, int]]:
+def removed_pairs(remove, ordering, pairs, named_strictly: bool = True) -> list[tuple[int, int]]:
+    """The fitted (n, m) pairs ``remove`` names. A name none of whose terms was fitted is refused when
+    the recipe gave it (``named_strictly``); the default list (piston, tilt, power) takes what a fit
+    of fewer terms has."""
     out = []
     for t in remove:
         if isinstance(t, str):
-            out += [p for p in zk.TERM_NAMES[t] if p in pairs]
+            got = [p for p in zk.TERM_NAMES[t] if p in pairs]
+            if not got and named_strictly:  # a review: `terms: 4` with `remove: [spherical]` removed nothing, silently
+                n = max(p[0] for p in zk.TERM_NAMES[t])
+                raise StepError(f"remove: {t} is not among the {len(pairs)} fitted {ordering} terms (its "
+                                f"radial order is {n}): fit more terms, or leave it out of remove")
+            out += got
         else:
             try:
                 p = zk.nm_of(int(t), ordering)
@@ -119,7 +127,7 @@ class ZernikeStep(Step):
         if not pvr_reusable:
             del resid  # one full-length column less while the removal is evaluated (issue 26)
         ctx.progress.check()
-        gone = removed_pairs(params.remove, params.ordering, pairs)
+        gone = removed_pairs(params.remove, params.ordering, pairs, "remove" in params.model_fields_set)
         cols = [pairs.index(p) for p in gone]
         # only the removed terms are evaluated again (in chunks: never the N × p design matrix)
         after = zk.evaluate(x, y, coef[cols], R, gone, params.normalization, c)
