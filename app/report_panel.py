@@ -17,8 +17,17 @@ from .worker import Worker
 class ReportPanel(QtWidgets.QWidget):
     def __init__(self, parent=None):
         super().__init__(parent)
-        lay = QtWidgets.QHBoxLayout(self)
-        lay.setContentsMargins(2, 2, 2, 2)
+        outer = QtWidgets.QVBoxLayout(self)
+        outer.setContentsMargins(2, 2, 2, 2)
+        # said when what is shown is no longer the recipe's result (a review: after a failed run or a
+        # deletion the old RMS and PV stood as if current)
+        self.stale = QtWidgets.QLabel()
+        self.stale.setWordWrap(True)
+        self.stale.setStyleSheet("background:#fff3cd;color:#6b4e00;padding:3px")
+        self.stale.hide()
+        outer.addWidget(self.stale)
+        lay = QtWidgets.QHBoxLayout()
+        outer.addLayout(lay)
         # a splitter, the list narrow: at the window's default size the dock is ~430 px wide, and a
         # 230 px list left the tables ~170 px — values off to the right or wrapped a letter a line
         split = QtWidgets.QSplitter(QtCore.Qt.Horizontal)
@@ -47,7 +56,16 @@ class ReportPanel(QtWidgets.QWidget):
         self.view.setHtml("<p style='color:#777'>Run the pipeline: each step's numbers and figures "
                           "appear here.</p>")
 
+    def set_stale(self, why: str) -> None:
+        """Mark the shown results as those of an earlier run (``why``: what changed since)."""
+        if self.result is None:
+            return
+        self.stale.setText(f"These results are from the last completed run; since then {why}. "
+                           "Run all to update them.")
+        self.stale.show()
+
     def set_result(self, result) -> None:
+        self.stale.hide()
         self.result = result
         self._serial += 1
         self._drawn.clear()

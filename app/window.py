@@ -184,6 +184,10 @@ class MainWindow(QtWidgets.QMainWindow):
             self.setWindowTitle(f"PointsPro — {s.input_path.name}")
         if what != "opened" or s.steps:
             self._autosave_timer.start()
+        if what == "deleted":
+            self.report.set_stale("points were deleted")
+        elif what in ("steps", "recipe", "restored", "undo", "redo") and not self.runner.busy:
+            self.report.set_stale("the recipe or the points changed")
 
     def _show_cloud(self, new_input: bool, edit: bool = False) -> None:
         s = self.session
@@ -321,7 +325,11 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _run_failed(self, msg):
         self._run_ended()
+        cancelled = "cancel" in str(msg).lower()
+        # not left at the step it stopped in, looking hung (a review)
+        self.pipeline.bar.setFormat("cancelled" if cancelled else "failed")
         self.log(f"run: {msg}")
+        self.report.set_stale("a run was cancelled" if cancelled else "a run failed")
 
     # -- files ----------------------------------------------------------------------------------------
     def open_any(self, path: str) -> None:

@@ -482,3 +482,24 @@ def test_a_deletion_waits_for_the_running_pipeline(qtbot, monkeypatch):
     monkeypatch.undo()
     win.delete_selection()
     assert len(win.session.steps) == steps + 1 and win.session.shown.n < c.n
+
+
+def test_the_report_says_when_it_no_longer_matches_the_recipe(qtbot):
+    """A review: after a failed run (the bar left at "selecting 64%") or a deletion, the Report panel
+    kept the last run's RMS and PV as if current. A banner says so until the next run."""
+    win = _example_window(qtbot, steps=3)
+    win.pipeline.run_all.click()
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
+    assert win.report.result is not None and win.report.stale.isHidden()
+    c = win.session.shown
+    win.set_selection(np.abs(c.x) < 100)
+    win.delete_selection()
+    assert not win.report.stale.isHidden() and "points were deleted" in win.report.stale.text()
+    win.pipeline.run_all.click()
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
+    assert win.report.stale.isHidden()
+    win.session.add_step("aperture", {"diameter": 0.5})  # no point inside: the run fails
+    assert not win.report.stale.isHidden()
+    win.pipeline.run_all.click()
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
+    assert win.pipeline.bar.format() == "failed" and "a run failed" in win.report.stale.text()
