@@ -170,9 +170,10 @@ def _rows(n, m, sep=" "):
 
 
 @pytest.mark.parametrize("nrows,ncols,matrix", [
-    (650, 650, True), (2, 11, True), (1000, 11, True),   # more than 10 columns: a matrix
-    (10, 10, True), (20, 10, True), (14, 7, True),       # 7–10 columns, rows ≤ 2 × columns
-    (21, 10, False), (15, 7, False), (500, 10, False),   # … more rows: points (CloudCompare's 10)
+    (650, 650, True), (2, 21, True), (1000, 21, True),   # more than 20 columns: a matrix
+    (10, 10, True), (8, 8, True), (20, 20, True),        # 8–20 columns in as many rows: a square map
+    (300, 13, False), (4, 7, False), (15, 10, False),    # CMM tables, a 4-ball export, CloudCompare's
+    (9, 10, False), (500, 10, False), (7, 7, False),     # 10 (a review: refused, or read as a map)
     (4, 6, False), (6, 6, False), (2, 5, False), (3, 3, False),  # x y z + up to 3 channels
 ])
 def test_headerless_width_decides(tmp_path, nrows, ncols, matrix):
@@ -205,15 +206,15 @@ def test_wide_rows_with_a_header_are_points(tmp_path):
 
 def test_headerless_matrix_in_csv_with_a_title_and_nan(tmp_path):
     """MATLAB's writematrix: commas; a title line above, a NaN pixel: dropped and counted."""
-    z = np.arange(48, dtype=float).reshape(4, 12)
+    z = np.arange(96, dtype=float).reshape(4, 24)
     text = "".join(",".join("NaN" if (j, i) == (2, 5) else repr(float(v)) for i, v in enumerate(row)) + "\n"
                    for j, row in enumerate(z))
     p = tmp_path / "w.csv"
     p.write_text("surface 7\n" + text, encoding="utf-8")
-    with pytest.raises(InputError, match=r"w.csv, line 2: 4 rows of 12 numbers"):
+    with pytest.raises(InputError, match=r"w.csv, line 2: 4 rows of 24 numbers"):
         read_cloud(p)
     c = read_cloud(p, pixel_size_um=0.5, height_unit="mm")
-    assert c.n == 47 and c.meta["invalid_dropped"] == 1
+    assert c.n == 95 and c.meta["invalid_dropped"] == 1
     assert np.array_equal(c.z, z[c["row"], c["col"]])
     assert np.array_equal(c.x, c["col"] * 5e-4) and np.array_equal(c.y, c["row"] * 5e-4)
 

@@ -24,8 +24,8 @@ reader option ``profile_angle_deg``, or the file's own ``angle`` column, default
 column keeps several profiles of one part apart (core.profiles). Each profile's x must be strictly
 monotonic: a repeated x or a scan that turns back is refused naming its line. On an x, y, z file
 ``profile_angle_deg`` names the scan direction of a line of points (the ``angle`` channel). Height
-matrices with a header are core.io.matrix's; headerless rows too wide for points (more than 10
-numbers, or 7–10 in no more than twice as many rows: ``_is_matrix_shape``) raise MatrixInText, a
+matrices with a header are core.io.matrix's; headerless rows too wide for points (more than 20
+numbers, or 8–20 in as many rows: ``_is_matrix_shape``) raise MatrixInText, a
 height matrix for core.io.matrix.read_headerless — never points with channels col4 … col650.
 Parsing is numpy's C reader (``np.loadtxt``); only when it fails do we walk the lines in Python to
 name the exact line and column at fault.
@@ -61,29 +61,26 @@ class MatrixInText(InputError):
         self.data, self.first_line = data, first_line
 
 
-# Rows without a header naming the columns are x, y, z (+ channels col4 …) only while they are no
-# wider than a point export writes them. The headerless point exports we know carry x y z and a few
-# channels: an intensity (4), r g b or normals (6), intensity + r g b (7), r g b + normals (9),
-# CloudCompare's r g b, a scalar field and normals (10) — never more than 10, and channels without
-# names would be of little use beyond that (a CMM export with more names them in a header, which
-# keeps it points at any width). A height matrix is a line of the map per row, as wide as the map
-# (SurfaceTopography's matrix-2.txt: 650 values a row). So, without a header:
-#   more than 10 columns          a matrix;
-#   7 to 10 columns               a matrix when there are at most twice as many rows as columns (a
-#                                 10 × 10 map: as points, 20 or fewer carrying 7+ unnamed channels,
-#                                 which is no measurement);
-#   6 or fewer                    points (a matrix that narrow needs a header saying so).
-# Wrongly a matrix costs a refusal that says how to read the rows as points (a header line); wrongly
-# points would be read silently, 650 rows as 650 points in mm — so the doubt goes to the matrix.
-_POINT_COLUMNS_MAX = 10
-_SMALL_MATRIX_COLUMNS = 7
+# Rows without a header naming the columns are x, y, z (+ channels col4 …) while they are no wider than
+# a point export writes them. Headerless point exports carry x y z and a few channels — an intensity,
+# r g b, normals, CloudCompare's r g b + scalar field + normals (10) — and a CMM's table up to ~15
+# (x y z, a direction, deviations, a ball id); a height matrix is a line of the map per row, as wide as
+# the map (SurfaceTopography's matrix-2.txt: 650 values a row). So, without a header:
+#   more than 20 columns               a matrix;
+#   8 to 20 columns in as many rows    a matrix (a square map: matrix-5.txt, 10 × 10);
+#   anything else                      points.
+# A review of the first rule (more than 10 columns, or 7–10 in up to twice as many rows) found it took
+# a 300-row 13-column CMM table and a 4-ball 7-column fiducial export for matrices — refused, or read
+# as a 300 × 13 map when a batch's recipe gave the pixel options for its instrument maps.
+_POINT_COLUMNS_MAX = 20
+_SQUARE_MATRIX_COLUMNS = 8
 
 
 def _is_matrix_shape(nrows: int, ncols: int) -> bool:
     """Whether headerless rows of ``ncols`` numbers (``nrows`` of them) are a height matrix."""
     if ncols > _POINT_COLUMNS_MAX:
         return True
-    return ncols >= _SMALL_MATRIX_COLUMNS and nrows <= 2 * ncols
+    return ncols >= _SQUARE_MATRIX_COLUMNS and nrows == ncols
 
 
 def _is_comment(line: str) -> bool:
