@@ -16,8 +16,13 @@
 
 The radial program is the azimuthal mean of dz about the surface's axis, sampled on rings every map
 spacing (bilinear on the filtered grid, ≥ 8 and ~1.5 samples per spacing of circumference, so no
-lobe below the sampling leaks into it); ``refit_surface`` turns nominal + that mean into the recipe's
-own surface syntax (even asphere or Forbes Q-con).
+lobe below the sampling leaks into it); for a part off the axis (an off-axis zone of the parent,
+turned about the parent's axis) each ring's mean is over its arc on the part, and rings with no arc
+on it are left out. ``refit_surface`` turns nominal + that mean into the recipe's own surface syntax
+(even asphere or Forbes Q-con).
+
+An annular clear aperture (an `aperture` annulus: ``inner`` > 0) is the ring inner ≤ r ≤ radius: the
+coverage, the plane and the statistics are over it; its hole is continued like the run-out.
 """
 from __future__ import annotations
 
@@ -205,16 +210,58 @@ class Correction:
     plane_error: tuple         # piston (mm), slopes of the error's plane
     plane_dz: tuple            # what was removed from −gain·F
     info: dict = field(default_factory=dict)
+    inner: float = 0.0         # inner radius of an annular clear aperture (0: a disk)
 
     @property
     def aperture_mask(self):
-        return ((self.xs[None, :] - self.center[0]) ** 2
-                + (self.ys[:, None] - self.center[1]) ** 2) <= self.radius ** 2
+        R2 = (self.xs[None, :] - self.center[0]) ** 2 + (self.ys[:, None] - self.center[1]) ** 2
+        return (R2 <= self.radius ** 2) & (R2 >= self.inner ** 2)
+
+
+def _aperture_words(radius: float, inner: float) -> str:
+    return (f"{2 * radius:g} mm clear aperture" if inner <= 0 else
+            f"{2 * radius:g} mm clear aperture (annulus, inner diameter {2 * inner:g} mm)")
+
+
+def coverage_message(cov: float, R2, inside, covered, radius: float, inner: float, center) -> str:
+    """The one line refusing a map that covers too little of the clear aperture, with advice that can
+    help: a smaller diameter only when a smaller one is covered, a larger inner diameter only when a
+    ring is (a review: "give a smaller diameter" for a zone whose data lay off the centre, or for an
+    annulus counted as a full disk, where no smaller diameter could ever be covered)."""
+    rr = np.sqrt(R2[inside])
+    ok = covered[inside]
+    order = np.argsort(rr, kind="stable")
+    rs, oks = rr[order], ok[order]
+    rmiss = float(rr[~ok].min())
+    head = (f"the map covers {cov:.1%} of the {_aperture_words(radius, inner)} about ({center[0]:g}, "
+            f"{center[1]:g}) mm (≥ {MIN_COVERAGE:.0%} needed): no data from r = {rmiss:.4g} mm")
+
+    def widest(radii, flags):
+        """Index of the last node at which the nodes so far (all of each radius, ≥ 16) are covered."""
+        c, n = np.cumsum(flags), np.arange(1, radii.size + 1)
+        good = np.r_[radii[1:] != radii[:-1], True] & (n >= 16) & (c >= MIN_COVERAGE * n)
+        return int(np.flatnonzero(good).max()) if good.any() else None
+
+    helps = []
+    i = widest(rs, oks)  # a disk (ring) from the centre (the inner rim) out
+    if i is not None and np.floor(2.0 * rs[i] * 100.0) / 100.0 > 2.0 * inner:
+        helps.append(f"give diameter ≤ {np.floor(2.0 * rs[i] * 100.0) / 100.0:g} mm (covered)")
+    k = widest(rs[::-1], oks[::-1])  # a ring from the rim in
+    if k is not None and np.ceil(2.0 * rs[::-1][k] * 100.0) / 100.0 < 2.0 * radius:
+        helps.append(f"apply an `aperture` annulus with inner_diameter ≥ "
+                     f"{np.ceil(2.0 * rs[::-1][k] * 100.0) / 100.0:g} mm before correction (the ring is covered)")
+    if helps:
+        return f"{head} — measure the whole aperture, or " + ", or ".join(helps)
+    if rmiss <= inner + 0.05 * (radius - inner):  # nothing about this centre is covered, its middle neither
+        return (f"{head} — the measured zone does not lie about this centre: give `centre: [x, y]` (the "
+                "zone's centre)")
+    return f"{head} — measure the whole aperture (no smaller disk or ring about this centre is covered)"
 
 
 def compute_correction(em: ErrorMap, *, center, radius: float, extend: float, cutoff: float,
-                       gain: float = 1.0) -> Correction:
-    """The correction of module doc from the error map ``em`` (which covers ``radius + extend``)."""
+                       gain: float = 1.0, inner: float = 0.0) -> Correction:
+    """The correction of module doc from the error map ``em`` (which covers ``radius + extend``);
+    ``inner`` > 0: an annular clear aperture (its hole continued like the run-out)."""
     from scipy import ndimage
 
     xs, ys, h = em.xs, em.ys, em.spacing
@@ -223,18 +270,15 @@ def compute_correction(em: ErrorMap, *, center, radius: float, extend: float, cu
     Y = ys[:, None] - cy
     R2 = X * X + Y * Y
     inside = R2 <= radius * radius
+    if inner > 0:
+        inside &= R2 >= inner * inner
     n_in = int(inside.sum())
     if n_in < 16:
-        raise CorrectionInputError(f"the {2 * radius:g} mm clear aperture holds {n_in} nodes at "
+        raise CorrectionInputError(f"the {_aperture_words(radius, inner)} holds {n_in} nodes at "
                                    f"spacing {h:g} mm: too few")
     cov = float(np.count_nonzero(em.covered & inside)) / n_in
     if cov < MIN_COVERAGE:
-        miss = inside & ~em.covered
-        rmiss = float(np.sqrt(R2[miss].min()))
-        raise CorrectionInputError(
-            f"the map covers {cov:.1%} of the {2 * radius:g} mm clear aperture (≥ {MIN_COVERAGE:.0%} "
-            f"needed): no data from r = {rmiss:.4g} mm — measure the whole aperture, or give a "
-            "smaller diameter")
+        raise CorrectionInputError(coverage_message(cov, R2, inside, em.covered, radius, inner, center))
     E = np.where(inside, em.E, np.nan)
     holes = inside & ~np.isfinite(E)
     known = inside & np.isfinite(E)
@@ -262,7 +306,7 @@ def compute_correction(em: ErrorMap, *, center, radius: float, extend: float, cu
     info = {"coverage": cov, "holes_filled": int(holes.sum()), "nodes_aperture": n_in,
             "nodes_written": int(written.sum()), "sigma_mm": gaussian_sigma(cutoff)}
     return Correction(xs, ys, h, (cx, cy), radius, radius + extend, cutoff, gain, Ein, dz, pred,
-                      F, tuple(float(t) for t in p), tuple(float(t) for t in q), info)
+                      F, tuple(float(t) for t in p), tuple(float(t) for t in q), info, float(inner))
 
 
 def rms(a) -> float:
@@ -275,28 +319,63 @@ def pv(a) -> float:
     return float(np.ptp(a)) if a.size else float("nan")
 
 
-def azimuthal_mean(cor: Correction, axis=(0.0, 0.0), field_name: str = "dz"):
-    """(r, mean of dz on the ring of radius r about ``axis``), r = 0, h, 2h, … up to the written
-    region's radius; bilinear on the full (unmasked) correction field."""
+def azimuthal_mean(cor: Correction, axis=(0.0, 0.0), field_name: str = "dz", return_share: bool = False):
+    """(r, mean of dz on the ring of radius r about ``axis``[, share]), r on multiples of the map
+    spacing; bilinear on the full (unmasked) correction field, ~1.5 samples per spacing of arc (≥ 8).
+
+    Clear aperture centred on ``axis``: whole rings, r = 0 … the written region's radius (aperture +
+    extension: the tool's run-out). Off the axis (an off-axis zone of the parent surface, turned
+    about the parent's axis): each ring's mean is over the arc of it that lies on the part (the clear
+    aperture, an annulus's hole excepted), and rings with no arc on the part are left out — no value
+    comes from beyond the part (a review: rings about the parent's axis edge-clamped off the grid,
+    r = 0 with no data). ``share``: the fraction of each ring the mean is over (1 for whole rings)."""
     from scipy import ndimage
 
     h = cor.spacing
     full = (-cor.gain * cor.filtered - (cor.plane_dz[0] + cor.plane_dz[1] * (cor.xs[None, :] - cor.center[0])
                                        + cor.plane_dz[2] * (cor.ys[:, None] - cor.center[1])))
-    rmax = cor.outer
-    r = h * np.arange(int(np.floor(rmax / h + 1e-9)) + 1, dtype=np.float64)
-    nth = np.maximum(8, np.ceil(2 * np.pi * r / h * 1.5)).astype(np.intp)
+    cx, cy = cor.center
+    d = float(np.hypot(cx - axis[0], cy - axis[1]))
+    on_axis = d <= 1e-9 * h
+    if on_axis:
+        r = h * np.arange(int(np.floor(cor.outer / h + 1e-9)) + 1, dtype=np.float64)
+        half = np.full(r.size, np.pi)
+        phi = 0.0
+    else:
+        R = cor.radius
+        k0 = max(0, int(np.ceil((d - R) / h - 1e-9)))
+        k1 = int(np.floor((d + R) / h + 1e-9))
+        r = h * np.arange(k0, k1 + 1, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cosa = (r * r + d * d - R * R) / (2.0 * r * d)
+        cosa = np.where(r > 0, cosa, -1.0)  # r = 0: the axis itself, on the part (d ≤ R here)
+        half = np.arccos(np.clip(cosa, -1.0, 1.0))  # half-angle of the ring's arc on the disk
+        phi = float(np.arctan2(cy - axis[1], cx - axis[0]))
+    nth = np.maximum(8, np.ceil(2.0 * half * r / h * 1.5)).astype(np.intp)
     ring = np.repeat(np.arange(r.size), nth)
     start = np.concatenate([[0], np.cumsum(nth)[:-1]])
     k = np.arange(ring.size) - start[ring]
-    th = 2 * np.pi * k / nth[ring]
+    if on_axis:
+        th = 2 * np.pi * k / nth[ring]
+    else:  # the arc's midpoints: symmetric about the part's centre, never on its rim
+        th = phi - half[ring] + (k + 0.5) * (2.0 * half[ring] / nth[ring])
     px = axis[0] + r[ring] * np.cos(th)
     py = axis[1] + r[ring] * np.sin(th)
     ci = (px - cor.xs[0]) / h
     ri = (py - cor.ys[0]) / h
-    vals = ndimage.map_coordinates(full, [ri, ci], order=1, mode="nearest")
-    mean = np.bincount(ring, weights=vals, minlength=r.size) / nth
-    return r, mean
+    vals = ndimage.map_coordinates(full, [ri, ci], order=1, mode="constant", cval=np.nan)
+    keep = np.isfinite(vals)  # never a value from beyond the grid
+    if not on_axis and cor.inner > 0:
+        keep &= (px - cx) ** 2 + (py - cy) ** 2 >= cor.inner ** 2
+    cnt = np.bincount(ring[keep], minlength=r.size)
+    tot = np.bincount(ring[keep], weights=vals[keep], minlength=r.size)
+    has = cnt > 0
+    if not on_axis:  # a ring that only touches the part's rim (a zero-length arc) holds one rim point
+        has &= (r == 0) | (2.0 * half * r >= 1e-3 * h)
+    mean = tot[has] / cnt[has]
+    share = (half / np.pi * cnt / nth)[has]
+    r = r[has]
+    return (r, mean, share) if return_share else (r, mean)
 
 
 def radial_remainder(cor: Correction, r, mean, axis=(0.0, 0.0)):
@@ -307,7 +386,10 @@ def radial_remainder(cor: Correction, r, mean, axis=(0.0, 0.0)):
     return np.where(cor.aperture_mask, cor.dz - sym, np.nan)
 
 
-def removal_map(cor: Correction, bias_mm: float = 0.0):
-    """Material to remove (mm, ≥ 0) over the written region: gain·F about its minimum, plus bias."""
-    m = -cor.dz  # = gain·F less its plane: what is high is removed
+def removal_map(cor: Correction, bias_mm: float = 0.0, side: int = 1):
+    """Material to remove (mm, ≥ 0) over the written region: side·gain·F about its minimum, plus bias.
+    ``side``: where the surface is seen from (the probe's side, docs/conventions.md Correction): +1
+    from +z (the material lies below the surface: a high spot, residual > 0, is excess), −1 from below
+    (the material lies above it: a low spot is excess). dz itself is geometric and the same for both."""
+    m = -float(side) * cor.dz  # side 1: gain·F less its plane, what is high is removed
     return m - np.nanmin(m) + bias_mm

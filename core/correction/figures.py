@@ -42,7 +42,8 @@ def radial_figure(r, dz, radius, fit=None, fit_label=""):
     ax.plot(r, dz * scale, "-", color="#2c6fbb", label="azimuthal mean of dz")
     if fit is not None:
         ax.plot(r, fit * scale, ":", color="#c0392b", label=fit_label)
-    ax.axvline(radius, color="k", lw=0.6, ls="--", label="clear aperture")
+    for i, edge in enumerate(np.atleast_1d(radius)):  # an off-axis part: its two edges about the axis
+        ax.axvline(edge, color="k", lw=0.6, ls="--", label="clear aperture" if i == 0 else None)
     ax.set_xlabel("r (mm)")
     ax.set_ylabel(f"dz ({unit}, add to program)")
     ax.legend(fontsize=8)

@@ -4,7 +4,8 @@ Grid CSVs have ``#`` comment lines first (the sign convention, the process, the 
 header with units, then one row per valid node, y-major (row by row from the lowest y) — the same
 order as map.csv. x and y are Python's shortest round-trip decimals of the nodes (formatted once per
 column and row); the value is written in fixed point with ``decimals`` places (12 in mm: 1 fm, far
-below anything a machine or a measurement resolves), trailing zeros dropped. The rows are assembled
+below anything a machine or a measurement resolves), trailing zeros dropped. The radial table
+(correction_radial.csv) writes both r and dz that way. The rows are assembled
 as one byte matrix in numpy, so a 1001 × 1001 grid is written in a fraction of a second.
 """
 from __future__ import annotations
@@ -83,11 +84,15 @@ def write_grid_csv(path, xs, ys, Z, header: str, comments=(), scale: float = 1.0
 
 
 def write_radial_csv(path, r, dz, comments=()) -> None:
-    with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write(_comment(comments))
-        f.write("r [mm],dz [mm]\n")
-        f.writelines(f"{a!r},{b!r}\n" for a, b in zip(np.asarray(r, float).tolist(),
-                                                       np.asarray(dz, float).tolist()))
+    """r and dz (mm) in fixed point, 12 decimals, as the grid files' values: r = k × spacing is
+    written as its decimal (1.2, not 1.2000000000000002 — exact for a decimal spacing)."""
+    r = np.asarray(r, dtype=np.float64)
+    comma = np.full((r.size, 1), ord(","), np.uint8)
+    nl = np.full((r.size, 1), ord("\n"), np.uint8)
+    M = np.concatenate([fixed_point_bytes(r, 12), comma, fixed_point_bytes(dz, 12), nl], axis=1)
+    with open(path, "wb") as f:
+        f.write((_comment(comments) + "r [mm],dz [mm]\n").encode("utf-8"))
+        f.write(M[M != 0].tobytes())
 
 
 def read_comment_csv(path):

@@ -166,18 +166,24 @@ def spec_of(surface) -> dict:
 
 
 def refit_surface(programmed, r, dz, radius: float, spacing: float, norm_radius: float,
-                  tol_mm: float = 1e-6, extension_weight: float = 0.1) -> dict:
+                  tol_mm: float = 1e-6, extension_weight: float = 0.1, share=None,
+                  inner: float = 0.0) -> dict:
     """Fit programmed + dz(r) over every ring (r ≤ norm_radius), the rings past the clear aperture
     (the run-out) weighted by ``extension_weight`` so the polynomial stays on the correction there
-    without costing the aperture its accuracy; the RMS judged is over r ≤ radius. Returns
-    {"surface", "type", "rms_mm", "tried": {...}, "why"}; "surface" is None when no form could be
-    fitted (a domain problem)."""
+    without costing the aperture its accuracy; the RMS judged is over r ≤ radius. ``share``: the
+    fraction of each ring on the part (an off-axis part's arcs; None: whole rings), so the weights
+    stay ∝ the area each ring stands for; ``inner``: an annular aperture's inner radius (its hole's
+    rings weighted as the run-out). Returns {"surface", "type", "rms_mm", "tried": {...},
+    "why"}; "surface" is None when no form could be fitted (a domain problem)."""
     sel = r <= norm_radius + 1e-9 * spacing  # piston: see _gauss_newton
     rr, target = r[sel], programmed.sag_r(r[sel]) + dz[sel]
-    w = _weights(rr, spacing) * np.where(rr <= radius + 1e-9 * spacing, 1.0, extension_weight)
+    sh = np.ones(rr.size) if share is None else np.asarray(share, dtype=np.float64)[sel]
+    ins = (rr <= radius + 1e-9 * spacing) & (rr >= inner - 1e-9 * spacing)
+    w = _weights(rr, spacing) * sh * np.where(ins, 1.0, extension_weight)
     w = w / w.sum()
-    ins = rr <= radius + 1e-9 * spacing
     wi = _weights(rr[ins], spacing)
+    if share is not None:
+        wi = wi * sh[ins] / np.sum(wi * sh[ins])
     aperture = programmed.aperture
     tried = {}
     cands = {}

@@ -14,15 +14,18 @@ core.maps first (as `bspline_map` does).
 Outputs (``outputs``; empty: every one the inputs allow):
 - cutting:   ``correction.csv`` (x, y, dz; mm, part frame) and ``correction.x3p`` over the clear
              aperture extended by ``extend_mm``;
-- radial:    ``correction_radial.csv`` (r, dz: the azimuthal mean about the axis) and
-             ``corrected_surface.yaml`` (the recipe's `surface:` syntax, even asphere or Forbes Q-con,
-             fitted to programmed + radial dz within ``fit_tolerance_nm`` RMS); the non-symmetric
-             remainder in the report (it needs a slow/fast tool servo or polishing); needs a
-             rotationally symmetric nominal;
+- radial:    ``correction_radial.csv`` (r, dz: the azimuthal mean about the axis — for an off-axis
+             part the mean over each ring's arc on the part, r over the radii it covers; for a flat,
+             about the clear aperture's centre) and ``corrected_surface.yaml`` (the recipe's
+             `surface:` syntax, even asphere or Forbes Q-con, fitted to programmed + radial dz within
+             ``fit_tolerance_nm`` RMS); the non-symmetric remainder in the report (it needs a
+             slow/fast tool servo or polishing); needs a rotationally symmetric nominal or a flat;
 - freeform:  ``corrected_sag.csv`` (x, y, z = programmed sag + dz) and ``corrected_surface.stl``
              (the same grid triangulated, mm) for CAM; needs a nominal;
 - polishing: ``removal.csv`` (x, y, removal in µm) and ``removal.x3p`` (metres, as the standard
-             stores heights), ≥ 0 everywhere, the total volume removed in the report.
+             stores heights), ≥ 0 everywhere, the total volume removed in the report; what is excess
+             material follows the side the surface was probed from (`probe_radius` side; +z when
+             none was given), and the depth is judged inside the clear aperture.
 Figures: ``correction.png`` (dz and the predicted error after it), ``correction_radial.png``,
 ``correction_history.png`` (RMS run by run with ``history_rms_um``). The cloud passes unchanged.
 """
@@ -66,10 +69,11 @@ class CorrectionParams(PupilCentreParams):
         "radius of a cutting tool): the cutoff defaults to its diameter")
     extend_mm: float | None = param(
         None, unit="mm", ge=0, help="continue the correction smoothly this far past the clear "
-        "aperture (the tool's run-out); empty: one cutoff")
+        "aperture (the tool's run-out); empty: one cutoff, as far as the surface exists (its domain)")
     diameter: float | None = param(None, unit="mm", gt=0,
                                    help="clear-aperture diameter; empty: the outer diameter of the "
-                                   "last circular `aperture` step applied, else the surface's aperture")
+                                   "last circular `aperture` step applied (about its centre, an "
+                                   "annulus without its hole), else the surface's aperture")
     spacing: float | None = param(None, unit="mm", gt=0, help="grid spacing of the outputs; empty: "
                                   "the input grid's, or half the knot spacing for scattered points")
     knot_spacing: float | None = param(None, unit="mm", gt=0, help="B-spline knot spacing for "
@@ -78,8 +82,9 @@ class CorrectionParams(PupilCentreParams):
                              "(dimensionless, as bspline_map)")
     bias_um: float = param(0.0, unit="µm", ge=0, help="uniform depth added to the removal map "
                            "(polishing: a minimum removal everywhere)")
-    max_depth_um: float | None = param(None, unit="µm", gt=0, help="largest removal depth allowed; "
-                                       "a deeper removal map is refused (nothing written)")
+    max_depth_um: float | None = param(None, unit="µm", gt=0, help="largest removal depth allowed "
+                                       "inside the clear aperture; a deeper removal map is refused "
+                                       "(nothing written)")
     fit_tolerance_nm: float = param(1.0, unit="nm", gt=0, help="corrected_surface.yaml must match "
                                     "programmed + radial correction to this RMS over the aperture")
     programmed_surface: dict[str, float | bool | str | list[float] | dict[int | str, float]] | None = param(
@@ -110,6 +115,33 @@ def _rotational(surface) -> bool:
     from pointspro.core.surfaces import SurfaceOfRevolution
 
     return isinstance(surface, SurfaceOfRevolution) and not surface.is_flat()
+
+
+def _turnable(surface) -> bool:
+    """A nominal a lathe can take as a radial program: a surface of revolution, or a flat (faced:
+    sag 0 + dz(r) about the part's centre on the spindle)."""
+    from pointspro.core.metrics.pupil import is_flat
+
+    return surface is not None and (_rotational(surface) or is_flat(surface))
+
+
+def _domain_radius(surface) -> float:
+    """Largest radius (mm) about the axis where the surface exists (a conic's r_max; inf if none)."""
+    for s in (surface, getattr(surface, "_base", None)):
+        r = getattr(s, "r_max", None)
+        if r is not None:
+            return float(r)
+    return float("inf")
+
+
+def _probe_side(cloud) -> int | None:
+    """The side the points were probed from: the last `probe_radius` step's ``side`` (+1 from +z,
+    −1 from below), None when no step said (an instrument's map)."""
+    for entry in reversed(cloud.provenance):
+        if entry.get("id") == "probe_radius":
+            side = (entry.get("params") or {}).get("side")
+            return None if side is None else (1 if int(side) > 0 else -1)
+    return None
 
 
 def _check_same_side(nominal, programmed) -> None:
@@ -191,34 +223,81 @@ class CorrectionStep(Step):
                 if o in ("radial", "freeform") and programmed is None:
                     raise StepError(f"output '{o}' ({FILES[o]}) needs the nominal surface — give the "
                                     "recipe's `surface:` (or programmed_surface)")
-                if o == "radial" and not _rotational(programmed):
+                if o == "radial" and not _turnable(programmed):
                     raise StepError(f"output 'radial' ({FILES['radial']}) needs a rotationally "
-                                    "symmetric nominal (even_asphere, qcon, qbfs); this one is "
-                                    f"{getattr(programmed, 'kind', '?')}")
+                                    "symmetric nominal (even_asphere, qcon, qbfs) or a flat; this one "
+                                    f"is {getattr(programmed, 'kind', '?')}, not a surface of revolution")
             outputs = asked
         else:
             outputs = ["cutting"]
             if programmed is None:
                 skipped["radial"] = skipped["freeform"] = "no nominal surface"
             else:
-                if _rotational(programmed):
+                if _turnable(programmed):
                     outputs.append("radial")
                 else:
                     skipped["radial"] = f"the nominal ({programmed.kind}) is not a surface of revolution"
                 outputs.append("freeform")
             outputs.append("polishing")
         # the clear aperture
+        ap = applied_aperture_step(cloud)
         diameter = params.diameter
-        if diameter is None:  # the clear aperture the recipe applied, else the surface's
-            diameter = applied_aperture(cloud)
+        if diameter is None and ap is not None:  # the clear aperture the recipe applied, else the surface's
+            diameter = ap["diameter"]
         if diameter is None and nominal is not None:
             diameter = getattr(nominal, "aperture", None)
         if diameter is None:
             raise StepError("the correction needs the clear aperture: give diameter: (mm) or the "
                             "surface's aperture")
-        pupil = pupil_of(x, y, nominal, params.given_centre)
+        given = params.given_centre
+        from_aperture = False
+        if given is None and ap is not None and (ap["centre"] != (0.0, 0.0) or is_flat(nominal)):
+            # the zone the recipe's `aperture` kept is about its centre, as its diameter is the
+            # clear aperture (a review: an off-centre aperture's diameter taken about the axis, and
+            # the step refused "no data from r = 0")
+            given, from_aperture = ap["centre"], True
+        pupil = pupil_of(x, y, nominal, given)
+        if from_aperture:
+            import dataclasses
+
+            pupil = dataclasses.replace(pupil, how="the last `aperture` step's centre (center_x, center_y)")
         center = pupil.center
         radius = diameter / 2.0
+        hole = 0.0
+        if (ap is not None and ap["inner_diameter"] > 0
+                and np.hypot(center[0] - ap["centre"][0], center[1] - ap["centre"][1]) <= 1e-9 * radius):
+            # an annulus: its hole holds no data, and the coverage is over the ring (a review: Ø40/Ø8
+            # refused as "96.1 % covered … give a smaller diameter")
+            hole = ap["inner_diameter"] / 2.0
+            if hole >= radius:
+                raise StepError(f"diameter {diameter:g} mm is not larger than the `aperture` annulus's "
+                                f"inner_diameter {2 * hole:g} mm: give a diameter that holds the ring")
+        # the radial program's axis: the nominal's (the spindle), or for a flat the part's centre
+        axis = (0.0, 0.0) if not is_flat(programmed) else center
+        # how far the written region may reach: the programmed surface exists out to its domain (a
+        # sphere R 25 mm exists to r = 25 mm; a review: the default extension took Ø46 to r = 26 mm
+        # and the whole step failed in the radial fit)
+        r_dom = _domain_radius(programmed) if programmed is not None and not is_flat(programmed) else np.inf
+        far = float(np.hypot(center[0] - axis[0], center[1] - axis[1])) + radius
+        room = r_dom * (1.0 - 1e-6) - far  # just inside: the conic's slope is vertical at its edge
+        extend_max = np.floor(room * 1e3) / 1e3 if np.isfinite(room) else np.inf  # whole µm
+        if room < 0:  # the aperture itself reaches the domain's edge: no sag to add dz to there
+            beyond = (f"the clear aperture (diameter {diameter:g} mm about ({center[0]:g}, {center[1]:g}) "
+                      f"mm) reaches r = {far:.6g} mm from the surface's axis, the surface's domain "
+                      f"ends at r = {r_dom:.6g} mm")
+            for o in ("radial", "freeform"):
+                if o in asked:
+                    raise StepError(f"output '{o}' ({FILES[o]}): {beyond} — check diameter, centre and "
+                                    "the surface's c/k")
+                if o in outputs:
+                    outputs.remove(o)
+                    skipped[o] = beyond
+            extend_max = 0.0
+        if params.extend_mm is not None and params.extend_mm > extend_max:
+            raise StepError(f"extend_mm {params.extend_mm:g} mm takes the correction to r = "
+                            f"{far + params.extend_mm:.6g} mm, beyond the surface's domain r ≤ {r_dom:.6g} "
+                            f"mm: give extend_mm ≤ {extend_max:g}")
+        extend_warning = []
         # the grid spacing and the cutoff, checked before any work
         reg = None
         spacing = params.spacing
@@ -238,7 +317,7 @@ class CorrectionStep(Step):
 
         def defaults(h):
             c = cutoff if cutoff is not None else 4.0 * h
-            e = params.extend_mm if params.extend_mm is not None else c
+            e = params.extend_mm if params.extend_mm is not None else min(c, extend_max)
             return c, e
 
         def outer(h):  # the working grid: aperture, extension and the filter's reach beyond it
@@ -255,6 +334,11 @@ class CorrectionStep(Step):
         if cutoff is None:
             cutoff_from = "4 × the map spacing (default)"
         cutoff, extend = defaults(h)
+        if params.extend_mm is None and extend < cutoff:
+            extend_warning.append(
+                f"extend_mm defaults to one cutoff ({cutoff:g} mm), but the surface exists only out to "
+                f"r = {r_dom:.6g} mm (its domain): the correction is extended {extend:g} mm past the "
+                f"clear aperture, as far as it can go")
         if cutoff < 2.0 * h:
             raise StepError(f"cutoff_mm {cutoff:g} mm is below twice the map spacing ({h:g} mm): "
                             f"the map holds no detail that fine — use cutoff_mm ≥ {2 * h:g} or a "
@@ -272,7 +356,7 @@ class CorrectionStep(Step):
         ctx.progress.update(0.3, "filter")
         try:
             cor = C.compute_correction(em, center=center, radius=radius, extend=extend,
-                                       cutoff=cutoff, gain=params.gain)
+                                       cutoff=cutoff, gain=params.gain, inner=hole)
         except C.CorrectionInputError as e:
             raise StepError(str(e)) from None
         inside = cor.aperture_mask
@@ -281,7 +365,8 @@ class CorrectionStep(Step):
         rep = {
             "outputs": outputs, "skipped": skipped, "sign": SIGN, "channel": channel,
             "map_from": em.source, "spacing_mm": h, "grid": [int(cor.xs.size), int(cor.ys.size)],
-            "diameter_mm": diameter, **pupil.report(),
+            "diameter_mm": diameter, **({"inner_diameter_mm": 2 * hole} if hole > 0 else {}),
+            **pupil.report(),
             "gain": params.gain, "cutoff_mm": cutoff, "cutoff_from": cutoff_from,
             "filter": "Gaussian, ISO 16610-61 (σ = α λc / √(2π), 50 % at the cutoff)",
             "extend_mm": extend, "coverage": cor.info["coverage"],
@@ -302,7 +387,7 @@ class CorrectionStep(Step):
                                   "; the points also hold what the map does not resolve "
                                   "(unresolved_rms_um: noise and detail finer than the knots), which "
                                   "stays")),
-            "warnings": [resolution_warning] if resolution_warning else [],
+            "warnings": ([resolution_warning] if resolution_warning else []) + extend_warning,
         }
         if em.unresolved_rms is not None:
             rep["unresolved_rms_um"] = em.unresolved_rms * 1e3
@@ -310,7 +395,9 @@ class CorrectionStep(Step):
         comments = [f"PointsPro correction: {SIGN}",
                     f"gain {params.gain:g}; Gaussian low-pass cutoff {cutoff:g} mm (ISO 16610-61); "
                     f"piston {rep['piston_removed_um']:.6g} um and tilt removed (set-up, not form)",
-                    f"clear aperture diameter {diameter:g} mm about ({center[0]:g}, {center[1]:g}) mm, "
+                    f"clear aperture diameter {diameter:g} mm"
+                    + (f" (annulus, inner diameter {2 * hole:g} mm)" if hole > 0 else "")
+                    + f" about ({center[0]:g}, {center[1]:g}) mm, "
                     f"extended {extend:g} mm; grid spacing {h:g} mm; rows y-major"]
         ctx.progress.update(0.5, "outputs")
         if "cutting" in outputs:
@@ -321,23 +408,51 @@ class CorrectionStep(Step):
                 p, cor.xs, cor.ys, cor.dz, "x [mm],y [mm],dz [mm]\n", comments)
             arts["correction.x3p"] = MapGrid(cor.xs, cor.ys, cor.dz, h).write_x3p
         if "polishing" in outputs:
-            removal = C.removal_map(cor, params.bias_um * 1e-3)
-            depth_um = float(np.nanmax(removal)) * 1e3
+            # which side of the surface is material: a high spot (residual > 0) is excess only when
+            # the surface is seen from +z; probed from below (probe_radius side −1) the material lies
+            # above it and a low spot is excess (a review: 0.415 µm to remove where the part lacked
+            # 0.276 µm). dz is geometric and the same either way
+            side = _probe_side(cloud)
+            seen = (side or 1)
+            removal = C.removal_map(cor, params.bias_um * 1e-3, seen)
+            # the depth a polisher must reach on the part: inside the clear aperture (the run-out
+            # ring beyond it is no part; a review: 0.442 µm there against 0.422 µm inside)
+            depth_um = float(np.nanmax(np.where(inside, removal, np.nan))) * 1e3
+            depth_all_um = float(np.nanmax(removal)) * 1e3
             vol = float(np.nansum(removal)) * h * h
             vol_ap = float(np.nansum(np.where(inside, removal, 0.0))) * h * h
             if params.max_depth_um is not None and depth_um > params.max_depth_um:
-                raise StepError(f"the removal map is {depth_um:.4g} µm deep (bias {params.bias_um:g} µm "
-                                f"included), more than max_depth_um {params.max_depth_um:g} µm: nothing "
-                                "written — cut instead of polishing, or lower gain/bias")
-            rep["removal"] = {"max_depth_um": depth_um, "min_depth_um": float(np.nanmin(removal)) * 1e3,
+                raise StepError(f"the removal map is {depth_um:.4g} µm deep inside the clear aperture (bias "
+                                f"{params.bias_um:g} µm included), more than max_depth_um "
+                                f"{params.max_depth_um:g} µm: nothing written — cut instead of polishing, "
+                                "or lower gain/bias")
+            if seen > 0:
+                side_words = ("seen from +z (probe_radius side +1): the material lies below the surface, "
+                              "a high spot (residual > 0) is excess" if side else
+                              "seen from +z (no probe side known: an instrument's map): the material is "
+                              "taken to lie below the surface, a high spot (residual > 0) is excess")
+                formula = "gain × low-passed error − its minimum + bias"
+            else:
+                side_words = ("seen from below (probe_radius side −1): the material lies above the "
+                              "surface, a low spot (residual < 0) is excess")
+                formula = "−gain × low-passed error − its minimum + bias"
+            rep["removal"] = {"max_depth_um": depth_um, "max_depth_written_um": depth_all_um,
+                              "min_depth_um": float(np.nanmin(removal)) * 1e3,
                               "bias_um": params.bias_um, "volume_mm3": vol,
-                              "volume_aperture_mm3": vol_ap,
-                              "sign": "removal = material to remove (µm, ≥ 0) = gain × low-passed "
-                                      "error − its minimum + bias"}
+                              "volume_aperture_mm3": vol_ap, "probe_side": seen,
+                              "side_from": "probe_radius" if side else "default (+z)",
+                              "material": side_words,
+                              "depth_note": "max_depth_um (and the max_depth_um limit) is over the clear "
+                                            "aperture; max_depth_written_um includes the run-out beyond it",
+                              "sign": f"removal = material to remove (µm, ≥ 0) = {formula}; surface "
+                                      f"{side_words}"}
             rcom = [f"PointsPro removal map (polishing): removal = material to REMOVE, um, >= 0 "
-                    f"everywhere = gain x low-passed form error - its minimum + bias {params.bias_um:g} um",
+                    f"everywhere = {'' if seen > 0 else '-'}gain x low-passed form error - its minimum + "
+                    f"bias {params.bias_um:g} um",
+                    f"surface {side_words}".replace("−", "-").replace("µ", "u"),
                     comments[1], comments[2],
-                    f"max depth {depth_um:.6g} um; volume removed {vol:.6g} mm^3"]
+                    f"max depth {depth_um:.6g} um inside the clear aperture ({depth_all_um:.6g} um with "
+                    f"the run-out); volume removed {vol:.6g} mm^3"]
             from pointspro.core.correction.files import write_grid_csv
             from pointspro.core.maps import MapGrid
 
@@ -348,7 +463,7 @@ class CorrectionStep(Step):
         ctx.progress.check()
         if "radial" in outputs:
             ctx.progress.update(0.6, "radial program")
-            self._radial(cor, programmed, params, rep, arts, comments, radius, h)
+            self._radial(cor, programmed, params, rep, arts, comments, radius, h, axis)
         if "freeform" in outputs:
             ctx.progress.update(0.8, "corrected sag")
             self._freeform(cor, programmed, rep, arts, comments)
@@ -369,41 +484,84 @@ class CorrectionStep(Step):
         rep["seconds"] = time.perf_counter() - t0
         return StepResult(cloud.replace(), rep, arts)
 
-    def _radial(self, cor, programmed, params, rep, arts, comments, radius, h):
+    def _radial(self, cor, programmed, params, rep, arts, comments, radius, h, axis):
         from pointspro.core import correction as C
         from pointspro.core.correction.figures import radial_figure
         from pointspro.core.correction.files import write_radial_csv
         from pointspro.core.figures import png_artifact
+        from pointspro.core.metrics.pupil import is_flat
+        from pointspro.core.surfaces import EvenAsphere
 
-        axis = (0.0, 0.0)  # the surface's axis in the part frame
-        r, mean = C.azimuthal_mean(cor, axis)
+        flat = is_flat(programmed)
+        if flat and not isinstance(programmed, EvenAsphere):
+            programmed = EvenAsphere(0.0, 0.0, aperture=getattr(programmed, "aperture", None))
+        # A lathe turns about its spindle, the nominal's axis. A part off that axis (an off-axis zone
+        # of the parent, `centre` away from it) is turned there too: each ring about the axis crosses
+        # it on an arc, and what a radial program can correct at that radius is the mean of dz over
+        # that arc — computed so, over the radii the part covers, with no row where no arc lies on
+        # the part. A machinist can trust that (it is what the part says about each radius, and the
+        # lathe's symmetric errors are about the spindle); a value edge-clamped off the map, or a row
+        # at r = 0 with no data under it, he could not (a review: r = 0…12 mm for a part at 5…25 mm)
+        off = float(np.hypot(cor.center[0] - axis[0], cor.center[1] - axis[1]))
+        on_axis = off <= 1e-9 * h
+        r, mean, share = C.azimuthal_mean(cor, axis, return_share=True)
+        if r.size < 2:
+            raise StepError("output 'radial': the part covers fewer than two rings about the axis at "
+                            f"spacing {h:g} mm — use the freeform outputs (corrected_sag.csv)")
         rem = C.radial_remainder(cor, r, mean, axis)
+        if on_axis:  # an annulus's hole is continued like the run-out: weighted as it in the fit
+            ins = (r <= radius + 1e-9 * h) & (r >= cor.inner - 1e-9 * h)
+            fit_radius, norm = radius, cor.outer
+        else:  # every row is on the part; no run-out rows
+            ins = np.ones(r.size, bool)
+            fit_radius = norm = float(r[-1])
+        wr = np.maximum(r[ins], h / 4) * share[ins]
         rep["radial"] = {"non_symmetric_rms_um": C.rms(rem) * 1e3, "non_symmetric_pv_um": C.pv(rem) * 1e3,
                          "symmetric_rms_um": float(np.sqrt(np.average(
-                             (mean[r <= radius] - np.average(mean[r <= radius], weights=np.maximum(
-                                 r[r <= radius], h / 4))) ** 2, weights=np.maximum(r[r <= radius], h / 4))))
-                         * 1e3,
+                             (mean[ins] - np.average(mean[ins], weights=wr)) ** 2, weights=wr))) * 1e3,
                          "note": "the non-symmetric remainder needs a slow/fast tool servo "
-                                 "(freeform output) or polishing", "rings": int(r.size)}
+                                 "(freeform output) or polishing", "rings": int(r.size),
+                         "axis_mm": [float(axis[0]), float(axis[1])],
+                         "about": ("the clear aperture's centre (a flat has no axis: the faced part's "
+                                   "centre on the spindle)" if flat else "the nominal's axis (the spindle)"),
+                         "r_range_mm": [float(r[0]), float(r[-1])]}
+        if not on_axis:
+            rep["radial"].update(
+                off_axis_mm=off, arc_share_max=float(share.max()),
+                off_axis_note=f"the part (diameter {2 * radius:g} mm about ({cor.center[0]:g}, "
+                              f"{cor.center[1]:g}) mm) lies {off:.4g} mm off the axis: each dz(r) is the "
+                              "mean over the ring's arc on the part (the share of the ring on it: 0 at the "
+                              "part's inner and outer edge, where the ring touches it, up to "
+                              "arc_share_max; the fit weights each ring by it), rows only where an arc "
+                              "lies on the part, no run-out rows")
         try:
-            fit = C.refit_surface(programmed, r, mean, radius, h, norm_radius=cor.outer,
-                                  tol_mm=params.fit_tolerance_nm * 1e-6)
+            fit = C.refit_surface(programmed, r, mean, fit_radius, h, norm_radius=norm,
+                                  tol_mm=params.fit_tolerance_nm * 1e-6,
+                                  share=None if on_axis else share, inner=cor.inner if on_axis else 0.0)
         except DomainError as e:
             raise StepError(f"output 'radial': the corrected surface: {e}") from None
         surf = fit["surface"]
-        rcom = [f"PointsPro radial correction (turning): {SIGN}",
-                "dz(r) = azimuthal mean of dz about the surface's axis; r in mm", comments[1]]
+        if flat:
+            about = (f"dz(r) = azimuthal mean of dz about the clear aperture's centre ({axis[0]:g}, "
+                     f"{axis[1]:g}) mm (a flat has no axis: put that centre on the spindle); r in mm")
+        elif on_axis:
+            about = "dz(r) = azimuthal mean of dz about the surface's axis; r in mm"
+        else:
+            about = (f"off-axis part (diameter {2 * radius:g} mm about ({cor.center[0]:g}, {cor.center[1]:g}) "
+                     f"mm): dz(r) = mean of dz over the arc of the ring about the surface's axis (the "
+                     f"spindle) that lies on the part; r = {r[0]:g} ... {r[-1]:g} mm, rows only where an "
+                     "arc lies on the part")
+        rcom = [f"PointsPro radial correction (turning): {SIGN}", about, comments[1]]
         arts["correction_radial.csv"] = lambda p: write_radial_csv(p, r, mean, rcom)
         label = ""
         fitted = None
         if surf is not None:
-            sel = r <= cor.outer
+            sel = r <= norm + 1e-9 * h
             try:
                 fitted = surf.sag_r(r) + surf.piston - programmed.sag_r(r)
             except DomainError:
                 fitted = None
-            ins = r <= radius
-            w = np.maximum(r[ins], h / 4)
+            w = np.maximum(r[ins], h / 4) * share[ins]
             err = (fitted[ins] - mean[ins]) if fitted is not None else np.array([np.inf])
             rms_area = float(np.sqrt(np.average(err ** 2, weights=w))) if fitted is not None else np.inf
             rep["corrected_surface"] = {
@@ -425,10 +583,12 @@ class CorrectionStep(Step):
                 rep["warnings"].append(
                     f"corrected_surface.yaml matches nominal + radial correction to {rms_area * 1e6:.3g} nm "
                     f"RMS only (tolerance {params.fit_tolerance_nm:g} nm): program correction_radial.csv")
-            arts["corrected_surface.yaml"] = _surface_yaml(surf, rep["corrected_surface"], comments)
+            arts["corrected_surface.yaml"] = _surface_yaml(surf, rep["corrected_surface"], comments,
+                                                           about if not on_axis or flat else None)
         else:
             rep["warnings"].append(f"no corrected surface could be fitted: {fit['why']}")
-        arts["correction_radial.png"] = png_artifact(radial_figure, r, mean, radius, fitted, label)
+        edges = radius if on_axis else (float(r[0]), float(r[-1]))
+        arts["correction_radial.png"] = png_artifact(radial_figure, r, mean, edges, fitted, label)
 
     def _freeform(self, cor, programmed, rep, arts, comments):
         from pointspro.core.correction.files import write_grid_csv
@@ -463,26 +623,35 @@ class CorrectionStep(Step):
         return with_example_residual(cloud)
 
 
-def _surface_yaml(surface, info, comments) -> str:
+def _surface_yaml(surface, info, comments, about=None) -> str:
     from pointspro.core.correction import spec_of
     from pointspro.core.yamlio import dump_yaml
 
     head = ["PointsPro corrected nominal for a turning program: sag = programmed sag + radial dz",
             f"form: {info['type']} ({info['why']}); matches programmed + dz(r) to "
             f"{info['fit_rms_nm']:.3g} nm RMS over the clear aperture",
-            comments[0], comments[1]]
+            comments[0], comments[1], *([about] if about else [])]
     body = dump_yaml({"surface": spec_of(surface)}, sort_keys=False, default_flow_style=None)
     return "".join(f"# {h}\n" for h in head) + body
 
 
-def applied_aperture(cloud) -> float | None:
-    """The outer diameter (mm) of the last circular or annular `aperture` step in the cloud's
-    provenance that gave one: the clear aperture the recipe kept, which the correction must cover
-    (the surface's own aperture may be larger than the measured zone)."""
+def applied_aperture_step(cloud) -> dict | None:
+    """The last circular or annular `aperture` step in the cloud's provenance that gave a diameter:
+    {"diameter", "inner_diameter", "centre"} (mm) — the clear aperture the recipe kept, which the
+    correction must cover (the surface's own aperture may be larger than the measured zone); None
+    when the last aperture step was a polygon or took the surface's diameter, or there is none."""
     for entry in reversed(cloud.provenance):
         if entry.get("id") == "aperture":
             p = entry.get("params") or {}
             if p.get("shape", "circle") in ("circle", "annulus") and p.get("diameter"):
-                return float(p["diameter"])
+                inner = float(p.get("inner_diameter") or 0.0) if p.get("shape") == "annulus" else 0.0
+                return {"diameter": float(p["diameter"]), "inner_diameter": inner,
+                        "centre": (float(p.get("center_x") or 0.0), float(p.get("center_y") or 0.0))}
             return None
     return None
+
+
+def applied_aperture(cloud) -> float | None:
+    """The outer diameter (mm) of the last circular or annular `aperture` step (applied_aperture_step)."""
+    ap = applied_aperture_step(cloud)
+    return None if ap is None else ap["diameter"]
