@@ -43,7 +43,11 @@ def _check_piston_tilt_equals_numpy(cloud):
     assert rep["centre_mm"] == pytest.approx(list(c), rel=1e-12, abs=1e-12)
     assert rep["centre_from"].startswith("bounding-box centre")
     assert rep["norm_radius_mm"] == pytest.approx(np.sqrt(np.max((x - c[0]) ** 2 + (y - c[1]) ** 2)))
-    want = _plane_power_removed(x, y, z, c)
+    # an evenly sampled area that does not cover the Zernike disk (a rectangle): piston and tilt are
+    # its best-fit plane, fitted alone (core.metrics.sampling.plain_best_fits); over a covered disk
+    # the joint fit's, which numpy's plane-and-power fit gives
+    alone = rep["removal"].startswith("the removed terms fitted alone")
+    want = remove_piston_tilt(x, y, z) if alone else _plane_power_removed(x, y, z, c)
     got = res.cloud["residual"]
     # power keeps its own constant (Z4 = √3(2ρ² − 1)): equal up to a piston
     d = (got - got.mean()) - (want - want.mean())
@@ -65,18 +69,28 @@ def test_real_map_piston_tilt_removal_equals_numpy_about_the_measured_centre(nam
 
 
 def test_metropro_figures_as_numpy_computes_them():
-    """The issue's figures: plane-removed RMS 0.01333 µm; 36 terms minus piston/tilt/power 0.0082 µm
-    (it was 155.6 µm about the corner origin)."""
+    """The issue's figures: plane-removed RMS 0.01333 µm; 36 terms minus piston/tilt/power: the best-fit
+    sphere's 0.006784 µm (it was 155.6 µm about the corner origin)."""
     from pointspro.core.io import read_cloud
 
     cloud = read_cloud(REAL / "metropro-1.dat")
     plane = remove_piston_tilt(cloud.x, cloud.y, cloud.z)
     assert np.std(plane) * 1e3 == pytest.approx(0.01333, abs=5e-5)
     res = _run(ZernikeStep, cloud, terms=36, remove=["piston", "tilt", "power"])
-    assert res.report["rms_after_um"] == pytest.approx(0.0082, abs=2e-4)
-    # about the corner (the old behaviour) the removal explodes: an error naming the fix, not "ok"
+    # the rectangle's best-fit sphere (piston, tilt, power fitted alone; 0.0082 µm with the joint
+    # fit's coefficients before 2026-11-27): numpy's least squares on [1, x, y, r²]
+    x, y, z = cloud.x, cloud.y, cloud.z
+    A = np.column_stack([np.ones_like(x), x, y, x * x + y * y])
+    sphere = z - A @ np.linalg.lstsq(A, z, rcond=None)[0]
+    assert res.report["rms_after_um"] == pytest.approx(np.std(sphere) * 1e3, rel=1e-9)
+    assert res.report["rms_after_um"] == pytest.approx(0.006784, abs=2e-6)
+    # a best-fit sphere does not depend on the pupil's centre: about the corner (once 155.6 µm) too
+    corner = _run(ZernikeStep, cloud, terms=36, remove=["piston", "tilt", "power"], centre=(0.0, 0.0))
+    assert corner.report["rms_after_um"] == pytest.approx(res.report["rms_after_um"], rel=1e-9)
+    # the joint fit's terms about the corner still trade: removing a higher one is refused
     with pytest.raises(StepError, match=r"raises the RMS .* fit fewer terms, or check the pupil"):
-        _run(ZernikeStep, cloud, terms=36, remove=["piston", "tilt", "power"], centre=(0.0, 0.0))
+        _run(ZernikeStep, cloud, terms=36, remove=["piston", "tilt", "power", "astigmatism", "coma"],
+             centre=(0.0, 0.0))
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -44,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import PointsProError
+from ..metrics.sampling import plain_best_fits
 
 #: the ISO quantities (key → how the notation names it)
 ISO_KEYS = {"sag_um": "sagitta deviation A", "irr_um": "irregularity B",
@@ -105,7 +106,7 @@ def iso_quantities(x, y, w, center, keys=None) -> dict[str, float]:
     pt = [idx[(0, 0)], idx[(1, 1)], idx[(1, -1)]]
     ip = idx[(2, 0)]
     rs = [idx[p] for p in pairs if p[1] == 0 and p[0] >= 4]
-    if uniform_sampling(x, y):
+    if plain_best_fits(x, y, (cx, cy), R):  # core.metrics.sampling
         # every point stands for the same area: the area-weighted best-fit plane and sphere of ISO
         # 14999-4 are the plain least-squares fits over the points, whatever the test area's shape.
         # The joint fit's Z1–Z4 equal them only over a full disk: on a rectangular map (the disk about
@@ -154,31 +155,6 @@ def fit_terms(count: int) -> list[tuple[int, int]]:
 
     pairs = zk.terms(min(count, 36), "fringe")
     return pairs + [(12, 0)] if count >= 37 else pairs
-
-
-#: cells per side of the grid uniform_sampling counts points in, and the largest relative spread of
-#: the counts of interior cells that is still uniform (a pixel grid: aliasing of the columns between
-#: cells, ≤ 3 %; Poisson scatter of random points with ≥ 100 a cell: ~10 %)
-_UNIFORM_CELLS = 16
-_UNIFORM_SPREAD = 0.12
-
-
-def uniform_sampling(x, y) -> bool:
-    """Whether the points sample their area evenly (a pixel map, a raster): the counts in the cells of
-    a 16 × 16 grid over their box, taken where a cell and its four neighbours all hold points (the
-    area's inside, not its edge), spread by less than 12 %. A star or a spiral of even angular steps
-    crowds its centre (counts 3–50× the rim's): False, and the joint fit stands for the area weights."""
-    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-    g = int(min(_UNIFORM_CELLS, np.sqrt(x.size / 100.0)))
-    if g < 4 or not (np.ptp(x) > 0 and np.ptp(y) > 0):
-        return False
-    ix = np.minimum(((x - x.min()) / np.ptp(x) * g).astype(np.int64), g - 1)
-    iy = np.minimum(((y - y.min()) / np.ptp(y) * g).astype(np.int64), g - 1)
-    counts = np.bincount(iy * g + ix, minlength=g * g).reshape(g, g)
-    full = counts > 0
-    inner = full[1:-1, 1:-1] & full[:-2, 1:-1] & full[2:, 1:-1] & full[1:-1, :-2] & full[1:-1, 2:]
-    c = counts[1:-1, 1:-1][inner].astype(np.float64)
-    return c.size >= 9 and float(np.std(c) / np.mean(c)) < _UNIFORM_SPREAD
 
 
 def _solve(A, w):

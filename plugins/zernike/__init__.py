@@ -21,6 +21,7 @@ from pointspro.core.errors import StepError
 from pointspro.core.metrics import zernike as zk
 from pointspro.core.metrics.form import PVR_TERMS
 from pointspro.core.metrics.pupil import pupil_of
+from pointspro.core.metrics.sampling import plain_best_fits
 from pointspro.core.params.pupil import PupilCentreParams
 from pointspro.core.step import Context, Step, StepResult, param
 
@@ -47,6 +48,10 @@ class ZernikeParams(PupilCentreParams):
                 raise ValueError(f"unknown term name {t!r}; use one of {', '.join(zk.TERM_NAMES)} "
                                  "or an index")
         return v
+
+
+#: the terms an evenly sampled area's best-fit plane and sphere are made of (piston, tilt, power)
+_BEST_FIT_TERMS = frozenset({(0, 0), (1, 1), (1, -1), (2, 0)})
 
 
 def removed_pairs(remove, ordering, pairs, named_strictly: bool = True) -> list[tuple[int, int]]:
@@ -129,8 +134,20 @@ class ZernikeStep(Step):
         ctx.progress.check()
         gone = removed_pairs(params.remove, params.ordering, pairs, "remove" in params.model_fields_set)
         cols = [pairs.index(p) for p in gone]
+        removed_coef, how = coef[cols], "the joint fit's coefficients of the removed terms"
+        if gone and set(gone) <= _BEST_FIT_TERMS and plain_best_fits(x, y, c, R):
+            # piston, tilt (and power) of an evenly sampled area that is not the disk — a rectangular
+            # map — are taken away as its best-fit plane (sphere): those terms fitted alone, the
+            # area-weighted least squares of ISO 14999-4 (core.metrics.sampling.plain_best_fits). The joint fit's coefficients equal
+            # them only over a full disk: on a rectangular map (its circumscribed disk has corners
+            # without points) the higher terms trade with them, and removing them raised the RMS of
+            # two real maps of six (35.2 → 67.4 nm; refused) and left 13.55 nm on MetroPro's for the
+            # plane's 13.33 nm (a review). The coefficients reported stay the joint fit's.
+            removed_coef = zk.fit(x, y, v, R, gone, params.normalization, c).coef
+            how = ("the removed terms fitted alone (best-fit plane or sphere of the evenly sampled area, "
+                   "which is not the Zernike disk)")
         # only the removed terms are evaluated again (in chunks: never the N × p design matrix)
-        after = zk.evaluate(x, y, coef[cols], R, gone, params.normalization, c)
+        after = zk.evaluate(x, y, removed_coef, R, gone, params.normalization, c)
         np.subtract(v, after, out=after)  # v − removed terms, in place
         reuse = {}
         if pvr_reusable:  # the kept terms' fit = after − resid; PV in chunks, no full-length temporary
@@ -158,7 +175,7 @@ class ZernikeStep(Step):
             "ordering": params.ordering, "normalization": params.normalization, "norm_radius": R,
             **pupil.report(),
             "channel": channel, "terms": len(pairs),
-            "removed_terms": [zk.index_of(n, m, params.ordering) for n, m in gone],
+            "removed_terms": [zk.index_of(n, m, params.ordering) for n, m in gone], "removal": how,
             "coefficients": rows, "condition_number": cond,
             "fit_residual_rms_um": fit_rms * 1e3,
             "rms_before_um": rms_before * 1e3, "rms_after_um": rms_after * 1e3,
