@@ -284,6 +284,7 @@ class MainWindow(QtWidgets.QMainWindow):
             res = session.compute(upto, progress=progress)
             res.summary()  # the metrics fit a map: in the worker, not in the GUI thread
             return res
+        self._run_recipe = session.recipe  # what the run computes (Recipe edits make new objects)
         self.runner.start(job)
 
     def cancel_run(self):
@@ -304,6 +305,14 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _ran(self, res):
         self._run_ended()
+        if self.session.recipe is not getattr(self, "_run_recipe", self.session.recipe):
+            # the recipe changed while the steps ran (an edit, Undo, Restore all): the result is of
+            # the recipe as it was, and shown it would undo the change on screen (a review: points
+            # restored during a run vanished again when it finished)
+            self.pipeline.bar.setFormat("discarded")
+            self.log("run: the recipe changed while it ran; its result is discarded — Run all again")
+            self.report.set_stale("the recipe changed during the last run")
+            return
         self.session.accept(res)  # back in the GUI thread: the model changes and the views follow
         self.last_report = res
         self.report.set_result(res)

@@ -503,3 +503,20 @@ def test_the_report_says_when_it_no_longer_matches_the_recipe(qtbot):
     win.pipeline.run_all.click()
     qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
     assert win.pipeline.bar.format() == "failed" and "a run failed" in win.report.stale.text()
+
+
+def test_a_run_whose_recipe_changed_meanwhile_is_not_shown(qtbot):
+    """A review: Restore all (or an Undo, or an edit) during a run was undone on screen when the run,
+    computed with the recipe as it was, replaced the view. Its result is discarded and said so."""
+    win = _example_window(qtbot, steps=3)
+    before = win.session.shown
+    win.pipeline.run_all.click()
+    assert win.runner.busy
+    win.session.add_step("aperture", {"diameter": 1290})  # an edit while the steps run
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
+    assert win.session.shown is before and "residual" not in win.session.shown.channels
+    assert "its result is discarded" in win.log_widget.toPlainText()
+    assert win.pipeline.bar.format() == "discarded"
+    win.pipeline.run_all.click()
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
+    assert "residual" in win.session.shown.channels and win.report.stale.isHidden()
