@@ -187,3 +187,20 @@ def test_reference_in_another_unit_or_mirrored_is_refused(tmp_path, scale, flip,
     # the true reference still calibrates (its scales differ from 1 by parts per 10⁵)
     FiducialsStep().run(cloud, FiducialsStep.Params(reference="reference.csv", monte_carlo_runs=0, Q=2),
                         Context(base_dir=tmp_path))
+
+
+def test_a_nearly_flat_layout_is_judged_by_its_in_plane_scales():
+    """Balls on one plate (heights within 5 µm) determine the transform's out-of-plane scale poorly:
+    a review's layout read scales 0.84…1.18 and was refused as a unit error. Only the in-plane scales
+    are judged there; a reference in metres is still caught."""
+    from pointspro.core.calibration.fiducials import frame_check
+
+    rng = np.random.default_rng(4)
+    ref = np.column_stack([rng.uniform(-100, 100, 12), rng.uniform(-50, 50, 12), rng.uniform(0, 5e-3, 12)])
+    meas = machine(ref) + rng.normal(0, 1e-3, ref.shape)
+    fit = fit_affine(ref, meas, 1e-3, 0.2e-3)
+    s = np.linalg.svd(fit.D, compute_uv=False)
+    assert s[0] > 1.1 or s[-1] < 0.9  # the whole D: the flat direction's scale is noise
+    assert frame_check(fit.D) is not None and frame_check(fit.D, ref) is None
+    big = fit_affine(ref * 1e-3, meas, 1e-3, 0.2e-3)
+    assert "metres" in frame_check(big.D, ref * 1e-3)

@@ -59,13 +59,22 @@ _UNIT_RATIOS = {1000.0: "the measured centres are in mm and the reference in met
                 25.4: "the reference is in inches", 1 / 25.4: "the measured centres are in inches"}
 
 
-def frame_check(D) -> str | None:
+def frame_check(D, ref=None) -> str | None:
     """Why the fitted D (X_c = D X_r + A) cannot be a machine frame's small distortion, or None.
 
     Its singular values are the scales along the principal directions: a reference in metres against
     centres in mm fits exactly with D ≈ 1000·R (a review: such a reference calibrated silently), and a
-    negative determinant is a mirror — an axis whose sign differs between the two files."""
-    s = np.linalg.svd(np.asarray(D, dtype=np.float64), compute_uv=False)
+    negative determinant is a mirror — an axis whose sign differs between the two files. ``ref``: the
+    reference layout; when it is nearly coplanar (layout_check's condition number > 10³) the scale out
+    of its plane is not determined (balls on one plate, 5 µm apart in height under 1 µm of noise read
+    0.84…1.18: a review), so only the scales within the plane are judged, and no mirror."""
+    D = np.asarray(D, dtype=np.float64)
+    if ref is not None:
+        ref = np.asarray(ref, dtype=np.float64)
+        _, sv, vt = np.linalg.svd(ref - ref.mean(axis=0), full_matrices=False)
+        if sv[-1] <= 0 or sv[0] / sv[-1] > 1e3:
+            D = D @ vt[:2].T  # D on the layout's plane: its two in-plane scales
+    s = np.linalg.svd(D, compute_uv=False)
     if s[-1] < 1 - SCALE_TOLERANCE or s[0] > 1 + SCALE_TOLERANCE:
         mean = float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))))
         hint = next((f" — perhaps {why}" for r, why in _UNIT_RATIOS.items() if abs(np.log(mean / r)) < 0.05),
@@ -73,7 +82,7 @@ def frame_check(D) -> str | None:
         return (f"the measured centres are the reference scaled by {s[-1]:.6g}…{s[0]:.6g}, where a machine "
                 f"frame's scale differs from 1 by less than {SCALE_TOLERANCE * 100:g} %{hint}; give both in mm, "
                 "for the same balls")
-    if np.linalg.det(D) < 0:
+    if D.shape == (3, 3) and np.linalg.det(D) < 0:
         return ("the measured centres are a mirror image of the reference (the transform's determinant "
                 "is negative): an axis's sign differs between the two files")
     return None

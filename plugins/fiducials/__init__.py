@@ -155,7 +155,7 @@ class FiducialsStep(Step):
         sr = params.sigma_reference * 1e-3
         ctx.progress.update(0.2, "transform")
         fit = fit_affine(ref, meas, sm, sr)
-        why = frame_check(fit.D)
+        why = frame_check(fit.D, ref)
         if why:
             raise InputError(f"{p}: {why}")
         warnings += fit.warnings
