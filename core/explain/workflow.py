@@ -124,7 +124,10 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
                    "residual_rms_over_noise": res["rms"] / max(sigma, 1e-300),
                    # effects the white-noise tests named but a test under the residual's own AR
                    # noise does not support (core/explain/select.py _correlated_noise_gate)
-                   "dropped_under_correlated_noise": res["dropped_under_correlated_noise"]},
+                   "dropped_under_correlated_noise": res["dropped_under_correlated_noise"],
+                   # chosen on the way, then no longer supported beside the effects found after them
+                   # (select.py _backward)
+                   "dropped_unsupported": res.get("dropped_unsupported", [])},
         "not_observable_on_this_scan": res["unobservable"], "points": int(meas.n), "match": match,
         "measured": str(measured), "model": str(model_path) if model_path else None,
         "simulated": str(simulated) if simulated else None, "warnings": warnings,
