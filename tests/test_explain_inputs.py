@@ -178,3 +178,18 @@ def test_linear_interpolation_finds_every_triangle_scipy_finds():
     assert np.array_equal(np.isnan(out), np.isnan(ref))
     ok = np.isfinite(ref)
     assert np.max(np.abs(out[ok] - ref[ok])) < 1e-12
+
+
+def test_a_wide_bump_is_located_apart_from_the_ring_its_piston_leaves():
+    """A review: a 100 nm bump of σ 4 mm at (0, 10) on a Ø40 part, its piston removed, came out as one
+    region over the whole part centred at (0, 2.9) with a mean of 0.006 nm: cells were grouped by
+    |mean|, so the bump and the negative ring around it merged. Raised and sunk cells are apart now."""
+    from pointspro.core.explain.workflow import regions
+
+    rng = np.random.default_rng(3)
+    r, t = 20 * np.sqrt(rng.random(40_000)), rng.uniform(0, 2 * np.pi, 40_000)
+    x, y = r * np.cos(t), r * np.sin(t)
+    g = 1e-4 * np.exp(-((x - 0) ** 2 + (y - 10) ** 2) / (2 * 4.0**2)) + rng.normal(0, 2e-6, x.size)
+    regs = regions(x, y, g - g.mean(), 2e-6)
+    top = regs[0]
+    assert top["mean_um"] > 0.02 and np.hypot(top["x"], top["y"] - 10) < 1.0 and top["radius"] < 10
