@@ -374,6 +374,7 @@ def test_form_error_png_of_a_grid_has_no_empty_bins():
     X, Y = np.meshgrid(g, g)
     r = 1e-5 * np.sin(X)
     assert default_bins(X.size) == 307 and default_bins(X.size, np.ptp(g), [0.04, 0.04]) == 254
+    assert default_bins(300) == 20 and default_bins(20) == 16  # a small cloud: not 60 × 60 mostly empty
     img = scattered_map(X.ravel(), Y.ravel(), r.ravel(), pixel_mm=[0.04, 0.04]).axes[0].images[0].get_array()
     assert not np.isnan(np.asarray(img, dtype=float)).any()
     img = scattered_map(X.ravel(), Y.ravel(), r.ravel()).axes[0].images[0].get_array()
