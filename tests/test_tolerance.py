@@ -596,3 +596,17 @@ def test_a_maps_figures_do_not_depend_on_its_pixel_count():
     assert on_lattice(x, y) and on_lattice(x[hole], y[hole]) and uniform_sampling(x[hole], y[hole])
     c, s = np.cos(0.3), np.sin(0.3)
     assert not on_lattice(c * x - s * y, s * x + c * y)  # a raster turned by a pose: scattered
+
+
+def test_a_star_or_a_spiral_is_no_grid():
+    """The grid test once took a star scan for a pixel grid: its coordinates, rounded to 10⁻¹² of the
+    span, differ by whole multiples of that quantum (the coverage test of the uncertainty caught it)."""
+    from pointspro.core.metrics.sampling import on_lattice, uniform_sampling
+
+    r = np.tile(np.linspace(0, 10, 60), 36)
+    t = np.repeat(np.arange(36) * np.pi / 18, 60)
+    assert not on_lattice(r * np.cos(t), r * np.sin(t)) and not uniform_sampling(r * np.cos(t), r * np.sin(t))
+    x, y = layout("raster", 0)
+    assert on_lattice(x, y)  # the raster layout: a grid clipped to the disk
+    keep = np.random.default_rng(1).random(x.size) > 0.3  # and with dropouts
+    assert on_lattice(x[keep], y[keep])

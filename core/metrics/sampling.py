@@ -39,7 +39,10 @@ def _steps_whole(xs, ys, x, y) -> bool:
             continue  # a sample along one row: its y says nothing yet
         d = np.diff(u)
         k = d / d.min()
-        if np.max(np.abs(k - np.round(k))) > 1e-6:
+        # a grid's nodes, not a rounding quantum: the step spans the values in at most 4× as many
+        # steps as there are distinct values (a star's coordinates differ by anything, down to the
+        # 10⁻¹² quantum, of which every difference is a whole multiple)
+        if (u[-1] - u[0]) / d.min() > 4 * u.size or np.max(np.abs(k - np.round(k))) > 1e-6:
             return False
     return True
 
