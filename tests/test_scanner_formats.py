@@ -247,3 +247,13 @@ def test_a_mesh_given_as_measurement_is_named(tmp_path, name, text, what):
     with pytest.raises(InputError, match=rf"{name}: {what} \(a nominal for `register` or "
                                          r"`surface: \{type: mesh\}`\), not a measurement file"):
         read_cloud(tmp_path / name)
+
+
+def test_las_in_longitude_and_latitude_is_refused(tmp_path):
+    """A geographic CRS (degrees): x, y were taken in the vertical unit or metres (0.0001° read as
+    0.1 mm). No length unit holds: refused, naming the CRS and what to do."""
+    wkt = ('GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563]],'
+           'PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]]')
+    _las_wkt(tmp_path / "g.las", wkt)
+    with pytest.raises(InputError, match=r"g\.las: x, y are geographic coordinates .*'WGS 84'.*reproject"):
+        read_cloud(tmp_path / "g.las")

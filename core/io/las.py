@@ -62,7 +62,10 @@ def read_las(path: Path):
     n = len(las.points)
     if n == 0:
         raise InputError(f"{path}: a LAS/LAZ file with no points")
-    (hname, hm, hnote), (vname, vm, vnote), stated = _units(las.header)
+    try:
+        (hname, hm, hnote), (vname, vm, vnote), stated = _units(las.header)
+    except InputError as e:  # a geographic CRS (_wkt_units)
+        raise InputError(f"{path}: {e}") from None
     xyz = np.column_stack([np.asarray(las.x, dtype=np.float64) * (hm * 1e3),
                            np.asarray(las.y, dtype=np.float64) * (hm * 1e3),
                            np.asarray(las.z, dtype=np.float64) * (vm * 1e3)])
@@ -135,6 +138,8 @@ _VERTICAL = {"VERT_CS", "VERTCS", "VERTCRS", "VERTICALCRS"}
 _HORIZONTAL = {"PROJCS", "PROJCRS", "PROJECTEDCRS", "GEOCCS", "GEODCRS", "GEODETICCRS", "LOCAL_CS",
                "ENGCRS", "ENGINEERINGCRS", "GEOGCS", "GEOGCRS", "GEOGRAPHICCRS"}
 _UNIT_KEYS = {"UNIT", "LENGTHUNIT"}
+#: a geographic CRS: its horizontal axes are angles
+_GEOGRAPHIC = {"GEOGCS", "GEOGCRS", "GEOGRAPHICCRS"}
 _WKT_TOKEN = re.compile(r'\s*(?:"((?:[^"]|"")*)"|([A-Za-z_][A-Za-z0-9_]*)\s*[\[(]|([\])])|(,)|'
                         r'([^\s,\[\]()"]+))')
 #: linear units by name (lower case, "_" as " ") → metres: a factor of exactly 1 written beside a
@@ -233,6 +238,13 @@ def _wkt_units(wkt: str) -> tuple[tuple[str, float, str] | None, tuple[str, floa
     vert = _find(tree, _VERTICAL)
     vertical = _crs_unit(vert) if vert is not None else None
     horiz = _find(tree, _HORIZONTAL, skip=_VERTICAL)
+    if horiz is not None and horiz[0] in _GEOGRAPHIC:
+        # longitude and latitude in degrees: no length unit x, y could be read in (they were taken
+        # as the vertical unit's or metres: 0.0001° read as 0.1 mm)
+        raise InputError(f"x, y are geographic coordinates (longitude, latitude in degrees; CRS "
+                         f"{horiz[1] if len(horiz) > 1 and isinstance(horiz[1], str) else horiz[0]!r}): "
+                         "PointsPro measures in lengths — reproject the cloud to a projected or local "
+                         "CRS in metres or feet")
     if horiz is not None:
         return _crs_unit(horiz), vertical
     # no CRS keyword known here: the last linear unit outside the vertical CRS, as before
