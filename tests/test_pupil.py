@@ -248,3 +248,23 @@ def test_points_microns_beyond_the_normalisation_radius_raise_no_warning():
     assert not any("outside the normalisation radius" in w for w in near.report["warnings"])
     far = step.run(cloud, step.Params.model_validate({"terms": 4, "norm_radius": 29.0, "centre": [0, 0]}), Context())
     assert any("outside the normalisation radius" in w for w in far.report["warnings"])
+
+
+def test_a_rectangular_maps_tilt_alone_is_taken_from_its_best_fit_plane():
+    """Removing tilt but not piston on a rectangular map with dropouts: the tilt of the best-fit plane
+    (piston fitted beside it), not a tilt fitted without piston, which takes part of the mean where the
+    points are not centred on the pupil."""
+    rng = np.random.default_rng(2)
+    X, Y = np.meshgrid(np.arange(120) * 0.1, np.arange(80) * 0.1)
+    x, y = X.ravel(), Y.ravel()
+    keep = (x > 3) | (y > 4)  # a missing corner: the points' mean is off the pupil centre
+    x, y = x[keep], y[keep]
+    z = 5e-4 + 2e-5 * x - 1e-5 * y + 3e-6 * np.cos(x) + rng.normal(0, 1e-7, x.size)
+    res = _run(ZernikeStep, PointCloud.from_xyz(x, y, z), terms=36, remove=["tilt"])
+    assert res.report["removal"].startswith("the removed terms fitted alone")
+    A = np.column_stack([np.ones_like(x), x, y])
+    b = np.linalg.lstsq(A, z, rcond=None)[0]
+    want = z - A[:, 1:] @ b[1:]  # the plane's tilt away, its piston kept (about the pupil's centre:
+    got = res.cloud["residual"]  # the same up to a constant)
+    d = (got - got.mean()) - (want - want.mean())
+    assert np.max(np.abs(d)) < 1e-12

@@ -143,7 +143,12 @@ class ZernikeStep(Step):
             # without points) the higher terms trade with them, and removing them raised the RMS of
             # two real maps of six (35.2 → 67.4 nm; refused) and left 13.55 nm on MetroPro's for the
             # plane's 13.33 nm (a review). The coefficients reported stay the joint fit's.
-            removed_coef = zk.fit(x, y, v, R, gone, params.normalization, c).coef
+            # the best fit is of the whole plane (sphere) — piston and both tilts, and power when it
+            # goes — even where only some of them are removed: tilt alone, fitted without piston,
+            # would take part of the mean wherever the points are not centred on the pupil
+            block = [(0, 0), (1, 1), (1, -1)] + ([(2, 0)] if (2, 0) in gone else [])
+            fitted = zk.fit(x, y, v, R, block, params.normalization, c).coef
+            removed_coef = np.array([fitted[block.index(p)] for p in gone])
             how = ("the removed terms fitted alone (best-fit plane or sphere of the evenly sampled area, "
                    "which is not the Zernike disk)")
         # only the removed terms are evaluated again (in chunks: never the N × p design matrix)
