@@ -140,33 +140,23 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     return report
 
 
-#: the units a file may state for the scan's clock (t, to seconds) and spindle angle (c, to degrees)
-_TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "min": 60.0, "h": 3600.0}
-_ANGLE_UNITS = {"deg": 1.0, "°": 1.0, "degree": 1.0, "degrees": 1.0, "rad": 180.0 / np.pi,
-                "mrad": 0.18 / np.pi, "gon": 0.9, "grad": 0.9}
-
-
 def clock_of(cloud, path) -> tuple[np.ndarray | None, np.ndarray | None]:
     """(t in s, c in degrees) of a cloud, None where it has no such channel. A unit its header
-    states (``t [ms]``, ``c [rad]``: core.io.text keeps it in meta["channel_units"]) is converted; a
-    column without one is read as s and degrees (docs/formats.md); an unknown unit is refused naming
-    the file and the column. The numbers were taken as s and degrees whatever the header said: a
-    23.3 Hz vibration read 0.0233 Hz from ``t [ms]`` (issue 16's review)."""
+    states (``t [ms]``, ``c [rad]``: core.io.text keeps it in meta["channel_units"]) is converted by
+    core.units.read_in, as the kinematic and dynamic steps convert theirs; a column without one is
+    read as s and degrees (docs/formats.md); an unknown unit is refused naming the file and the
+    column. The numbers were taken as s and degrees whatever the header said: a 23.3 Hz vibration
+    read 0.0233 Hz from ``t [ms]`` (issue 16's review)."""
+    from ..units import read_in
+
     stated = cloud.meta.get("channel_units") or {}
     out = []
-    for ch, table, what in (("t", _TIME_UNITS, "seconds"), ("c", _ANGLE_UNITS, "degrees")):
+    for ch, unit in (("t", "s"), ("c", "deg")):
         if ch not in cloud.channels:
             out.append(None)
             continue
-        v = np.asarray(cloud[ch], dtype=np.float64)
-        unit = stated.get(ch) if isinstance(stated, dict) else None
-        if unit is None or table.get(unit, table.get(str(unit).lower())) == 1.0:
-            out.append(v)
-        elif str(unit).lower() in table or unit in table:
-            out.append(v * table.get(unit, table.get(str(unit).lower())))
-        else:
-            raise InputError(f"{path}: column '{ch} [{unit}]': explain reads the {what[:-1]} in {what}; "
-                             f"'{unit}' is not a unit it knows ({', '.join(table)})")
+        given = stated.get(ch) if isinstance(stated, dict) else None
+        out.append(read_in(cloud[ch], given, unit, str(path), ch, "explain"))
     return out[0], out[1]
 
 
