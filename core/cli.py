@@ -869,6 +869,13 @@ def console() -> None:  # pragma: no cover - the console-script wrapper
             stream.reconfigure(errors="replace")
         except (AttributeError, ValueError):  # not a text stream of io's
             pass
+    # a crash in a C library (a segfault) prints the Python stack of every thread on stderr instead
+    # of ending silently with −11: one CI run of a SIGTERM'd two-worker batch ended so, never seen
+    # again in 14 runs; the stack is what the next occurrence must show (Python exceptions are
+    # unaffected: they stay one line without --debug)
+    import faulthandler
+
+    faulthandler.enable()
     code = main()
     argv = sys.argv[1:]
     if "--batch" in argv and not any(a.startswith("--scheduler") for a in argv):

@@ -13,8 +13,17 @@ from pointspro.core.surfaces import EvenAsphere
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 # the window's tests: errors go to the log, not to modal dialogs; autosave into a scratch folder
 os.environ.setdefault("POINTSPRO_NO_DIALOGS", "1")
+import atexit as _atexit  # noqa: E402
+import shutil as _shutil  # noqa: E402
 import tempfile as _tempfile  # noqa: E402
 
+# one scratch folder for the whole run, removed at its end: the steps' example parameters (fiducials,
+# volumetric, kinematic, dynamic calibrations) and the subprocesses' temporary files went to the
+# system's temporary folder and stayed there (~200 folders a run of the suite)
+_SCRATCH = _tempfile.mkdtemp(prefix="pointspro-tests-")
+_tempfile.tempdir = _SCRATCH
+os.environ["TMPDIR"] = _SCRATCH
+_atexit.register(_shutil.rmtree, _SCRATCH, ignore_errors=True)
 os.environ.setdefault("POINTSPRO_AUTOSAVE_DIR", _tempfile.mkdtemp(prefix="pointspro-autosave-"))
 os.environ.setdefault("POINTSPRO_SETTINGS", os.path.join(os.environ["POINTSPRO_AUTOSAVE_DIR"], "settings.ini"))
 
