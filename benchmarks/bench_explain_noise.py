@@ -48,12 +48,18 @@ def noise(n: int, kind: str, rng: np.random.Generator) -> np.ndarray:
         return lfilter([1.0], [1.0, -rho], w)
     if kind == "ar2":
         e = lfilter([1.0], [1.0, -1.4, 0.5], rng.normal(0.0, 1.0, n + 500))[500:]
-    else:  # flicker: power ∝ 1/f (or 1/f^1.5)
+    else:  # flicker: power ∝ 1/f (or 1/f^1.5), a window of n out of a series 8 times longer — not
+        # periodic over the scan, as an instrument's drift is not (a spectrum shaped over n samples
+        # alone makes the series wrap around, which a frequency-domain noise model fits exactly)
         slope = 1.0 if kind == "flicker" else 1.5
-        spec = np.fft.rfft(rng.normal(0.0, 1.0, n))
+        m = 8 * n
+        spec = np.fft.rfft(rng.normal(0.0, 1.0, m))
         f = np.arange(spec.size, dtype=np.float64)
         f[0] = 1.0
-        e = np.fft.irfft(spec / f ** (slope / 2), n)
+        long = np.fft.irfft(spec / f ** (slope / 2), m)
+        start = int(rng.integers(0, m - n))
+        e = long[start: start + n]
+        e = e - e.mean()
     return e * NOISE / np.std(e)
 
 
