@@ -20,6 +20,62 @@ from . import display
 
 MODES = ("select rectangle", "select lasso", "profile cut")
 
+#: the figure's margins (fractions of the canvas) where it has room for its labels
+MARGINS = {"left": 0.15, "right": 0.8, "bottom": 0.1, "top": 0.95}
+_PAD_PX = 3  # pixels kept between a label and the canvas' edge
+
+
+def _labels_engine():
+    """A matplotlib layout engine (run at each full draw, before anything is drawn — so the blitting
+    background holds the laid-out figure) that puts the subplots at ``MARGINS`` and widens a margin where
+    the axes' tick labels, axis labels or titles would leave the canvas. In a narrow map dock (320 px
+    when the autosave banner's one line of text held the centre of the window 808 px wide) the fixed
+    15 % left of the map cut "y (mm)" off, and the colour bar's unit was cut off on the right."""
+    from matplotlib.layout_engine import LayoutEngine
+
+    class _KeepLabels(LayoutEngine):
+        _adjust_compatible = True
+        _colorbar_gridspec = False
+
+        _last = (None, MARGINS)  # (what the labels' extents depend on, the margins found for it)
+
+        def execute(self, fig):
+            w, h = fig.bbox.width, fig.bbox.height
+            # measuring costs ~40 ms a draw: not again while the size, limits and labels are the same
+            key = (w, h, tuple((a.get_xlim(), a.get_ylim(), a.get_xlabel(), a.get_ylabel(), a.get_title(),
+                                a.get_visible(), a.xaxis.get_major_formatter(), a.yaxis.get_major_formatter())
+                               for a in fig.axes))
+            if key == self._last[0]:
+                fig.subplots_adjust(**self._last[1])
+                return
+            self._last = (None, MARGINS)
+            renderer = fig._get_renderer()
+            m = dict(MARGINS)
+            fig.subplots_adjust(**m)
+            for _ in range(4):  # the map keeps its aspect: moving its slot's edge may move it less
+                boxes = [a.get_tightbbox(renderer, bbox_extra_artists=[]) for a in fig.axes if a.get_visible()]
+                boxes = [b for b in boxes if b is not None and np.all(np.isfinite(b.extents))]
+                if not boxes or w <= 0 or h <= 0:
+                    break
+                x0, x1 = min(b.x0 for b in boxes), max(b.x1 for b in boxes)
+                y0, y1 = min(b.y0 for b in boxes), max(b.y1 for b in boxes)
+                new = dict(m)
+                if x0 < _PAD_PX:
+                    new["left"] += (_PAD_PX - x0) / w
+                if x1 > w - _PAD_PX:
+                    new["right"] -= (x1 - w + _PAD_PX) / w
+                if y0 < _PAD_PX:
+                    new["bottom"] += (_PAD_PX - y0) / h
+                if y1 > h - _PAD_PX:
+                    new["top"] -= (y1 - h + _PAD_PX) / h
+                if new == m or new["right"] - new["left"] < 0.2 or new["top"] - new["bottom"] < 0.2:
+                    break  # all inside, or a canvas too small to hold them: as far as it goes
+                m = new
+                fig.subplots_adjust(**m)
+            self._last = (key, m)
+
+    return _KeepLabels()
+
 
 class MapView(QtWidgets.QWidget):
     """``selected(mask)`` is emitted with a boolean mask over the shown cloud."""
@@ -45,8 +101,9 @@ class MapView(QtWidgets.QWidget):
         lay.addLayout(tools)
         self.figure = Figure(figsize=(5.2, 6.0), dpi=90)
         gs = self.figure.add_gridspec(2, 2, height_ratios=(3.2, 1), width_ratios=(1, 0.04),
-                                      left=0.15, right=0.8, bottom=0.1, top=0.95, hspace=0.35,
-                                      wspace=0.05)
+                                      hspace=0.35, wspace=0.05)
+        self.figure.subplots_adjust(**MARGINS)  # the grid's margins: the figure's
+        self.figure.set_layout_engine(_labels_engine())  # widened where the labels need it
         self.ax = self.figure.add_subplot(gs[0, 0])
         self.cax = self.figure.add_subplot(gs[0, 1])
         self.pax = self.figure.add_subplot(gs[1, :])

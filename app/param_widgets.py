@@ -1,7 +1,11 @@
 """The widgets of a step's parameter form, one per ``core.forms.FormField`` (its ``editor``).
 
 - float: a spin box with the unit as suffix that shows the value's shortest exact text (repr:
-  0.00033333333, 7e-13, 1290) and reads scientific notation. A spin box rather than a line edit with
+  0.00033333333, 7e-13, 1290) and reads scientific notation. A length (a field in mm, µm or nm) is
+  shown in the unit its size asks for (core.units.length_unit: 1e-05 mm reads "10 nm", 0.00033333333
+  mm "333.33333 nm"), its digits shifted by a power of ten in decimal, so the text is still exact and
+  reads back as the very float64 the recipe holds (in the recipe's unit); a value may be typed in the
+  unit shown, or with its own ("0.02 mm", "20 µm", "20um"). A spin box rather than a line edit with
   a QDoubleValidator: it keeps the arrows, the wheel and the suffix, and with Qt's largest
   ``decimals`` (323) it rounds nothing a float64 holds above 1e-323, so values of any decade (a
   7e-13 aspheric coefficient, a 1e6 smoothing) are shown and written back unchanged; an arrow moves
@@ -22,10 +26,15 @@ refused (``mark``); ``marked(message)`` tells the dock what to show.
 """
 from __future__ import annotations
 
+import math
+import re
+from decimal import Decimal, InvalidOperation
+
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from pointspro.core import forms
 from pointspro.core.forms import FormField
+from pointspro.core.units import length_unit
 
 INVALID = "background:#ffd6d6"
 _DBL_MAX = 1.7976931348623157e308
@@ -93,6 +102,90 @@ class ParamWidget(QtWidgets.QWidget):
 
 # --- numbers -------------------------------------------------------------------------------------
 
+#: length units a value is shown or typed in: the power of ten of the unit in mm
+LENGTH_EXP = {"m": 3, "mm": 0, "µm": -3, "μm": -3, "um": -3, "nm": -6}
+_TYPED_UNIT = re.compile(r"(.*?)(mm|µm|μm|um|nm|m)?")
+_PARTIAL_UNITS = ("µ", "μ", "u", "n")  # a unit being typed ("20 µ" → "20 µm")
+
+
+def is_length(field: FormField) -> bool:
+    """Whether ``field`` holds a length (its unit mm, µm or nm): shown in the unit its size asks for."""
+    return field.unit in LENGTH_EXP
+
+
+def _shifted(d: Decimal, k: int) -> Decimal:
+    """``d`` × 10^k, exactly (the exponent moved; no rounding to a context's precision)."""
+    sign, digits, exp = d.as_tuple()
+    return Decimal((sign, digits, exp + k))
+
+
+def _decimal_text(d: Decimal) -> str:
+    """The shortest text of ``d`` as Python writes a float: plain from 1e-4 to below 1e16, else
+    scientific ("7e-13", "1.5e+20")."""
+    sign, digits, exp = d.as_tuple()
+    digits = list(digits)
+    while len(digits) > 1 and digits[-1] == 0:
+        digits.pop()
+        exp += 1
+    if digits == [0]:
+        return "-0" if sign else "0"
+    d = Decimal((sign, tuple(digits), exp))
+    adjusted = d.adjusted()
+    if -4 <= adjusted < 16:
+        return format(d, "f")
+    mantissa = str(digits[0]) + ("." + "".join(map(str, digits[1:])) if len(digits) > 1 else "")
+    return ("-" if sign else "") + f"{mantissa}e{adjusted:+03d}"
+
+
+def length_text(v: float, unit: str) -> tuple[str, str]:
+    """(text, unit shown) of the length ``v`` stated in ``unit`` (mm, µm or nm): in the unit its size
+    asks for (core.units.length_unit: nm below 1 µm, µm below 1 mm, mm below 10 m, m above), the
+    digits of its shortest exact text shifted by a power of ten — 1e-05 mm → ("10", "nm"), 4.39e-05
+    mm → ("43.9", "nm") — so ``parse_length`` of it gives ``v`` back bit for bit. Zero and non-finite
+    values in ``unit`` itself."""
+    v = float(v)
+    if not math.isfinite(v) or v == 0:
+        return forms.format_number(v), unit
+    d = Decimal(forms.format_number(v))
+    shown = length_unit(float(_shifted(d, LENGTH_EXP[unit])))[1]
+    return _decimal_text(_shifted(d, LENGTH_EXP[unit] - LENGTH_EXP[shown])), shown
+
+
+def split_length(text: str) -> tuple[str, str | None]:
+    """A typed length as (number text, unit typed or None): "20 µm" → ("20", "µm"), "1e-5" → ("1e-5",
+    None); spaces, thin spaces and a typographic minus are read as parse_number reads them."""
+    t = str(text).strip().replace("−", "-").replace("\u2009", "").replace(" ", "")
+    m = _TYPED_UNIT.fullmatch(t)
+    return m.group(1), m.group(2)
+
+
+def parse_length(text: str, shown: str, unit: str) -> float:
+    """The length typed as ``text`` in the unit ``shown`` (or the one typed with it: "0.02 mm"), as a
+    float64 in ``unit``: the decimal digits shifted by the units' power of ten, then rounded once (so
+    "43.9" nm in a mm field is the float64 nearest 4.39e-05, the same as "4.39e-05" typed in mm).
+    ValueError with the message when it is not a finite number."""
+    num, typed = split_length(text)
+    forms.parse_number(num)  # the message for what is not a finite number
+    try:
+        d = Decimal(num)
+    except InvalidOperation:
+        raise ValueError(f"'{text}' is not a number") from None
+    v = float(_shifted(d, LENGTH_EXP[typed or shown] - LENGTH_EXP[unit]))
+    if not math.isfinite(v):
+        raise ValueError(f"'{text}' is not a finite number")
+    return v
+
+
+def bounds_message(field: FormField, v) -> str | None:
+    """forms.bounds_problem, with the value refused in the unit it is shown in ("floor must be ≥ 0
+    mm (got -10 nm)")."""
+    problem = forms.bounds_problem(field, v)
+    if problem and is_length(field) and isinstance(v, (int, float)) and " (got " in problem:
+        text, shown = length_text(v, field.unit)
+        problem = f"{problem[:problem.rfind(' (got ')]} (got {text} {shown})"
+    return problem
+
+
 class _SpinMixin:
     """Shared by the float and int spin boxes: exact text, scientific notation, the unit as suffix,
     bounds with the message while typing, arrows that stay inside the bounds."""
@@ -122,27 +215,38 @@ class _SpinMixin:
         t = text
         if self.prefix() and t.startswith(self.prefix()):
             t = t[len(self.prefix()):]
+        if getattr(self, "length", False):  # the suffix with its space: "20 mm" typed over " m" is mm
+            suffix = self.suffix().rstrip()
+            if suffix and t.rstrip().endswith(suffix):
+                t = t.rstrip()[:-len(suffix)]
+            return t.strip()
         unit = self.suffix().strip()
         if unit and t.rstrip().endswith(unit):
             t = t.rstrip()[:-len(unit)]
         return t.strip()
 
+    def _partial(self, t: str) -> bool:
+        return forms.is_partial_number(t)
+
+    def _read(self, t: str):
+        return forms.parse_number(t, self.kind)
+
     def validate(self, text, pos):
         t = self._number_text(text)
-        if forms.is_partial_number(t):
+        if self._partial(t):
             return QtGui.QValidator.Intermediate
         try:
-            v = forms.parse_number(t, self.kind)
+            v = self._read(t)
         except ValueError:
             return QtGui.QValidator.Invalid
-        problem = forms.bounds_problem(self.field, v)
+        problem = bounds_message(self.field, v)
         if self.lineEdit().isModified():  # typed (not Qt's own text): a refusal's message stays
             self.owner.mark(problem or "")  # once the text reverts to the value
         return QtGui.QValidator.Intermediate if problem else QtGui.QValidator.Acceptable
 
     def valueFromText(self, text):
         try:
-            return forms.parse_number(self._number_text(text), self.kind)
+            return self._read(self._number_text(text))
         except ValueError:
             return self.value()
 
@@ -170,9 +274,57 @@ class _SpinMixin:
 
 
 class FloatSpin(_SpinMixin, QtWidgets.QDoubleSpinBox):
+    """A float; a length (``is_length``) in the unit its value's size asks for, the suffix following
+    the value ("10 nm", "15 mm"), its text exact (``length_text``); typed in the unit shown or with
+    one's own ("0.02 mm")."""
+
     def __init__(self, owner, field, prefix=""):
         super().__init__()
+        self.length = is_length(field)
         self._setup(owner, field, "float", prefix)
+        if self.length:
+            # before any other slot: whoever hears the new value sees its unit shown with it
+            self.valueChanged.connect(self._sync_unit)
+            self._sync_unit()
+
+    def shown_unit(self) -> str | None:
+        """The unit the value is shown (and a unit-less text typed) in."""
+        shown = self.suffix().strip()
+        return shown if self.length and shown in LENGTH_EXP else self.field.unit
+
+    def _sync_unit(self, *_):
+        unit = " " + length_text(self.value(), self.field.unit)[1]
+        if self.suffix() != unit:
+            self.setSuffix(unit)
+
+    def setValue(self, v):
+        super().setValue(v)
+        if self.length:
+            self._sync_unit()  # set quietly (signals blocked) too
+
+    def _partial(self, t):
+        if not self.length:
+            return super()._partial(t)
+        num, typed = split_length(t)
+        if typed is None:
+            for u in _PARTIAL_UNITS:  # a unit being typed after a number: "20 µ", "20n"
+                if num.endswith(u):
+                    try:
+                        forms.parse_number(num[:-len(u)])
+                    except ValueError:
+                        return False
+                    return True
+        return forms.is_partial_number(num)
+
+    def _read(self, t):
+        if not self.length:
+            return super()._read(t)
+        return parse_length(t, self.shown_unit(), self.field.unit)
+
+    def textFromValue(self, v):
+        if not self.length:
+            return super().textFromValue(v)
+        return length_text(v, self.field.unit)[0]
 
 
 class IntSpin(_SpinMixin, QtWidgets.QSpinBox):
@@ -207,7 +359,7 @@ class NumberWidget(ParamWidget):
             return f"{self.field.key}: {v!r} is not a number"
         if self.spin.kind == "int" and v != int(v):
             return f"{self.field.key}: {v!r} is not a whole number"
-        return forms.bounds_problem(self.field, v)
+        return bounds_message(self.field, v)
 
 
 class BoolWidget(ParamWidget):
@@ -297,7 +449,7 @@ class UnionWidget(ParamWidget):
             return None
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             return f"{self.field.key}: {v!r} is neither {', '.join(map(str, self.field.choices))} nor a number"
-        return forms.bounds_problem(self.field, v)
+        return bounds_message(self.field, v)
 
 
 class TextWidget(ParamWidget):

@@ -14,6 +14,37 @@ from PySide6 import QtCore, QtWidgets
 from .worker import Worker
 
 
+def shown_report(report: dict) -> dict:
+    """A step's report as the panel's table shows it: a key without a unit left out where the same
+    number stands under its name with the unit (zernike reports ``norm_radius`` for its parameter and
+    ``norm_radius_mm`` for the pupil: the table showed the radius twice). report.json keeps both."""
+    import math
+
+    from pointspro.core.units import KEY_UNITS, SHOWN_LENGTH_MM, unit_of_key
+
+    def number(x):
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+    def same(k, twin, twin_unit):
+        a, b = report[k], report[twin]
+        if not (number(a) and number(b)):
+            return False
+        unit = unit_of_key(k)
+        if unit in SHOWN_LENGTH_MM and twin_unit in SHOWN_LENGTH_MM:  # both lengths: in one unit
+            a, b = a * SHOWN_LENGTH_MM[unit], b * SHOWN_LENGTH_MM[twin_unit]
+        elif unit:  # a bare key with a unit of its own other than the twin's
+            return False
+        return math.isclose(a, b, rel_tol=1e-12, abs_tol=0.0)
+
+    hidden = set()
+    for k in report:
+        if not isinstance(k, str) or any(k.endswith(suffix) for suffix, _ in KEY_UNITS):
+            continue
+        if any(k + suffix in report and same(k, k + suffix, unit) for suffix, unit in KEY_UNITS):
+            hidden.add(k)
+    return {k: v for k, v in report.items() if k not in hidden} if hidden else report
+
+
 class ReportPanel(QtWidgets.QWidget):
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -108,7 +139,7 @@ class ReportPanel(QtWidgets.QWidget):
         warn = "".join(f"<p style='color:#a45200'>⚠ {html.escape(str(w))}</p>"
                        for w in rec.report.get("warnings", []) or [])
         parts = [f"<h3>{html.escape(rec.title)} <small>({html.escape(rec.id)})</small></h3>", warn,
-                 table_html(rec.report)]
+                 table_html(shown_report(rec.report))]
         for name in self.figures_of(row):
             p = self._path(name, row)
             if p.is_file():

@@ -41,6 +41,13 @@ class _LassoOverlay(QtWidgets.QWidget):
         p.end()
 
 
+def drawn_text(drawn: int, n: int) -> str:
+    """The 3D view's count: "150,000 of 12,600,000 points drawn" (``drawn`` of the measurement's
+    ``n`` shown points: the level of detail, never the selection's highlight), "4,680 points" when
+    all are drawn."""
+    return f"{drawn:,} of {n:,} points drawn" if drawn < n else f"{n:,} points"
+
+
 class View3D(QtWidgets.QWidget):
     """``selected(mask)`` is emitted with a boolean mask over the shown cloud."""
 
@@ -178,9 +185,8 @@ class View3D(QtWidgets.QWidget):
         self._info_and_repaint(c, idx)
 
     def _info_and_repaint(self, c, idx):
-        n = c.n if self.shown_mask is None else int(np.count_nonzero(self.shown_mask))
-        shown = f"{idx.size:,} of {n:,} points drawn" if idx.size < n else f"{n:,} points"
-        self.info.setText(shown)
+        self.info.setText(drawn_text(idx.size, c.n if self.shown_mask is None
+                                     else int(np.count_nonzero(self.shown_mask))))
         self._repaint()
 
     def highlight(self, mask):

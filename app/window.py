@@ -84,6 +84,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.banner.setStyleSheet("QFrame{background:#fff4cc}")
         blay = QtWidgets.QHBoxLayout(self.banner)
         self.banner_text = QtWidgets.QLabel()
+        # wrapped: as one line its ~800 px set the centre's minimum width, the window grew past its
+        # 1280 px and the map dock was squeezed to 320 px, its y-axis label cut off
+        self.banner_text.setWordWrap(True)
         blay.addWidget(self.banner_text, 1)
         b = QtWidgets.QPushButton("Restore")
         b.clicked.connect(self.restore_autosave)

@@ -140,13 +140,14 @@ def test_float_spin_box_with_unit_bounds_and_exact_values(dock, qtbot):
     qtbot.keyClicks(spin, "2.5e1")
     qtbot.keyClick(spin, QtCore.Qt.Key_Return)
     assert _step(dock, 3) == {"knn_denoise": {"window": 25.0}}
-    # many decades: shown and written back exactly, not rounded to the spin box's decimals
+    # many decades: shown (in the unit its size asks for) and written back exactly, not rounded to
+    # the spin box's decimals
     spacing = dock.fields["spacing"].spin
     spacing.setValue(3.3333333e-4)
-    assert spacing.text() == "0.00033333333 mm" and _step(dock, 3)["knn_denoise"]["spacing"] == 3.3333333e-4
+    assert spacing.text() == "333.33333 nm" and _step(dock, 3)["knn_denoise"]["spacing"] == 3.3333333e-4
     # an arrow: a tenth of the decade
     spacing.stepBy(1)
-    assert _step(dock, 3)["knn_denoise"]["spacing"] == 0.00034
+    assert _step(dock, 3)["knn_denoise"]["spacing"] == 0.00034 and spacing.text() == "340 nm"
     # out of range (window > 0): refused where it is typed, with the message; the recipe keeps its value
     spin.lineEdit().selectAll()
     qtbot.keyClicks(spin, "-5")
@@ -163,6 +164,85 @@ def test_float_spin_box_with_unit_bounds_and_exact_values(dock, qtbot):
     assert "spacing must not exceed window" in dock.message.text()
     w.enter(20.0)
     assert _step(dock, 3)["knn_denoise"]["window"] == 20.0 and w.styleSheet() == "" and dock.message.isHidden()
+
+
+def test_lengths_are_shown_in_the_unit_their_size_asks_for(dock, qtbot):
+    """knn_denoise's floor (1e-05 mm) reads "10 nm", not "1e-05 mm"; the text stays exact, so the
+    recipe keeps its value in its own unit (mm) bit for bit, whether the value was typed in the unit
+    shown, with its own unit, or not edited at all (leaving the field changes nothing)."""
+    from PySide6 import QtCore
+
+    dock.list.setCurrentRow(3)  # knn_denoise: floor 1e-05 mm (its default, not in the recipe)
+    w = dock.fields["floor"]
+    spin = w.spin
+    assert spin.text() == "10 nm" and spin.suffix() == " nm" and w.value() == 1e-05
+    got = []
+    w.edited.connect(got.append)
+    spin.interpretText()  # what leaving the field does: a value shown is not a value entered
+    spin.editingFinished.emit()
+    assert got == [] and "floor" not in _step(dock, 3)["knn_denoise"] and w.value() == 1e-05
+    w.set_value(4.39e-05)
+    assert spin.text() == "43.9 nm"
+
+    def typed(text):
+        spin.lineEdit().selectAll()  # the number, not the unit shown after it
+        qtbot.keyClicks(spin, text)
+        qtbot.keyClick(spin, QtCore.Qt.Key_Return)
+        return _step(dock, 3)["knn_denoise"].get("floor")
+
+    assert typed("20") == 2e-05 and spin.text() == "20 nm"  # in the unit shown
+    assert typed("43.9") == 4.39e-05  # the float64 nearest 4.39e-05, as typed in mm
+    assert typed("0.0001 mm") == 1e-04 and spin.text() == "100 nm"  # with its own unit
+    assert typed("1.5 µm") == 1.5e-03 and spin.text() == "1.5 µm" and spin.suffix() == " µm"
+    assert typed("2um") == 2e-03 and typed("3e-6mm") == 3e-06 and spin.text() == "3 nm"
+    # refused where typed, with the value in the unit it was typed in
+    spin.lineEdit().selectAll()
+    qtbot.keyClicks(spin, "-5")
+    assert dock.message.text() == "floor must be ≥ 0 mm (got -5 nm)"
+    qtbot.keyClick(spin, QtCore.Qt.Key_Return)
+    assert _step(dock, 3)["knn_denoise"]["floor"] == 3e-06
+    # tiny and huge values, and ones with 17 digits: shown and read back as the same float64
+    from pointspro.app.param_widgets import length_text, parse_length
+
+    for v in (1e-300, 7e-13, 1e-05 / 3, 2.5e-07, 9.9996e-04, 0.1 + 0.2, 1 / 3, 123456.789, 1e4, 1.5e15, 1e300,
+              1.7976931348623157e308, 5e-320):
+        w.set_value(v)
+        text = spin.text()
+        spin.interpretText()
+        assert w.value() == v and spin.text() == text, (v, text)
+        t, unit = length_text(v, "mm")
+        assert parse_length(t, unit, "mm") == v and text == f"{t} {unit}"
+    assert length_text(1e4, "mm") == ("10", "m") and length_text(1234.5, "mm") == ("1234.5", "mm")
+    assert length_text(1e-05 / 3, "mm") == ("3.3333333333333337", "nm")  # repr: 3.3333333333333337e-06
+    assert length_text(1e300, "mm") == ("1e+297", "m") and length_text(7e-13, "mm") == ("7e-07", "nm")
+    assert got[-1] == 3e-06  # none of those was sent to the recipe
+
+    # the other lengths alike: a group's (mm), a point's, and fields stated in µm and nm
+    dock.list.setCurrentRow(2)  # misalignment initial.dx
+    dx = dock.fields["initial"].children_["dx"]
+    dx.auto.click()
+    dx.inner.enter(2.5e-06)
+    assert dx.inner.spin.text() == "2.5 nm" and _step(dock, 2) == {"misalignment": {"initial": {"dx": 2.5e-06}}}
+    dock.list.setCurrentRow(6)  # bspline_map centre: [x, y] mm
+    centre = dock.fields["centre"]
+    centre.auto.click()
+    centre.inner.spins[0].setValue(-0.0025)
+    assert [s.text() for s in centre.inner.spins] == ["x -2.5 µm", "y 0 mm"]
+    assert _step(dock, 6)["bspline_map"]["centre"] == [-0.0025, 0.0]
+    from pointspro.app.param_widgets import build_widget
+
+    sigma = build_widget(_field("fiducials", "sigma_reference"), 0.2)  # µm in the recipe: "200 nm"
+    qtbot.addWidget(sigma)
+    assert sigma.spin.text() == "200 nm" and sigma.value() == 0.2
+    sigma.spin.lineEdit().selectAll()
+    qtbot.keyClicks(sigma.spin, "0.3 mm")
+    qtbot.keyClick(sigma.spin, QtCore.Qt.Key_Return)
+    assert sigma.value() == 300.0 and sigma.spin.text() == "300 µm"
+    tol = build_widget(_field("correction", "fit_tolerance_nm"), 1.0)  # nm in the recipe
+    bias = build_widget(_field("correction", "bias_um"), 0.0)
+    qtbot.addWidget(tol)
+    qtbot.addWidget(bias)
+    assert tol.spin.text() == "1 nm" and bias.spin.text() == "0 µm"  # zero: in the recipe's unit
 
 
 def test_int_spin_box_and_choice_combo(dock, qtbot):
@@ -243,7 +323,7 @@ def test_bool_auto_box_union_and_group(dock):
     dx.auto.click()
     dx.inner.spin.setValue(0.5)
     assert _step(dock, 2) == {"misalignment": {"initial": {"dx": 0.5}}}
-    assert dx.inner.spin.suffix() == " mm"
+    assert dx.inner.spin.text() == "500 µm"  # a length in the unit its size asks for; the recipe's mm
 
 
 def test_refused_values_are_sent_again_until_the_step_accepts_them(dock):
