@@ -14,7 +14,9 @@ Readers (maintained, not ours), each chosen by the file's content, never by its 
         the readers by content (magic bytes first); where no magic matches and one format alone uses
         the extension (.nms, .mat …), that reader is tried first (:func:`_open_by_extension`).
         Multi-channel files give their default height channel. Corrected here: NanoFocus .nms pixel
-        in nm (:func:`_nms_lateral`), FRT's valid range (:func:`_frt_in_valid_range`).
+        in nm (:func:`_nms_lateral`), FRT's valid range (:func:`_frt_in_valid_range`), an Igor
+        wave with Igor's default x/y scaling (1 per point, no unit) taken as uncalibrated, not as
+        a pixel of one height unit (:func:`_ibw_uncalibrated`).
   Zygo .datx whose heights are in fringes or waves (SurfaceTopography refuses the unit): read here
         with h5py, heights × λ/2 (fringe) or × λ (wave) with the reader option ``wavelength_nm``.
 
@@ -633,9 +635,20 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
                          "not yet supported as input")
     _check_raw_scales(path, fmt, ch.info.get("raw_metadata", {}) or {})
     unit = ch.unit.replace("Âµ", "µ") if isinstance(ch.unit, str) else ch.unit  # Latin-1 µ as UTF-8
+    # no lateral calibration: none in the reader's metadata, or an Igor wave whose x/y scaling is
+    # Igor's default (SurfaceTopography reads it as a pixel of 1 height unit)
+    no_lateral = "pixel size" if ch.physical_sizes is None else None
+    if fmt == "ibw" and no_lateral is None:
+        no_lateral = _ibw_uncalibrated(path)
     kwargs = {}
     if unit is None or not is_length_unit(unit):
         if opts.height_unit is None:
+            if no_lateral is not None and opts.pixel_size_um is None:
+                raise InputError(f"{path}: the {reader.name()} file gives no length unit for its "
+                                 f"heights{f' ({unit})' if unit else ''} and no lateral calibration "
+                                 f"({no_lateral}); give the reader options height_unit (nm, µm, mm or "
+                                 "m) and pixel_size_um (µm), e.g. `input: {pixel_size_um: 1.1, "
+                                 "height_unit: nm}` in the recipe")
             raise InputError(f"{path}: the {reader.name()} file gives no length unit for its heights"
                              f"{f' ({unit})' if unit else ''}; give the reader option height_unit "
                              "(nm, µm, mm or m)")
@@ -644,15 +657,17 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
     elif opts.height_unit is not None:  # was ignored silently, while pixel_size_um was refused
         raise InputError(f"{path}: the file gives its own height unit ({unit}); remove the reader "
                          "option height_unit")
-    if ch.physical_sizes is None:
+    if no_lateral is not None:
         if opts.pixel_size_um is None:
-            raise InputError(f"{path}: the {reader.name()} file gives no lateral calibration (pixel "
-                             "size); give the reader option pixel_size_um (µm), e.g. `input: "
-                             "{pixel_size_um: 1.1}` in the recipe")
-        to_unit = 1e-3 / _unit_to_mm(unit)  # µm → the file's unit
-        nx, ny = ch.nb_grid_pts
-        kwargs["physical_sizes"] = (nx * opts.pixel_size_um[0] * to_unit,
-                                    ny * opts.pixel_size_um[1] * to_unit)
+            raise InputError(f"{path}: the {reader.name()} file gives no lateral calibration "
+                             f"({no_lateral}); give the reader option pixel_size_um (µm), e.g. "
+                             "`input: {pixel_size_um: 1.1}` in the recipe")
+        if ch.physical_sizes is None:
+            to_unit = 1e-3 / _unit_to_mm(unit)  # µm → the file's unit
+            nx, ny = ch.nb_grid_pts
+            kwargs["physical_sizes"] = (nx * opts.pixel_size_um[0] * to_unit,
+                                        ny * opts.pixel_size_um[1] * to_unit)
+        # else (Igor): the reader refuses physical_sizes; the positions are set below
     elif opts.pixel_size_um is not None:
         raise InputError(f"{path}: the file gives its own lateral calibration; remove the reader "
                          "option pixel_size_um")
@@ -685,6 +700,9 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
     X_mm, Y_mm, pixel = X * to_mm, Y * to_mm, [sx * to_mm, sy * to_mm]
     if fmt == "nms":
         X_mm, Y_mm, pixel = _nms_lateral(path, t.nb_grid_pts)
+    elif no_lateral is not None and ch.physical_sizes is not None:  # Igor: default x/y scaling
+        X_mm, Y_mm, pixel = _pixel_grid(t.nb_grid_pts, opts.pixel_size_um[0] * 1e-3,
+                                        opts.pixel_size_um[1] * 1e-3)
     # SurfaceTopography's arrays are (x, y): index [i, j] is column i, row j
     xyz, chans = _to_cloud(X_mm.T, Y_mm.T, h.T * to_mm, valid.T, path)
     return xyz, chans, {"instrument_format": fmt, "instrument_reader": reader.name(),
@@ -719,11 +737,63 @@ def _nms_lateral(path: Path, nb_grid_pts):
     dx_nm, dy_nm = struct.unpack("<2d", b)
     _raise_bad(path, (("pixel size x (offset 1376, nm)", dx_nm, "x positions", True),
                       ("pixel size y (offset 1384, nm)", dy_nm, "y positions", True)))
-    px, py = dx_nm * 1e-6, dy_nm * 1e-6  # nm → mm
+    return _pixel_grid(nb_grid_pts, dx_nm * 1e-6, dy_nm * 1e-6)  # nm → mm
+
+
+def _pixel_grid(nb_grid_pts, px: float, py: float):
+    """(X, Y as (nx, ny) arrays, [px, py]) of a map of pixel px × py from the origin (the pixel
+    convention: pixel (i, j) at (i·px, j·py)), in px's and py's unit."""
     nx, ny = int(nb_grid_pts[0]), int(nb_grid_pts[1])
     X = np.broadcast_to((np.arange(nx) * px)[:, None], (nx, ny))
     Y = np.broadcast_to((np.arange(ny) * py)[None, :], (nx, ny))
     return X, Y, [px, py]
+
+
+#: Igor binary wave v5 (Igor Technical Note 003; igor2's BinHeader5/WaveHeader5): a 64-byte
+#: BinHeader5, then WaveHeader5 whose sfA (double[4]: the value of element e of dimension d is
+#: sfA[d]·e + sfB[d]) is at +84 and dimUnits (char[4][4], 0–3 characters and a NUL) at +152
+_IBW_BIN_HEADER = 64
+_IBW_SFA = _IBW_BIN_HEADER + 84
+_IBW_DIM_UNITS = _IBW_BIN_HEADER + 152
+
+
+def _ibw_uncalibrated(path: Path) -> str | None:
+    """Why an Igor binary wave (version 5) has no lateral calibration, or None when it has one.
+
+    A wave that was never given x/y scaling keeps Igor's default: sfA = 1 per point and no unit
+    (dimUnits empty, no extended dimension unit). SurfaceTopography 1.27 reads that as physical
+    sizes of nx × 1, ny × 1 in the height unit — a 1 nm pixel for heights in nm (its test file
+    10x10-one_channel_without_name.ibw, a Gwyddion export, reports physical_sizes (10, 10)). A
+    dimension counts as uncalibrated when its unit is empty and its sfA is exactly 1; the map does
+    when x or y is. Units longer than three characters are stored after the note (the extended
+    dimension units, BinHeader5's dimEUnitsSize[4]): a non-empty one counts as a unit."""
+    import struct
+
+    with open(path, "rb") as f:
+        b = f.read(_IBW_DIM_UNITS + 16)
+        if len(b) < _IBW_DIM_UNITS + 16:
+            raise InputError(f"{path}: a damaged or truncated Igor binary wave file (its wave "
+                             "header is cut short)")
+        order = next((o for o in "<>" if struct.unpack_from(o + "h", b)[0] == 5), None)
+        if order is None:  # not version 5: SurfaceTopography's reader refuses it before
+            return None
+        wfm, formula, note, data_eu, *dim_eu = struct.unpack_from(order + "4i4i", b, 4)
+        sf_a = struct.unpack_from(order + "4d", b, _IBW_SFA)
+        units = [b[_IBW_DIM_UNITS + 4 * d:_IBW_DIM_UNITS + 4 * d + 4].split(b"\0")[0].strip()
+                 for d in range(4)]
+        if any(dim_eu[:2]):
+            if min(wfm, formula, note, data_eu, *dim_eu) < 0:
+                raise InputError(f"{path}: a damaged Igor binary wave file (a negative block size "
+                                 "in its header)")
+            f.seek(_IBW_BIN_HEADER + wfm + formula + note + data_eu)
+            for d in range(2):
+                ext = f.read(dim_eu[d]).split(b"\0")[0].strip()
+                units[d] = ext or units[d]
+    bare = [axis for d, axis in enumerate("xy") if not units[d] and sf_a[d] == 1.0]
+    if not bare:
+        return None
+    return (f"pixel size: {' and '.join(bare)} {'have' if len(bare) > 1 else 'has'} Igor's default "
+            "scaling, 1 per point without a unit")
 
 
 def _frt_in_valid_range(info: dict, h: np.ndarray) -> np.ndarray | bool:
