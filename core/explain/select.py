@@ -24,8 +24,10 @@ inflate but a strong vibration does; it is therefore estimated again on the resi
 effects are removed, and the selection repeated with it (its ties depend on σ) until it settles.
 Correlated noise: the tests above assume white noise; when the residual is correlated along the scan
 (|lag-1 autocorrelation| above RHO_GATE), each chosen effect is tested again on data whitened for the
-residual's AR(3) model (Cochrane–Orcutt: generalised least squares), and the least supported of those
-that no longer enter is dropped, one at a time (_correlated_noise_gate).
+residual's AR(3) model (Cochrane–Orcutt: generalised least squares), then — when all still enter —
+under a flicker model (power-law noise fitted to the residual's periodogram above the frequencies the
+effects took, extrapolated below them: power_law_gls), and the least supported of those that no
+longer enter is dropped, one at a time (_correlated_noise_gate).
 At the end: VIF of every chosen column, a χ² test of the residual against σ, the lag-1
 autocorrelation of the residual along the scan (whiteness), regions where the residual's local mean
 is significant, and a block bootstrap of the selection (stability of each choice).
@@ -810,6 +812,146 @@ def whiten(X: np.ndarray, order: np.ndarray, phi: np.ndarray) -> np.ndarray:
     return W
 
 
+#: the exponent range of the power-law (flicker) noise model S(f) = w + A·f^−β
+FLICKER_BETA = (0.3, 2.5)
+#: up to this many points the power-law model's generalised least squares uses the Cholesky factor of
+#: its Toeplitz covariance (O(n³): 0.2 s at 3,000); above, conjugate gradients on the Toeplitz system
+#: (products by FFT), preconditioned by its optimal circulant (T. Chan 1988). The circulant alone —
+#: Whittle's frequency-domain shortcut — wraps the scan around: it left 15 of 40 spiral gaps of
+#: 1/f^1.5 noise naming an effect (benchmarks/README.md, "flicker")
+FLICKER_CHOLESKY_POINTS = 3000
+
+
+def _power_law_fit(f: np.ndarray, I: np.ndarray) -> tuple[float, float, float]:
+    """(w, A, β) of S(f) = w + A·f^−β fitted to periodogram ordinates I at frequencies f by Whittle's
+    likelihood, Σ ln S + I/S (β within FLICKER_BETA)."""
+    from scipy.optimize import minimize
+
+    m = float(np.mean(I))
+    lf = np.log(f)
+
+    def nll(q):
+        S = np.exp(q[0]) + np.exp(q[1] - q[2] * lf)
+        return float(np.sum(np.log(S) + I / S)) / I.size
+
+    best = None
+    for b0 in (0.8, 1.5):
+        q0 = np.array([np.log(0.3 * m), np.log(0.3 * m) + b0 * np.log(np.median(f)), b0])
+        res = minimize(nll, q0, method="L-BFGS-B", bounds=[
+            (np.log(m) - 30, np.log(m) + 5), (np.log(m) - 40, np.log(m) + 40), FLICKER_BETA])
+        if best is None or res.fun < best.fun:
+            best = res
+    return float(np.exp(best.x[0])), float(np.exp(best.x[1])), float(best.x[2])
+
+
+class ToeplitzGLS:
+    """Generalised least squares under stationary noise of autocovariance γ (γ₀…γ_{n−1}) along the
+    scan: ``gram(X, g)`` gives XᵀΣ⁻¹X, XᵀΣ⁻¹g and gᵀΣ⁻¹g, Σ the Toeplitz matrix of γ, rows of X and g
+    taken in scan order (``order``). Σ⁻¹ is applied by the Cholesky factor up to
+    FLICKER_CHOLESKY_POINTS, else by preconditioned conjugate gradients (FLICKER_CHOLESKY_POINTS)."""
+
+    def __init__(self, gamma: np.ndarray, order: np.ndarray):
+        self.gamma = np.asarray(gamma, dtype=np.float64)
+        self.order = order
+        n = self.gamma.size
+        self.L = None
+        if n <= FLICKER_CHOLESKY_POINTS:
+            from scipy.linalg import cholesky, toeplitz
+
+            self.L = cholesky(toeplitz(self.gamma), lower=True)
+            return
+        # Σ·v by FFT: Σ embedded in a circulant of 2n (first column γ, 0, γ reversed)
+        c = np.concatenate([self.gamma, [0.0], self.gamma[:0:-1]])
+        self._eig = np.fft.rfft(c).real
+        # T. Chan's optimal circulant preconditioner: c_k = ((n − k)·γ_k + k·γ_{n−k}) / n
+        k = np.arange(n)
+        ck = ((n - k) * self.gamma + k * np.concatenate([[0.0], self.gamma[:0:-1]])) / n
+        lam = np.fft.rfft(ck).real
+        self._pinv = 1.0 / np.maximum(lam, 1e-12 * lam.max())
+
+    def _matvec(self, V):
+        n = self.gamma.size
+        F = np.fft.rfft(V, 2 * n, axis=0) * self._eig[:, None]
+        return np.fft.irfft(F, 2 * n, axis=0)[:n]
+
+    def _precond(self, V):
+        n = self.gamma.size
+        return np.fft.irfft(np.fft.rfft(V, axis=0) * self._pinv[:, None], n, axis=0)
+
+    def solve(self, B: np.ndarray, tol: float = 1e-8, max_iter: int = 400) -> np.ndarray:
+        """Σ⁻¹·B for the columns of B (rows in scan order): conjugate gradients, every column at once."""
+        X = np.zeros_like(B)
+        R = B.copy()
+        Z = self._precond(R)
+        P = Z.copy()
+        rz = np.einsum("ij,ij->j", R, Z)
+        stop = tol * np.sqrt(np.einsum("ij,ij->j", B, B)) + 1e-300
+        for _ in range(max_iter):
+            Q = self._matvec(P)
+            alpha = rz / np.maximum(np.einsum("ij,ij->j", P, Q), 1e-300)
+            X += P * alpha
+            R -= Q * alpha
+            if np.all(np.sqrt(np.einsum("ij,ij->j", R, R)) <= stop):
+                break
+            Z = self._precond(R)
+            rz_new = np.einsum("ij,ij->j", R, Z)
+            P = Z + P * (rz_new / np.maximum(rz, 1e-300))
+            rz = rz_new
+        return X
+
+    def gram(self, X: np.ndarray, g: np.ndarray):
+        Xs = np.asarray(X, dtype=np.float64)[self.order]
+        gs = np.asarray(g, dtype=np.float64)[self.order]
+        B = np.column_stack([Xs, gs])
+        if self.L is not None:
+            from scipy.linalg import solve_triangular
+
+            W = solve_triangular(self.L, B, lower=True)
+            M = W.T @ W
+        else:
+            M = B.T @ self.solve(B)
+            M = 0.5 * (M + M.T)
+        p = Xs.shape[1]
+        return M[:p, :p], M[:p, p], float(M[p, p])
+
+
+def power_law_gls(r: np.ndarray, order: np.ndarray, skip: int = 0) -> ToeplitzGLS | None:
+    """Generalised least squares for flicker noise — power-law noise S(f) = w + A·f^−β, an
+    interferometer's or a probe's drift — fitted to the residual r (scan order); None for a scan
+    shorter than 64. The model is fitted by Whittle's likelihood to r's periodogram above its lowest
+    1 + ``skip`` frequencies — the chosen effects took r's slowest wander (a drift fitted as an
+    effect leaves r short of it) — and extrapolated below them, which an AR model cannot do (its
+    spectrum flattens there: AR(3), 8 or 16 left 8–20 of 40 gaps of 1/f noise naming an effect).
+    The covariance is the Toeplitz one of S (its autocovariance from S on a circle 16 n long): exact
+    GLS for a window of the noise, not a periodic one (ToeplitzGLS). Measured (benchmarks/README.md,
+    "flicker"): on 1/f^1.5 noise along a 400-point spiral 16 of 40 gaps named an effect under the AR
+    gate alone, 0 with the true covariance and 0 with this fitted one."""
+    n = r.size
+    if n < 64:
+        return None
+    rc = r - r.mean()
+    I = np.abs(np.fft.rfft(rc)) ** 2 / n
+    f = np.arange(I.size, dtype=np.float64) / n
+    j0 = min(1 + int(skip), I.size // 8)
+    stop = I.size - 1 if n % 2 == 0 else I.size  # no Nyquist ordinate (real: half the others' weight)
+    fi, Ii = f[j0:stop], I[j0:stop]
+    if not Ii.mean() > 0:
+        return None
+    w, A, beta = _power_law_fit(fi, Ii)
+    M = 16 * n
+    fg = np.arange(M // 2 + 1, dtype=np.float64) / M
+    fg[0] = fg[1]
+    S = A * fg ** -beta
+    # a white floor of at least 10⁻⁸ of the slowest term's power: Σ's condition number stays below
+    # ~10⁸ (β 2.4 without one: 10¹⁴ at 10⁵ points, and the conjugate gradients did not converge)
+    S += max(w, 1e-8 * float(S[0]))
+    gamma = np.fft.irfft(S, M)[:n]
+    try:
+        return ToeplitzGLS(gamma, order)
+    except np.linalg.LinAlgError:
+        return None
+
+
 def _correlated_noise_gate(s: _Search, order: np.ndarray) -> list[str]:
     """The selection's F tests and ΔBIC assume white noise. Noise correlated along the scan (a probe's
     or an interferometer's lag, flicker) has a coloured spectrum, and its slow part reads as effects:
@@ -820,7 +962,13 @@ def _correlated_noise_gate(s: _Search, order: np.ndarray) -> list[str]:
     least supported of those that no longer enter (Bonferroni over its stage's family, as it entered;
     ΔBIC < −10) is dropped — one at a time, the others tested again after each drop, with ρ̂ and the
     model fitted again on what is left (a review: dropping every failing effect at once lost a true
-    squareness beside a spurious look-alike, each failing only beside the other). Effects the gap
+    squareness beside a spurious look-alike, each failing only beside the other). When every effect
+    stands the AR noise, each is tested again under flicker noise (power_law_gls): an AR model's
+    spectrum flattens at the frequencies the effects took out of the residual, where a power law
+    goes on rising. Measured (benchmarks/README.md, "flicker"): 1/f and 1/f^1.5 noise, 40 gaps each on
+    a 400-point spiral, a 1,505-point raster and a 5,000-point spiral: 8–26 named an effect under
+    the AR gate alone, 0 with the flicker test; true effects at 3 and 6 σ named as often as before
+    under white, AR(1) 0.5 and flicker noise, 3 of 27 fewer at 3 σ under AR(1) 0.8. Effects the gap
     holds well above the noise stay; on white noise ρ̂ stays below the gate and nothing changes.
     Returns the dropped effects' names."""
     N = s.g.size
@@ -831,7 +979,11 @@ def _correlated_noise_gate(s: _Search, order: np.ndarray) -> list[str]:
         if not (abs(rho) > max(RHO_GATE, 4.0 / np.sqrt(N))) or N <= 4 * AR_ORDER + len(s.cols):
             break
         phi = ar_coefficients(r, AR_ORDER)
-        worst = _least_supported(s, order, phi)
+        worst = _least_supported(s, order, lambda A, phi=phi: whiten(A, order, phi))
+        if worst is None:  # every effect stands the AR noise: does each stand flicker noise too?
+            flicker = power_law_gls(r, order, skip=len(s.cols))
+            if flicker is not None:
+                worst = _least_supported(s, order, flicker)
         if worst is None:
             break
         dropped.append(s.by_name[worst].effect if worst in s.by_name else worst)
@@ -840,29 +992,37 @@ def _correlated_noise_gate(s: _Search, order: np.ndarray) -> list[str]:
     return dropped
 
 
-def _least_supported(s: _Search, order: np.ndarray, phi: np.ndarray | None = None):
+def _least_supported(s: _Search, order: np.ndarray, white=None):
     """The chosen effect (all its harmonics; one vibration line) least supported beside all the others,
     among those that would no longer enter (Bonferroni over its stage's family as it entered; ΔBIC <
-    BIC_STRONG) — None when every one still would. ``phi``: data and columns whitened for AR noise of
-    these coefficients first (_correlated_noise_gate); None: as they are."""
+    BIC_STRONG) — None when every one still would. ``white``: a map whitening data and columns for a
+    noise model first (whiten; _correlated_noise_gate), or a ToeplitzGLS (power_law_gls) giving the
+    generalised Gram matrices; None: as they are."""
     N = s.g.size
     piston = list(s.D.index["_piston"])
     keys = list(dict.fromkeys(_effect_key(st) for st in s.stages))
     cols_of = {k: [c for st in s.stages if _effect_key(st) == k for c in s.D.index[st.candidate]] for k in keys}
     allc = piston + [c for k in keys for c in cols_of[k]]
     s.D.ensure(allc)
-    if phi is None:
-        Xw, gw = np.asarray(s.D.X(allc), dtype=np.float64), np.asarray(s.g, dtype=np.float64)
-    else:
-        Xw = whiten(s.D.X(allc), order, phi)
-        gw = whiten(s.g, order, phi)
     at = {c: j for j, c in enumerate(allc)}
-    n = gw.size
+    if isinstance(white, ToeplitzGLS):
+        G, b, gg = white.gram(s.D.X(allc), s.g)
+        n = s.g.size
 
-    def ssr(cols):
-        A = Xw[:, [at[c] for c in cols]]
-        e = gw - A @ np.linalg.lstsq(A, gw, rcond=1e-12)[0]
-        return max(float(e @ e), 1e-300)
+        def ssr(cols):  # gᵀΣ⁻¹g − bᵀG⁻¹b over the columns kept (a pseudo-inverse: near-collinear ones)
+            j = [at[c] for c in cols]
+            return max(gg - float(b[j] @ np.linalg.lstsq(G[np.ix_(j, j)], b[j], rcond=1e-13)[0]), 1e-300)
+    else:
+        if white is None:
+            Xw, gw = np.asarray(s.D.X(allc), dtype=np.float64), np.asarray(s.g, dtype=np.float64)
+        else:
+            Xw, gw = white(s.D.X(allc)), white(s.g)
+        n = gw.size
+
+        def ssr(cols):
+            A = Xw[:, [at[c] for c in cols]]
+            e = gw - A @ np.linalg.lstsq(A, gw, rcond=1e-12)[0]
+            return max(float(e @ e), 1e-300)
 
     full = ssr(allc)
     dof = n - len(allc)
