@@ -89,7 +89,7 @@ MIN_POINTS = 100
 def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simulated: Path | None = None,
             bootstrap: int = 10) -> dict:
     from ..io import read_cloud
-    from ..simulate.model import load_model
+    from ..simulate.model import check_scan, load_model
 
     meas = read_cloud(measured)
     if meas.n < MIN_POINTS:
@@ -101,6 +101,7 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     warnings: list[str] = []  # printed on stderr by `pointspro explain`, kept in explain.json
     if model_path is not None:
         model = load_model(model_path)
+        check_scan(model, model_path)  # the model simulates (explain evaluates it at the measured points only)
         ctx, z_sim, match = against_model(meas, model, Path(model_path).parent, measured, warnings)
     elif simulated is not None:
         ctx, z_sim, match = against_simulation(meas, simulated, warnings)

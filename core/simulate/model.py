@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from ..errors import RecipeError
 from .effects import LIBRARY, ScanContext
@@ -47,8 +47,29 @@ class ModelSpec(BaseModel):
     surface: dict = Field(description="nominal surface, as in recipes")
     scan: ScanSpec
     probe: ProbeSpec = ProbeSpec()
-    seed: int = Field(0, description="seed of the noise")
+    # ge=0: numpy's generator refused seed: -1 in its own words ("expected non-negative integer")
+    seed: int = Field(0, ge=0, description="seed of the noise (0 or more)")
     effects: list[dict[str, dict]] = Field(default_factory=list, description="[{effect: {param: value}}]")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _numbers_are_numbers(cls, data):
+        """`seed: true`, `scan: {radius: true}` (taken as 1 by pydantic's lax mode) and `seed: "3"`,
+        `fs: 4_00` (text, a word in YAML 1.2, taken as the number) are refused, as in a recipe's
+        steps and surface (core.yamlio.bool_as_number, core.surfaces.spec.number_as_text). The
+        surface is checked as a recipe's (load_model), the effects by _known."""
+        from ..surfaces.spec import number_as_text
+        from ..yamlio import bool_as_number
+
+        if isinstance(data, dict):
+            for name, v in data.items():
+                f = cls.model_fields.get(name) if isinstance(name, str) and name != "surface" else None
+                if f is None:
+                    continue
+                error = bool_as_number(f.annotation, v, name) or number_as_text(f.annotation, v, name)
+                if error is not None:
+                    raise error
+        return data
 
     @field_validator("effects")
     @classmethod
@@ -91,10 +112,14 @@ def load_model(path) -> ModelSpec:
         model = ModelSpec.model_validate(data)
     except ValidationError as e:
         err = e.errors()[0]
-        key = ".".join(str(k) for k in err["loc"])
-        line = data.key_lines.get(err["loc"][0]) if err["loc"] else None
-        at = f", line {line}" if line else ""
+        names = [str(k) for k in err["loc"]]
         msg = err["msg"].removeprefix("Value error, ")  # a validator's own words, without pydantic's tag
+        ctx = err.get("ctx") or {}
+        if "keys" in ctx and "detail" in ctx:  # bool_as_number, number_as_text: the keys down to the value
+            names, msg = names + [str(k) for k in ctx["keys"]], ctx["detail"]
+        key = ".".join(names)
+        line = data.key_lines.get(names[0]) if names else None
+        at = f", line {line}" if line else ""
         raise RecipeError(f"{path}{at}: key '{key}': {msg}") from None
     # the surface is checked now, as a recipe's is (a review: `R: 0` was an internal error of explain
     # and a pydantic dump from simulate)
@@ -107,6 +132,21 @@ def load_model(path) -> ModelSpec:
         line = data.key_lines.get("surface")
         raise RecipeError(format_validation_error(e, f"{path}{f', line {line}' if line else ''}: surface: ")) from None
     return model
+
+
+def check_scan(model: ModelSpec, path) -> None:
+    """Refuse, as `pointspro simulate` does and in its words, a model whose own scan cannot be
+    simulated: a spiral of more than 5,000,000 samples, fiducials without centres (the scan's
+    ValueError, named with the model file as core/cli.py cmd_simulate names it), a scan reaching
+    where the nominal surface is not defined (the surface's own error). For `pointspro explain`,
+    which evaluates the model at the measured points only: it took such models, and its
+    model.updated.yaml would then not simulate (a review's finding)."""
+    path = Path(path)
+    try:
+        pts = scan_points(model.scan)
+    except ValueError as e:
+        raise RecipeError(f"{path}: {e}") from None
+    ScanContext.from_surface(model.build_surface(path.parent), pts["x"], pts["y"], pts["t"], pts["c"])
 
 
 def effects_dz(ctx: ScanContext, effects: list[dict]) -> np.ndarray:

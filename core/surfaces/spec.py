@@ -10,7 +10,10 @@
 """
 from __future__ import annotations
 
+import functools
 import re
+import types
+import typing
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
@@ -28,6 +31,74 @@ _TERM = re.compile(r"x([0-9]+)y([0-9]+)")  # fullmatch: "x2y0\n" and "x２y0" ar
 _INT = TypeAdapter(int)
 
 
+@functools.cache
+def _step_number():
+    """A step's parameters with one number: the steps' own check (core.step.Params) of a number
+    written as text, applied here to one value at a time rather than written twice. Imported when
+    first needed: core.step imports core.surfaces."""
+    from ..step import Params
+
+    class _Number(Params):
+        value: float | None = None
+
+    return _Number
+
+
+def _texts(ann, value, path=()):
+    """(path, text) of each string in ``value`` where ``ann`` wants a number: a float or int field,
+    a mapping's values, a list's or tuple's items, a nested pydantic model's fields (the path: the
+    ("in", key) and ("item", i) steps down to it, as core.yamlio.bool_as_number's)."""
+    origin, args = typing.get_origin(ann), typing.get_args(ann)
+    if origin is typing.Annotated:
+        yield from _texts(args[0], value, path)
+    elif origin is typing.Union or origin is types.UnionType:
+        if isinstance(value, str) and any(a in (float, int) for a in args):
+            yield path, value
+        elif not isinstance(value, str):
+            for a in args:
+                yield from _texts(a, value, path)
+    elif ann in (float, int):
+        if isinstance(value, str):
+            yield path, value
+    elif isinstance(value, (list, tuple)) and origin in (list, tuple):
+        fixed = origin is tuple and args and not (len(args) == 2 and args[1] is Ellipsis)
+        for i, v in enumerate(value):
+            a = (args[i] if i < len(args) else None) if fixed else (args[0] if args else None)
+            if a is not None:
+                yield from _texts(a, v, (*path, ("item", i)))
+    elif isinstance(value, dict) and origin is dict and len(args) == 2:
+        for k, v in value.items():
+            yield from _texts(args[1], v, (*path, ("in", k)))
+    elif isinstance(value, dict) and isinstance(getattr(ann, "model_fields", None), dict):
+        for k, v in value.items():
+            f = ann.model_fields.get(k) if isinstance(k, str) else None
+            if f is not None:
+                yield from _texts(f.annotation, v, (*path, ("in", k)))
+
+
+def number_as_text(annotation, value, name: str | None = None):
+    """A pydantic error (type ``number_text``) when ``value`` holds a number written as text where
+    ``annotation`` wants a number — `aperture: 1_300` (a word in YAML 1.2) or `c: "3.33e-4"`, which
+    pydantic's lax mode would read as the number — refused with the steps' own check and words
+    (core.step.Params); None otherwise (text that is no number is left to pydantic's own message).
+    As core.yamlio.bool_as_number's: its context has ``keys`` (``name``, the field the value is of,
+    then the mapping keys down to the text) and ``detail`` (the message without them)."""
+    for path, text in _texts(annotation, value, (("in", name),) if name is not None else ()):
+        try:
+            _step_number()(value=text)
+        except ValidationError as e:
+            why = next((err["msg"] for err in e.errors() if err["type"] == "number_text"), None)
+            if why is None:
+                continue
+            n = next((i for i, (kind, _) in enumerate(path) if kind != "in"), len(path))
+            keys = [str(k) for _, k in path[:n]]  # the keys down to it ('A', '4'); the rest: "item 2: …"
+            where = "'s ".join(f"item {k + 1}" if kind == "item" else f"key {yaml_word(k)}"
+                               for kind, k in path[n:])
+            detail = (f"{where}: " if where else "") + f"{why} (got {text!r})"
+            return PydanticCustomError("number_text", "{detail}", {"keys": keys, "detail": detail})
+    return None
+
+
 class _Spec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN, ±inf: never
     aperture: float | None = Field(None, gt=0, description="clear-aperture diameter (mm)")
@@ -38,8 +109,9 @@ class _Spec(BaseModel):
         """`c: true`, `aperture: true`, `A: {4: true}`, `a: [1e-4, false]` are refused: pydantic's lax
         mode would take true as 1 and false as 0 (core.yamlio.bool_as_number); and, as a step's
         parameters do (core.step.Params), `repair: yes`, a word in YAML 1.2 that pydantic would take
-        as true. A model validator: a field's before-validator may not touch the union's
-        discriminator `type`."""
+        as true, and `aperture: 1_300` or `c: "3.33e-4"`, text it would take as the number
+        (number_as_text; a review: both ran). A model validator: a field's before-validator may not
+        touch the union's discriminator `type`."""
         if isinstance(data, dict):
             for name, v in data.items():
                 f = cls.model_fields.get(name) if isinstance(name, str) else None
@@ -55,6 +127,10 @@ class _Spec(BaseModel):
                                                "detail": f"Input should be true or false (got {v})"})
                 if f is not None and isinstance(v, (bool, list, tuple, dict)):
                     error = bool_as_number(f.annotation, v, name)
+                    if error is not None:
+                        raise error
+                if f is not None:  # `aperture: 1_300`, `c: "3.33e-4"`: text, refused as a step's is
+                    error = number_as_text(f.annotation, v, name)
                     if error is not None:
                         raise error
         return data

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -370,10 +371,21 @@ def one_sample(job: Job, i: int):
 _JOB: Job | None = None
 
 
-def _worker_init():
-    import signal
+#: blocked while the pool forks its workers; each worker unblocks them once it handles them its way
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
+
+def _worker_init():
+    """A worker's own signal handling. It is forked from the batch, whose SIGTERM handler raises
+    KeyboardInterrupt (core/cli.py _drain): on the pool's terminate() (which sends SIGTERM) each
+    worker printed "Process ForkPoolWorker-1: Traceback … KeyboardInterrupt" before the batch's
+    closing line (a review's finding). The parent stops the pool: Ctrl-C (SIGINT, sent to the whole
+    process group) is ignored here, and SIGTERM ends the worker at once, silently, as by default.
+    Both were blocked while the pool forked (run_samples), so that neither reaches a worker before
+    this has run; they are unblocked last."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops the pool
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def _worker_chunk(indices):
@@ -417,17 +429,27 @@ def run_samples(job: Job, samples: int, workers: int, progress) -> tuple[int, li
     chunks = [list(range(a, min(a + chunk, samples))) for a in range(0, samples, chunk)]
     _JOB = job
     ctx = mp.get_context("fork")
-    pool = ctx.Pool(workers, initializer=_worker_init)
+    pool = None
     try:
+        # the workers (and the pool's threads, which fork replacements) start with SIGINT and SIGTERM
+        # blocked: one arriving between a fork and _worker_init waits for the worker's own handling;
+        # one arriving here meanwhile is handled by this thread once Pool() has returned
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+        try:
+            pool = ctx.Pool(workers, initializer=_worker_init)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         for part in pool.imap(_worker_chunk, chunks):
             results.extend(part)
             progress.update(len(results) / samples, f"Monte Carlo sample {len(results)}/{samples}")
         pool.close()
     except BaseException:
-        pool.terminate()
+        if pool is not None:
+            pool.terminate()
         raise
     finally:
-        pool.join()
+        if pool is not None:
+            pool.join()
         _JOB = None
     results.sort(key=lambda r: r[0])
     return workers, results
