@@ -277,7 +277,9 @@ def _batch(args, recipe_path: Path, pool) -> int:
     recipe = load_batch_recipe(recipe_path, tuple(args.overrides))  # --set applied, then validated
     inputs = [Path(f) for f in args.files[1:]]
     allowed = _allowed_dirs(recipe_path, inputs, args.allow_path)
-    _check_recipe_files(recipe, allowed)  # before any file the recipe names is read
+    # before any file the recipe names is read; on a cluster without --ship the workers may see
+    # paths this machine does not, so only there is a missing one left to the worker to say
+    _check_recipe_files(recipe, allowed, must_exist=not (args.scheduler and not args.ship))
     surface = recipe.build_surface()  # a missing mesh file is a recipe error: fail before any input
     _check_surface_needed(recipe, recipe_path, surface)
     out = Path(args.out)
@@ -482,10 +484,13 @@ def _allowed_dirs(recipe_path: Path, inputs: list[Path], extra: list[str]) -> li
     return list(dict.fromkeys(d.resolve() for d in dirs))
 
 
-def _check_recipe_files(recipe, allowed: list[Path]) -> None:
+def _check_recipe_files(recipe, allowed: list[Path], must_exist: bool = True) -> None:
     """Every file the recipe names (steps' file parameters, ``inputs:``, a mesh surface) lies in
     ``allowed``: RecipeError naming the line, the step and the parameter otherwise — so a shared
-    recipe cannot read files its user did not allow, on any executor."""
+    recipe cannot read files its user did not allow, on any executor. With ``must_exist``, a step's
+    file parameter that is empty, missing or a folder is refused here too, before any input runs (a
+    review: a missing `dynamic.model` or `kinematic.map` was found only at run time, on every
+    input, behind "the scan has no t channel"; `volumetric: {model: ""}` read as the folder ".")."""
     from .errors import RecipeError
     from .step import file_parameters, outside_allowed
 
@@ -495,18 +500,34 @@ def _check_recipe_files(recipe, allowed: list[Path]) -> None:
     spec = recipe.surface_spec or {}
     if spec.get("type") == "mesh" and isinstance(spec.get("path"), str):
         named.append(("surface: key 'path'", spec["path"]))
+    step_files = []
     for i, rs in enumerate(recipe.steps, 1):
         loc = f"line {rs.line}: " if rs.line else ""
-        named += [(f"{loc}step {i} '{rs.id}': parameter '{k}'", v)
-                  for k, v in file_parameters(rs.params).items()]
+        files = file_parameters(rs.params)
+        step_files += [(f"{loc}step {i} '{rs.id}': parameter '{k}'", v) for k, v in files.items()]
+        for k, f in type(rs.params).model_fields.items():  # set, but to nothing
+            extra = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
+            value = getattr(rs.params, k, None)
+            if extra.get("file") and isinstance(value, str) and not value.strip():
+                raise RecipeError(f"{where}, {loc}step {i} '{rs.id}': parameter '{k}' is empty; "
+                                  "give a file name (relative to the recipe) or leave the key out")
+    named += step_files
     resolved = [(f"inputs: key '{k}'", str(v)) for k, v in recipe.inputs.items()]  # already joined
+
+    def say(what, why):
+        return f"{where}, {what}: {why}" if what.startswith("line") else f"{where}: {what}: {why}"
+
     for what, value in [*named, *resolved]:
         p = Path(value)
         p = p if p.is_absolute() or base is None or (what, value) in resolved else base / p
         why = outside_allowed(p, allowed)
         if why:
-            raise RecipeError(f"{where}, {what}: {why}" if what.startswith("line") else
-                              f"{where}: {what}: {why}")
+            raise RecipeError(say(what, why))
+        if must_exist and (what, value) in step_files:
+            if not p.exists():
+                raise RecipeError(say(what, f"{p}: file not found"))
+            if p.is_dir():
+                raise RecipeError(say(what, f"{p}: a folder, not a file"))
 
 
 def _cores() -> int:

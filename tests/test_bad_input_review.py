@@ -189,3 +189,32 @@ def test_explain_refuses_the_models_simulate_refuses(tmp_path, run_cli, measured
     code, _, err = run_cli("explain", "--model", model, "--measured", measured, "--out", tmp_path / "e")
     assert code == 2 and _one_line(err) == line, (err, err_sim)
     assert not (tmp_path / "e").exists() and not (tmp_path / "s.csv").exists()
+
+
+# --- a step's parameter file is checked before any input runs ------------------------------------
+@pytest.mark.parametrize("step,value,says", [
+    ("volumetric: {model: missing.json}", "missing.json", "file not found"),
+    ("kinematic: {map: gone/kinematic_map.json}", "kinematic_map.json", "file not found"),
+    ("dynamic: {model: dynamic_model.json}", "dynamic_model.json", "file not found"),
+    ("volumetric: {model: sub}", "sub", "a folder, not a file"),
+    ("volumetric: {model: \"\"}", "parameter 'model' is empty", "give a file name"),
+])
+def test_a_missing_parameter_file_is_refused_before_any_input(tmp_path, run_cli, step, value, says):
+    """A review: a missing `dynamic.model` or `kinematic.map` was reported at run time, on each input,
+    behind "the scan has no t channel"; `volumetric: {model: ""}` read as the folder "." ("file not
+    found"). The README says the whole recipe is validated before anything runs: one line naming the
+    step and the parameter, and no output folder written."""
+    import shutil
+
+    (tmp_path / "sub").mkdir()
+    data = tmp_path / "asphere_cmm.csv"
+    shutil.copy(EXAMPLE / "asphere_cmm.csv", data)
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text(f"pointspro: 1\nsteps:\n  - {step}\n", encoding="utf-8")
+    out = tmp_path / "out"
+    code, _, err = run_cli("--batch", recipe, data, "--out", out)
+    assert code == 2, err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert "r.yaml" in lines[0] and "line 3" in lines[0] and value in lines[0] and says in lines[0], lines[0]
+    assert not out.exists()
