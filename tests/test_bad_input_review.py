@@ -218,3 +218,23 @@ def test_a_missing_parameter_file_is_refused_before_any_input(tmp_path, run_cli,
     assert len(lines) == 1 and "Traceback" not in err, err
     assert "r.yaml" in lines[0] and "line 3" in lines[0] and value in lines[0] and says in lines[0], lines[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("header,refused", [
+    ("x [µm],y [µm],z", True), ("x [um],y,z [um]", True), ("x,y,z [nm]", True),
+    ("x [mm],y [mm],z", False), ("x,y,z", False), ("x [µm],y [µm],z [µm]", False),
+])
+def test_a_coordinate_without_its_unit_beside_others_in_another_unit_is_refused(tmp_path, header, refused):
+    """A review: `x [µm],y [µm],z` read z in mm without a word — 1000× off if the writer meant µm for
+    all three. A coordinate without a unit beside one stated in another length is refused, naming
+    both; beside mm (the default) it is read as mm."""
+    from pointspro.core.errors import InputError
+    from pointspro.core.io import read_cloud
+
+    f = write(tmp_path / "p.csv", header + "\n" + "\n".join(f"{i},{i % 7},{i % 3}" for i in range(30)) + "\n")
+    if refused:
+        with pytest.raises(InputError, match=r"line 1: .* no unit .*read as mm"):
+            read_cloud(f)
+    else:
+        c = read_cloud(f)
+        assert c.n == 30

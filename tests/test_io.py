@@ -200,7 +200,7 @@ def test_a_title_line_is_not_taken_for_a_short_header(tmp_path):
     ("y,x,z\n1 2 3\n4 5 6\n", [[2, 1, 3], [5, 4, 6]]),
     ("y x z\n1\t2\t3\n4\t5\t6\n", [[2, 1, 3], [5, 4, 6]]),  # a space-separated header, tab data
     ("x [um] y [um] z [um]\n1000,2000,3\n4000,5000,6\n", [[1, 2, 0.003], [4, 5, 0.006]]),
-    ("x[um] y (um) z\n1000\t2000\t3\n4000\t5000\t6\n", [[1, 2, 3], [4, 5, 6]]),
+    ("x[um] y (um) z (mm)\n1000\t2000\t3\n4000\t5000\t6\n", [[1, 2, 3], [4, 5, 6]]),
     ("Part 7, run 3\ny x z\n1\t2\t3\n4\t5\t6\n", [[2, 1, 3], [5, 4, 6]]),
 ])
 def test_header_with_another_separator_than_the_data_is_read(tmp_path, text, xyz):

@@ -641,6 +641,17 @@ def _xyz_in_mm(path, lay: _Layout, data, names, lengths, units):
     cols = {n: data[:, j] for j, n in enumerate(names)}
     xyz = np.column_stack([cols.pop("x"), cols.pop("y") if "y" in cols else np.zeros(len(data)),
                            cols.pop("z")])
+    # a coordinate without a unit beside one stated in another length (`x [µm], y [µm], z`): read as
+    # mm it would be silently 1000× off if the writer meant the same µm (a review) — refused
+    stated = {a: units[names.index(a)] for a in "xyz"
+              if a in names and units[names.index(a)] and lengths[names.index(a)]}
+    bare = [a for a in "xyz" if a in names and not units[names.index(a)]]
+    other = sorted({u for u in stated.values() if u.strip().lower() != "mm"})
+    if bare and other:
+        raise InputError(f"{path}, line {lay.header[0] + 1}: {' and '.join(sorted(stated))} "
+                         f"{'is' if len(stated) == 1 else 'are'} given in {' and '.join(other)} but "
+                         f"{' and '.join(bare)} {'has' if len(bare) == 1 else 'have'} no unit (it would "
+                         f"be read as mm): state it, e.g. {bare[0]} [{other[0]}] or {bare[0]} [mm]")
     for a in "xyz":
         if a not in names:
             continue
