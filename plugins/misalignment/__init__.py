@@ -12,7 +12,9 @@ equations, so that it converges from zero for misalignments of degrees and tens 
 runs in well under a second on 10⁶ points. Optional DOF: the vertex radius (`radius`) and the conic
 (`conic`) for users who want them. Stylus profiles (core.profiles: an x, z file, an `angle` or
 `profile` channel) are fitted in their own planes (profile.py). The output is the cloud in the part frame with
-``residual = z − sag(x, y)`` (mm).
+``residual = z − sag(x, y)`` (mm). A residual that is a large share of the nominal's own sag
+variation over the points — a wrong nominal, not a form error — is refused, naming the curvature's sign
+when the points fit the nominal turned upside down (nominal_check.py).
 
 Uncertainties are Type A: s²(JᵀJ)⁻¹ with s² the residual variance — they treat the form error as
 random, so read them as the spread the data allows, not as a calibration uncertainty.
@@ -85,7 +87,17 @@ class MisalignmentStep(Step):
         except StepError as e:
             from pointspro.core.profiles import with_profile_hint
 
-            raise with_profile_hint(e) from None
+            from .nominal_check import check_failed_fit
+
+            # a flipped curvature the fit cannot even converge on is named as such (nominal_check.py)
+            flipped = check_failed_fit(surface, cloud.xyz, dof, params.initial.as_dof(),
+                                       params.max_iterations, ctx.progress.check, e)
+            raise (StepError(flipped) if flipped else with_profile_hint(e)) from None
+        from .nominal_check import check_fit
+
+        # a residual the size of the nominal's own sag is a wrong nominal (a flipped c), not a form error
+        check_fit(surface, fit.surface, cloud.xyz, part, residual, dof, params.initial.as_dof(),
+                  params.max_iterations, ctx.progress.check)
         ctx.progress.update(0.9, "residual")
         report = fit.report()
         report.update(residual_rms_um=float(np.sqrt(np.mean(residual ** 2)) * 1e3),
