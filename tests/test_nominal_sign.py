@@ -1,4 +1,4 @@
-"""misalignment refuses a residual that is the nominal's own shape (plugins/misalignment/nominal_check.py).
+"""misalignment refuses a residual that is the nominal's own shape (core/geometry/nominal_check.py).
 
 A review ran the example asphere against its nominal with c, A4, A6 negated (a concave/convex mix-up)
 and got exit 0, "residual RMS 41.98 mm, PV 139.8 mm", map.csv, zernike.csv and no warning. The step

@@ -14,7 +14,7 @@ runs in well under a second on 10⁶ points. Optional DOF: the vertex radius (`r
 `profile` channel) are fitted in their own planes (profile.py). The output is the cloud in the part frame with
 ``residual = z − sag(x, y)`` (mm). A residual that is a large share of the nominal's own sag
 variation over the points — a wrong nominal, not a form error — is refused, naming the curvature's sign
-when the points fit the nominal turned upside down (nominal_check.py).
+when the points fit the nominal turned upside down (core/geometry/nominal_check.py).
 
 Uncertainties are Type A: s²(JᵀJ)⁻¹ with s² the residual variance — they treat the form error as
 random, so read them as the spread the data allows, not as a calibration uncertainty.
@@ -85,15 +85,14 @@ class MisalignmentStep(Step):
                     surface, cloud.xyz, dof, params.initial.as_dof(), "vertical", params.exclude_beyond,
                     fit, part, residual, max_iter=params.max_iterations, check=ctx.progress.check)
         except StepError as e:
+            from pointspro.core.geometry.nominal_check import check_failed_fit
             from pointspro.core.profiles import with_profile_hint
 
-            from .nominal_check import check_failed_fit
-
-            # a flipped curvature the fit cannot even converge on is named as such (nominal_check.py)
+            # a flipped curvature the fit cannot even converge on is named as such (core/geometry/nominal_check.py)
             flipped = check_failed_fit(surface, cloud.xyz, dof, params.initial.as_dof(),
                                        params.max_iterations, ctx.progress.check, e)
             raise (StepError(flipped) if flipped else with_profile_hint(e)) from None
-        from .nominal_check import check_fit
+        from pointspro.core.geometry.nominal_check import check_fit
 
         # a residual the size of the nominal's own sag is a wrong nominal (a flipped c), not a form error
         check_fit(surface, fit.surface, cloud.xyz, part, residual, dof, params.initial.as_dof(),

@@ -16,6 +16,11 @@ conic, A4, A6]`. Each centre then moves by −s·ρ·n̂ with n̂ the design nor
 from the data's own slopes where the part has form error (normals.py). The output stays in the
 measuring frame, as the input. Stylus profiles (core.profiles) get the same exact fit in each
 profile's plane: the 2-D offset curve of the meridian (profile.py).
+
+A nominal whose curvature has the wrong sign (concave for convex: the example with c and A negated)
+makes the fit fail ("cannot separate … fit fewer DOF", "did not converge") or converge to a distance
+residual the size of the nominal's sag; either way the centres mirrored in z are fitted to the nominal
+and, when they fit far better, the sign of `surface.c` is named (core/geometry/nominal_check.py, shared with misalignment).
 """
 from __future__ import annotations
 
@@ -158,12 +163,26 @@ class ProbeRadiusStep(Step):
                 pass
             if isinstance(e, DomainError):
                 raise
+            # a flipped curvature (c's sign) makes the fit fail — "cannot separate …: fit fewer DOF" or
+            # "did not converge" on the example: the centres mirrored in z fit the nominal then
+            from pointspro.core.geometry.nominal_check import check_failed_fit
             from pointspro.core.profiles import with_profile_hint
 
-            raise with_profile_hint(e) from None
+            flipped = check_failed_fit(
+                surface, cloud.xyz, dof, params.initial.as_dof(), params.max_iterations, ctx.progress.check,
+                e, kind="normal", offset=s * rho_b)
+            raise (StepError(flipped) if flipped else with_profile_hint(e)) from None
         ctx.progress.update(0.8, "compensating")
         foot, n, dist = fit.foot_point()  # warm-started from the fit's last foot radii
         e = dist - s * rho_b  # envelope residual: form error along the normal, plus noise (mm)
+        # ... or it converges to a distance residual the size of the nominal's own sag (the tilts held)
+        from pointspro.core.geometry.nominal_check import check_sign
+
+        flipped = check_sign(surface, fit.surface, cloud.xyz, foot, e, dof,
+                                             params.initial.as_dof(), params.max_iterations,
+                                             ctx.progress.check, kind="normal", offset=s * rho_b)
+        if flipped:
+            raise StepError(flipped)
         exclusion, excluded = {}, None
         if params.exclude_beyond is not None:  # the pose without the outliers (core/geometry/outliers.py)
             from pointspro.core.geometry.outliers import refit_without_outliers

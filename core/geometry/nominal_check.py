@@ -1,4 +1,5 @@
-"""Is the nominal the part's? `misalignment` refuses a residual that is the nominal's own shape.
+"""Is the nominal the part's? A residual that is the nominal's own shape is refused (the check
+`misalignment` and `probe_radius` share).
 
 A real part's form error is µm against the mm of its sag. A wrong nominal gives a "form error" the size
 of the sag itself, and every step after the fit (Zernike, map, tolerance) then reports it with exit 0: a
@@ -26,6 +27,14 @@ dz → −dz) — when it fits far better, the sign of the curvature is wrong; e
 the nominal (and when their heights barely vary at all, they are probably deviations already).
 A fit to the nominal that fails outright (no convergence) is tried mirrored too, so that a flipped
 sign the fit cannot even start from is named as such rather than as a convergence problem.
+
+probe_radius, which meets the nominal first, asks the same of its normal-distance fit of probe-ball
+centres (check_sign, check_failed_fit with kind "normal"): the mirrored centres are fitted at −s·ρ
+(the ball's side turns with them), which is exact — the example flipped leaves 0.839 µm, the correct
+fit's own; c alone negated 68.9 µm, c negated without k and A 0.182 mm (ratios 4e-5 to 0.009). Their
+vertical fit, as on contact points, would leave the ball's own 1–1.6 × ρ/R of the sag variation: 0.0013
+to 0.0075 on the example, but 0.27–0.58 on small lenses probed with a ball a fifth to a third of R (R
+10 mm ball 2.5: 0.40), above RATIO_LIMIT. The correct nominals' mirrored fits leave 2–5.
 """
 from __future__ import annotations
 
@@ -90,9 +99,13 @@ def _figures(surface, part, residual, rows=slice(None)):
     return res, var
 
 
-def _mirrored_fit(nominal, q, dof, initial, max_iter, check):
+def _mirrored_fit(nominal, q, dof, initial, max_iter, check, kind="vertical", offset=0.0):
     """(residual RMS, sag variation RMS) of the pose fit of the points mirrored in z — the fit of the
-    nominal turned upside down — or None when that fit fails."""
+    nominal turned upside down — or None when that fit fails. ``kind``, ``offset``: those of the fit to
+    the nominal; "normal" with offset s·ρ is probe_radius's fit of probe-ball centres, whose mirror
+    images lie at −s·ρ from the nominal when its sign is wrong (the ball's side turns with the part):
+    the mirrored fit's figures are then those of its distance residual at its foot points, as exact as
+    on contact points."""
     from pointspro.core.geometry.posed_fit import PosedSurfaceFit
 
     init = {k: (-v if k in ("alpha", "beta", "dz") else v) for k, v in initial.items()}
@@ -105,8 +118,11 @@ def _mirrored_fit(nominal, q, dof, initial, max_iter, check):
         tries.append(held)
     for free in tries:
         try:
-            fit = PosedSurfaceFit(nominal, mirrored, free, init, "vertical", max_iter=max_iter,
+            fit = PosedSurfaceFit(nominal, mirrored, free, init, kind, offset=-offset, max_iter=max_iter,
                                   check=check).fit()
+            if kind == "normal":
+                foot, _, dist = fit.foot_point()
+                return _figures(fit.surface, foot, dist + offset)
         except (StepError, DomainError, np.linalg.LinAlgError, FloatingPointError, ValueError):
             continue
         return _figures(fit.surface, fit.part, fit.residuals)
@@ -150,39 +166,72 @@ def _mismatch_message(res, sag, part, residual) -> str:
     return msg
 
 
+def _large_share(fitted, part, residual):
+    """(residual RMS, sag variation RMS) over every point (less a plane, mm) when the residual is a
+    large share of the sag variation (SIGN_FLOOR_MM and RATIO_LIMIT, tested on ≤ SAMPLE points); else
+    None."""
+    n = len(residual)
+    rows = slice(None, None, max(1, n // SAMPLE))
+    figs = _figures(fitted, part, residual, rows)
+    if figs is None:
+        return None
+    res, sag = figs
+    if not (res > SIGN_FLOOR_MM and res > RATIO_LIMIT * sag):
+        return None
+    full = _figures(fitted, part, residual)  # the message's figures over every point
+    return full if full is not None else figs
+
+
+def _mirror_verdict(nominal, q, dof, initial, max_iter, check, res, sag, kind="vertical", offset=0.0):
+    """The message naming the sign when the mirrored fit passes RATIO_LIMIT itself and fits
+    MIRROR_GAIN better than the fit's residual ``res``; else None."""
+    mirrored = _mirrored_fit(nominal, q, dof, initial, max_iter, check, kind, offset)
+    if mirrored is not None:
+        m_res, m_sag = mirrored
+        if m_res <= RATIO_LIMIT * m_sag and m_res <= MIRROR_GAIN * res:
+            return _sign_message(res, m_res, sag)
+    return None
+
+
 def check_fit(nominal, fitted, q, part, residual, dof, initial, max_iter, check) -> None:
     """StepError when the residual ``residual`` at part-frame points ``part`` (the pose fit of points
     ``q`` to ``nominal``; ``fitted``: the fit's surface, the nominal with any design DOF fitted) is no
     form error but a wrong nominal — module doc. Passes quietly otherwise."""
-    n = len(residual)
-    if n < 4 or _is_flat(nominal) or _is_flat(fitted):
+    if len(residual) < 4 or _is_flat(nominal) or _is_flat(fitted):
         return
-    rows = slice(None, None, max(1, n // SAMPLE))
-    figs = _figures(fitted, part, residual, rows)
+    figs = _large_share(fitted, part, residual)
     if figs is None:
         return
     res, sag = figs
-    if not (res > SIGN_FLOOR_MM and res > RATIO_LIMIT * sag):
-        return
-    full = _figures(fitted, part, residual)  # the message's figures over every point
-    if full is not None:
-        res, sag = full
-    mirrored = _mirrored_fit(nominal, q, dof, initial, max_iter, check)
-    if mirrored is not None:
-        m_res, m_sag = mirrored
-        if m_res <= RATIO_LIMIT * m_sag and m_res <= MIRROR_GAIN * res:
-            raise StepError(_sign_message(res, m_res, sag))
+    flipped = _mirror_verdict(nominal, q, dof, initial, max_iter, check, res, sag)
+    if flipped:
+        raise StepError(flipped)
     if res > RESIDUAL_FLOOR_MM and res > RATIO_LIMIT * sag:
         raise StepError(_mismatch_message(res, sag, part, residual))
 
 
-def check_failed_fit(nominal, q, dof, initial, max_iter, check, error: StepError) -> str | None:
+def check_sign(nominal, fitted, q, part, residual, dof, initial, max_iter, check, kind="vertical",
+               offset=0.0) -> str | None:
+    """check_fit's test of the curvature's sign alone: the message naming it, or None (no verdict on
+    anything else). probe_radius: ``kind`` "normal" and ``offset`` s·ρ (its fit's), ``part`` the foot
+    points and ``residual`` the distance residual less s·ρ (_mirrored_fit)."""
+    if len(residual) < 4 or _is_flat(nominal) or _is_flat(fitted):
+        return None
+    figs = _large_share(fitted, part, residual)
+    if figs is None:
+        return None
+    return _mirror_verdict(nominal, q, dof, initial, max_iter, check, *figs, kind=kind, offset=offset)
+
+
+def check_failed_fit(nominal, q, dof, initial, max_iter, check, error: StepError, kind="vertical",
+                     offset=0.0) -> str | None:
     """After the pose fit to ``nominal`` failed with ``error``: the error naming the curvature's sign
     when the points mirrored in z fit well (their residual within RATIO_LIMIT of the sag variation,
-    and that sag variation large enough for the flip to matter); else None (the caller re-raises)."""
+    and that sag variation large enough for the flip to matter); else None (the caller re-raises).
+    ``kind``, ``offset``: those of the failed fit (probe_radius: "normal", s·ρ; _mirrored_fit)."""
     if _is_flat(nominal) or len(q) < 4:
         return None
-    mirrored = _mirrored_fit(nominal, q, dof, initial, max_iter, check)
+    mirrored = _mirrored_fit(nominal, q, dof, initial, max_iter, check, kind, offset)
     if mirrored is None:
         return None
     m_res, m_sag = mirrored
