@@ -122,9 +122,15 @@ KEY_UNITS = (("_um", "µm"), ("_nm", "nm"), ("_mm", "mm"), ("_urad", "µrad"), (
 
 
 #: report keys with no unit suffix that are lengths in mm by the rule of docs/conventions.md, Units
-#: (a pose's translation, a step's window or spacing, an aperture's diameter, a surface's radius)
+#: (a pose's translation, a step's window or spacing, an aperture's diameter, a surface's radius; and
+#: the measurement model's effect parameters in mm, explain.json's ``found[].params``: a vibration's
+#: ``amplitude``, spindle_axial's harmonics ``a1``…``b32``, straightness ``s2``…``s4``, thermal_drift
+#: ``d1``, ``d2`` — docs/formats.md, Measurement models; core/simulate/effects.py). No other report
+#: uses these names (spindle_tilt's harmonics carry their unit: ``a2_arcsec``).
 BARE_LENGTH_KEYS = frozenset({"dx", "dy", "dz", "tx", "ty", "tz", "diameter", "aperture", "knot_spacing",
-                              "spacing", "window", "norm_radius", "r_max", "radius", "probe_radius"})
+                              "spacing", "window", "norm_radius", "r_max", "radius", "probe_radius",
+                              "amplitude", "s2", "s3", "s4", "d1", "d2",
+                              *(f"{ab}{k}" for k in range(1, 33) for ab in "ab")})
 
 
 def unit_of_key(name: str) -> str:
@@ -156,7 +162,7 @@ def column_unit(values_mm, default: str = "mm") -> str:
 
 def format_keyed(name: str, v: float, digits: int = 6) -> str:
     """A report number for people, with the unit its key names: a length in the unit its size asks
-    for (``robust_sigma_um`` 0.2976 → "297.6 nm", ``dx`` 0.7975 → "797.536 µm"), another unit
+    for (``robust_sigma_um`` 0.2976 → "297.6 nm", ``dx`` 0.7975361802 → "797.536 µm"), another unit
     appended ("0.168275°", "3.8695 µrad"); a key with no unit, the number alone (counts, ratios)."""
     unit = unit_of_key(name)
     if unit in SHOWN_LENGTH_MM:
