@@ -86,8 +86,9 @@ def test_calibrated_ibw_keeps_its_78_nm_pixel_and_refuses_the_option():
     assert c.meta["pixel_mm"][0] * 1e6 == pytest.approx(78.43, abs=0.005)  # nm
     assert np.allclose(c.x, c["col"] * sf_a[0] * 1e3, rtol=1e-12, atol=0)
     assert np.allclose(c.y, c["row"] * sf_a[1] * 1e3, rtol=1e-12, atol=0)
-    # heights: layer 0 (HeightTrace) in m; SurfaceTopography's orientation (dimension 1 reversed)
-    assert np.allclose(c.z, data[0][255 - c["row"], c["col"]] * 1e3, rtol=1e-6, atol=0)
+    # heights: layer 0 (HeightTrace) in m, at the wave's own coordinates x = i·sfA₀, y = j·sfA₁
+    # (SurfaceTopography gives dimension 1 reversed: a y mirror, corrected in the reader)
+    assert np.allclose(c.z, data[0][c["row"], c["col"]] * 1e3, rtol=1e-6, atol=0)
     with pytest.raises(InputError, match=r"gives its own lateral calibration; remove the reader "
                                          r"option pixel_size_um"):
         read_cloud(CALIBRATED, pixel_size_um=0.1)
@@ -125,7 +126,7 @@ def test_uncalibrated_ibw_takes_the_pixel_size_um_given(path, opts):
     assert c.meta["pixel_mm"] == pytest.approx([2e-3, 3e-3], rel=1e-15)
     assert np.array_equal(c.x, c["col"] * 2e-3) and np.array_equal(c.y, c["row"] * 3e-3)
     assert np.isclose(np.ptp(c.x), 9 * 2e-3) and np.isclose(np.ptp(c.y), 9 * 3e-3)
-    assert np.allclose(c.z, data[0][9 - c["row"], c["col"]] * 1e-6, rtol=1e-12, atol=0)  # nm → mm
+    assert np.allclose(c.z, data[0][c["row"], c["col"]] * 1e-6, rtol=1e-12, atol=0)  # nm → mm
     c1 = read_cloud(path, pixel_size_um=1.1, **opts)
     assert c1.meta["pixel_mm"] == pytest.approx([1.1e-3, 1.1e-3], rel=1e-15)
 

@@ -703,6 +703,13 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
     elif no_lateral is not None and ch.physical_sizes is not None:  # Igor: default x/y scaling
         X_mm, Y_mm, pixel = _pixel_grid(t.nb_grid_pts, opts.pixel_size_um[0] * 1e-3,
                                         opts.pixel_size_um[1] * 1e-3)
+    if fmt == "ibw":
+        # an Igor wave states its own coordinates, x = sfB₀ + i·sfA₀, y = sfB₁ + j·sfA₁ (dimension 0 the
+        # rows, 1 the columns); SurfaceTopography 1.27 gives dimension 1 reversed, which put the wave's
+        # y = 0 line at the top of our y-up frame: a mirror (y-odd Zernike terms, a correction's side,
+        # flipped). Gwyddion's igorfile.c flips the wave vertically for its y-down image rows — the
+        # same picture as the wave's own y up (checked pixel by pixel on spot_1-1000nm.ibw)
+        h, valid = h[:, ::-1], valid[:, ::-1]
     # SurfaceTopography's arrays are (x, y): index [i, j] is column i, row j
     xyz, chans = _to_cloud(X_mm.T, Y_mm.T, h.T * to_mm, valid.T, path)
     return xyz, chans, {"instrument_format": fmt, "instrument_reader": reader.name(),
