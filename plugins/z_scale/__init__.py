@@ -1,10 +1,12 @@
 """`z_scale`: correct the z axis's amplification error (seed paper 000 §2.6, §3.2).
 
 Either from ``calibration`` — a CSV of step-artefact scans (columns x, z in mm, optional `scan` for
-repeats) with the calibrated ``heights`` (µm, in the order the steps occur along x) — evaluated by
-core.calibration.zscale (ISO 5436-1 line fits, amplification = slope of measured vs calibrated,
-linearity = largest deviation), or from a known ``amplification``. Heights are corrected about the
-cloud's mean: z' = z̄ + (z − z̄)/m (and the residual likewise, when present).
+repeats) with the certified ``heights`` (µm, one per edge in the order the edges occur along x; an
+ISO 5436-1 type A1 groove is its depth twice) — evaluated by core.calibration.zscale (each scan
+levelled by a robust line, ISO 5436-1 line fits at each edge, amplification = slope of measured vs
+certified: a line with its linearity for two or more distinct heights, through the origin for a single
+one; its standard uncertainty from the fit's residuals), or from a known ``amplification``. Heights are
+corrected about the cloud's mean: z' = z̄ + (z − z̄)/m (and the residual likewise, when present).
 """
 from __future__ import annotations
 
@@ -19,7 +21,8 @@ class ZScaleParams(Params):
     calibration: str | None = param(None, file=True, help="step-artefact scans (CSV x, z [, scan]), relative to "
                                     "the recipe; give this or amplification")
     heights: list[float] = param(default_factory=list, unit="µm",
-                                 help="calibrated step heights in the order along x")
+                                 help="certified step heights, one per edge in their order along x (a "
+                                 "groove: its depth twice)")
     amplification: float | None = param(None, gt=0.5, lt=2.0, help="known amplification coefficient "
                                         "(measured / true height); give this or calibration")
 
@@ -28,7 +31,12 @@ class ZScaleParams(Params):
         if (self.calibration is None) == (self.amplification is None):
             raise ValueError("give exactly one of calibration and amplification")
         if self.calibration is not None and len(self.heights) < 2:
-            raise ValueError("a calibration needs at least two calibrated heights")
+            raise ValueError("a calibration needs at least two calibrated heights (one per edge; a single "
+                             "groove: its depth twice)")
+        if any(not (h > 0 and np.isfinite(h)) for h in self.heights):
+            # a step's height is its magnitude: −3 for a step down gave amplification −1, refused
+            # later with a message about the order
+            raise ValueError("the calibrated heights are step heights, positive µm (a step down too)")
         return self
 
 
@@ -55,6 +63,9 @@ class ZScaleStep(Step):
                 raise StepError(f"the calibration gives amplification {m:.4g}, outside 0.5…2: check that "
                                 "the heights are in µm, positive, and in their order along x")
             report.update(cal.describe())
+            if cal.dof < 1:
+                report["warnings"].append("the amplification's uncertainty is not known: the fit has no "
+                                          "residual degrees of freedom (repeat the scans)")
             import json
 
             arts["z_scale.json"] = json.dumps({"pointspro_z_scale": 1, **cal.describe()}, indent=2) + "\n"
