@@ -1,7 +1,11 @@
-"""The kinematic error map: a look-up table of the measurement error e(r, c) over probe radius r (mm)
-and spindle angle c (deg), built from the separated components with the selective model
+"""The kinematic error map: a look-up table of the measurement error e(X, c) over the probe's position
+X on the X slide (mm, signed: the spindle axis at X = 0; ``r`` in the table and its JSON, "r_mm") and
+the spindle angle c (deg), built from the separated components with the selective model
 (core.kinematics.htm.selective_error), interpolated bilinearly (periodic in c) and subtracted from
-on-machine heights."""
+on-machine heights. The table holds 0 ≤ X ≤ r_max and, where the straightness scan reaches there,
+X < 0: a scan through the centre has the probe on both sides, and e(−X, c) ≠ e(X, c) (EZX(−X),
+and the cone −X·(EBC + EB0C) changes sign). A map of X ≥ 0 only (built before, or from a straightness
+scan that starts at the axis) refuses points at X < 0 rather than reading them at |X|."""
 from __future__ import annotations
 
 import json
@@ -21,7 +25,7 @@ MAX_GAP_DEG = 180.0 / MAX_UPR
 
 @dataclass(frozen=True)
 class KinematicMap:
-    r: np.ndarray            # (nr,) mm, ascending
+    r: np.ndarray            # (nr,) mm, ascending: the probe's signed position X on the slide
     c_deg: np.ndarray        # (nc,) deg, ascending over [0, 360)
     e: np.ndarray            # (nr, nc) mm
     components: dict = field(default_factory=dict)
@@ -31,9 +35,12 @@ class KinematicMap:
 
         r = np.asarray(r, dtype=np.float64)
         c = np.mod(np.asarray(c_deg, dtype=np.float64), 360.0)
-        if r.size and (r.max() > self.r[-1] * (1 + 1e-9) or r.min() < self.r[0] - 1e-9):
-            raise InputError(f"points at radius up to {r.max():.4g} mm lie outside the kinematic map "
-                             f"({self.r[0]:g}–{self.r[-1]:g} mm)")
+        tol = 1e-9 * max(abs(self.r[0]), abs(self.r[-1]), 1.0)
+        if r.size and (r.max() > self.r[-1] + tol or r.min() < self.r[0] - tol):
+            out = (r > self.r[-1] + tol) | (r < self.r[0] - tol)
+            raise InputError(f"{int(out.sum())} points with the probe at X from {r[out].min():.4g} to "
+                             f"{r[out].max():.4g} mm lie outside the kinematic map (X {self.r[0]:g}–"
+                             f"{self.r[-1]:g} mm)")
         cc = np.r_[self.c_deg, self.c_deg[0] + 360.0]
         ee = np.concatenate([self.e, self.e[:, :1]], axis=1)
         f = RegularGridInterpolator((self.r, cc), ee)
@@ -95,18 +102,85 @@ def facial_coverage(c_samples, path, step: str = "kinematic_map") -> None:
                      f"covers {found}")
 
 
+def map_positions(x_lo: float, r_max: float, n_r: int) -> np.ndarray:
+    """The table's probe positions X: 0…r_max in n_r steps, continued at that step down to x_lo < 0
+    (x_lo itself the first node), or from x_lo > 0 when the straightness scan starts off the axis."""
+    pos = np.linspace(0.0, r_max, n_r)
+    if x_lo > 0:
+        return np.r_[x_lo, pos[pos > x_lo * (1 + 1e-12)]]
+    k = int(np.floor(-x_lo / pos[1] + 1e-9)) if x_lo < 0 else 0
+    r = np.r_[-pos[1:k + 1][::-1], pos]
+    return np.r_[x_lo, r] if x_lo < r[0] - 1e-9 * r_max else r
+
+
+#: the squareness reversal's fit needs at least this many samples on each side of the spindle axis
+MIN_SQUARENESS_SIDE = 3
+
+
+def squareness_window(x_squareness, x_straightness, path, straightness_path, step: str = "kinematic_map"):
+    """The squareness samples the EB0C fit may use: |x| ≤ a, the largest range symmetric about the
+    spindle axis that both the squareness scans and the straightness scan (EZX, removed from them
+    first) cover. Symmetric, because turned by 180° the flat is read at −x: only over ±x does its own
+    form drop out of β1 + β2 (over 0…R its even part — power — goes into EB0C: 0.08″ read as −0.245″);
+    within the straightness scan, because EZX is not known beyond it (held at its end value it gave
+    −0.176″ for 0.08″). Returns (mask, a, warning or None); InputError, naming the files, the ranges
+    found and what is needed, when fewer than MIN_SQUARENESS_SIDE samples are left on a side."""
+    xq = np.asarray(x_squareness, dtype=np.float64)
+    xs = np.asarray(x_straightness, dtype=np.float64)
+    need = MIN_SQUARENESS_SIDE
+    neg, pos = np.sort(-xq[xq < 0]), np.sort(xq[xq > 0])
+    sq_range = f"x {xq.min():g}…{xq.max():g} mm ({xq.size} samples, {neg.size} at x < 0, {pos.size} at x > 0)"
+    if min(neg.size, pos.size) < need:
+        raise InputError(
+            f"{path}: the {step} step's squareness reversal needs the scans across the spindle axis, at least "
+            f"{need} samples on each side of x = 0 over a range symmetric about it (turned by 180°, the flat is "
+            f"read at −x, and only over ±x does its own form drop out of the slopes; a one-sided scan puts the "
+            f"flat's power into EB0C); the file covers {sq_range} — scan the flat through its centre, or "
+            f"leave squareness empty (EB0C = 0)")
+    a = min(float(neg[-1]), float(pos[-1]), float(-xs.min()), float(xs.max()))
+    tol = 1e-9 * max(float(np.max(np.abs(xq))), 1.0)
+    keep = np.abs(xq) <= a + tol
+    n_neg, n_pos = int(np.sum(keep & (xq < 0))), int(np.sum(keep & (xq > 0)))
+    st_range = f"x {xs.min():g}…{xs.max():g} mm"
+    if min(n_neg, n_pos) < need:
+        a_need = max(float(neg[need - 1]), float(pos[need - 1]))
+        left = (f"|x| ≤ {a:g} mm with {n_neg} samples at x < 0 and {n_pos} at x > 0" if a > 0 else
+                "no range about the axis (EZX is known on one side of it only)")
+        raise InputError(
+            f"{path}: the {step} step fits EB0C where the straightness scan ({straightness_path}) gives EZX, over "
+            f"a range symmetric about the spindle axis; the straightness scan covers {st_range} and the "
+            f"squareness scan {sq_range}, which leaves {left} — at least {need} samples on each side are "
+            f"needed: the straightness scan must cover x from −{a_need:g} to {a_need:g} mm or more (EZX is not "
+            f"extrapolated; the wider the range, the less noise in EB0C)")
+    warning = None
+    if not keep.all():
+        why = ("where the straightness scan gives EZX and " if a < min(float(neg[-1]), float(pos[-1])) - tol
+               else "")
+        warning = (f"squareness: EB0C fitted over |x| ≤ {a:g} mm only ({int(keep.sum())} of {xq.size} samples), "
+                   f"{why}symmetric about the spindle axis so that the flat's form drops out: the squareness "
+                   f"scan covers {sq_range.split(' (')[0]}, the straightness scan {st_range} (EZX is not "
+                   f"extrapolated); the shorter range leaves EB0C noisier")
+    return keep, a, warning
+
+
 def build_map(x_samples, ezx_values, c_samples, ezc_values, ebc_values, eb0c: float, r_max: float,
               n_r: int = 101, n_c: int = 360) -> KinematicMap:
-    """The table of e(r, c) = −EZX(r) + EZC(c) − r(EBC(c) + EB0C) over 0 ≤ r ≤ r_max."""
+    """The table of e(X, c) = −EZX(X) + EZC(c) − X(EBC(c) + EB0C) over the probe's position X from
+    max(−r_max, the straightness scan's smallest x) to r_max (n_r positions over 0…r_max, as many at
+    the same step below 0) — never beyond the x the straightness scan covers: EZX is not extrapolated."""
     xs = np.asarray(x_samples, dtype=np.float64)
     if r_max > xs.max() + 1e-9:
         raise InputError(f"the straightness scan covers x ≤ {xs.max():g} mm but the map needs "
                          f"r ≤ {r_max:g} mm")
+    x_lo = max(float(xs.min()), -r_max)
+    if x_lo >= r_max:
+        raise InputError(f"the straightness scan covers x {xs.min():g}–{xs.max():g} mm, none of the map's "
+                         f"0–{r_max:g} mm")
     o = np.argsort(xs)
     ezx = lambda q: np.interp(q, xs[o], np.asarray(ezx_values, dtype=np.float64)[o])  # noqa: E731
     ezc = periodic(c_samples, ezc_values)
     ebc = periodic(c_samples, ebc_values)
-    r = np.linspace(0.0, r_max, n_r)
+    r = map_positions(x_lo, r_max, n_r)
     c = np.arange(n_c) * 360.0 / n_c
     R, C = np.meshgrid(r, c, indexing="ij")
     e = selective_error(R, C, ezx, ezc, ebc, eb0c)
