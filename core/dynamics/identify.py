@@ -16,6 +16,14 @@ continuous fit would still have to be discretised to correct the series):
     BIC = N ln(SSR/N) + p ln N over n = 1 … max_order.
 u = xd − xd[0]: Gm acts on the displacement from the first sample, so a static position is measured
 as it is (a DC gain ≠ 1 is a scale error of displacements, which the steps measure).
+The reference's own zero (its offset c, millimetres from the encoder's) is removed before the fits (the
+median of ref − u) and the output-error fit starts c at the least-squares offset of its start filter:
+the ARX intercept is c·Σa, not c, and starting from it made the fit depend on where the reference's
+zero lies (a 338 Hz loop read as order 5 with a 2.75 kHz resonance that is not there).
+Accepted poles decay within DECAY_FRACTION of the calibration record (1/e time −1/(fs ln|z|)): a slower
+pole — in practice one at z ≈ −1 that the fit pushes against |z| = 1 — is not seen to decay, so the
+data cannot tell it from drift; it rings at the Nyquist frequency through every corrected scan.
+A DC gain ≤ 0 (ref moving against xd: its sign reversed) is refused.
 Continuous poles for the report: s = fs · ln(z) (exact for the poles of a sampled system; modes above
 the Nyquist frequency fs/2 appear aliased — the report says so).
 """
@@ -29,6 +37,13 @@ import numpy as np
 from ..errors import InputError, StepError
 from .timeseries import sampling_rate
 
+#: a pole is accepted when its decay time (1/e) is at most this fraction of the calibration record:
+#: over the record it then decays by e⁴ ≈ 55× or more, which the steps show; a slower one is not seen
+#: to decay (its time constant is not identified) and rings on through the correction
+DECAY_FRACTION = 0.25
+#: DC gains outside this range are warned of (the sensor point follows the carriage at rest: ≈ 1)
+DC_GAIN_PLAUSIBLE = (0.5, 2.0)
+
 
 @dataclass(frozen=True)
 class LoopModel:
@@ -40,6 +55,8 @@ class LoopModel:
     fit_rms: float = float("nan")           # mm, reference minus model on the calibration
     bic: dict = field(default_factory=dict)  # order → BIC
     steps: int = 0
+    record_s: float = float("nan")           # duration of the calibration record (s)
+    set_aside: dict = field(default_factory=dict)  # order → why its fit was not accepted
 
     @property
     def order(self) -> int:
@@ -56,6 +73,29 @@ class LoopModel:
     @property
     def stable(self) -> bool:
         return bool(np.all(np.abs(self.poles_z) < 1.0))
+
+    def decay_times_s(self) -> np.ndarray:
+        """1/e decay time of each pole (s), −1/(fs ln|z|); inf for |z| ≥ 1."""
+        r = np.abs(self.poles_z)
+        out = np.full(r.shape, np.inf)
+        ok = r < 1.0
+        with np.errstate(divide="ignore"):
+            out[ok] = -1.0 / (self.fs * np.log(r[ok]))
+        return out
+
+    @property
+    def slowest_decay_s(self) -> float:
+        return float(np.max(self.decay_times_s(), initial=0.0))
+
+    def real_poles(self) -> list[dict]:
+        """The real poles, which modes() leaves out: z, decay time (s); a negative one alternates in
+        sign every sample (a response at the Nyquist frequency, which no sampled continuous loop has
+        as a single pole)."""
+        z = np.asarray(self.poles_z, dtype=complex)
+        tau = self.decay_times_s()
+        out = [{"z": float(p.real), "decay_time_s": float(d), "alternating": bool(p.real < 0)}
+               for p, d in zip(z, tau) if abs(p.imag) <= 1e-12 * max(abs(p), 1e-300)]
+        return sorted(out, key=lambda r: -abs(r["z"]))
 
     def poles_s(self) -> np.ndarray:
         """Continuous poles (1/s), s = fs ln z (principal branch)."""
@@ -99,8 +139,11 @@ class LoopModel:
     def describe(self) -> dict:
         return {"order": self.order, "fs_hz": self.fs, "b": self.b.tolist(), "a": self.a.tolist(),
                 "dc_gain": self.dc_gain, "poles_z": [[float(p.real), float(p.imag)] for p in self.poles_z],
-                "modes": self.modes(), "fit_rms_um": self.fit_rms * 1e3,
+                "modes": self.modes(), "real_poles": self.real_poles(),
+                "slowest_decay_s": self.slowest_decay_s, "fit_rms_um": self.fit_rms * 1e3,
                 "bic": {str(k): v for k, v in self.bic.items()}, "steps": self.steps,
+                "record_s": self.record_s if np.isfinite(self.record_s) else None,
+                "orders_set_aside": {str(k): v for k, v in self.set_aside.items()},
                 "aliased_modes_possible": True}
 
     def to_json(self) -> str:
@@ -112,14 +155,19 @@ class LoopModel:
             d = json.loads(text)
             if d.get("pointspro_dynamic_model") != 1:
                 raise KeyError("pointspro_dynamic_model")
+            record = d.get("record_s")
             m = cls(np.asarray(d["b"], dtype=np.float64), np.asarray(d["a"], dtype=np.float64),
-                    float(d["fs_hz"]), float(d.get("fit_rms_um", float("nan"))) * 1e-3)
+                    float(d["fs_hz"]), float(d.get("fit_rms_um", float("nan"))) * 1e-3,
+                    record_s=float("nan") if record is None else float(record))
         except (ValueError, KeyError, TypeError, AttributeError) as e:
             from ..io.text import json_problem  # quotes nothing of the file
 
             raise InputError(f"{source}: not a PointsPro dynamic model ({json_problem(e)})") from None
         if m.a[0] != 1.0 or not m.stable:
             raise InputError(f"{source}: the model is not a stable normalised filter")
+        if np.isfinite(m.record_s) and m.slowest_decay_s > DECAY_FRACTION * m.record_s:
+            raise InputError(f"{source}: the model has a pole decaying in {m.slowest_decay_s:.3g} s, more than "
+                             f"{DECAY_FRACTION:g} of its {m.record_s:.3g} s calibration record: identify it again")
         return m
 
 
@@ -166,15 +214,20 @@ def _oe(u, y, n, start):
     from scipy.optimize import least_squares
     from scipy.signal import lfilter
 
-    b0, a0, c0 = start
+    b0, a0, _ = start  # the ARX intercept is c·Σa, not the offset c
     a0 = _stabilise(a0)
     scale = float(np.std(y)) or 1.0
+    y_start = lfilter(b0, a0, u)
+    c0 = float(np.mean(y - y_start))  # the offset that fits best with the start filter
+    r0 = (y - c0 - y_start) / scale
+    # an unstable trial costs more than the start whatever the data's units and zero: never accepted
+    penalty = 1e3 * max(1.0, float(np.sqrt(np.mean(r0 * r0))))
 
     def resid(x):
         b = x[: n + 1]
         a = np.r_[1.0, x[n + 1: 2 * n + 1]]
         if np.any(np.abs(np.roots(a)) >= 1.0):
-            return np.full(y.shape, 1e3 * scale)
+            return np.full(y.shape, penalty)
         return (y - x[-1] - lfilter(b, a, u)) / scale
 
     x0 = np.r_[b0, a0[1:], c0]
@@ -198,27 +251,76 @@ def identify(t, xd, ref, max_order: int = 5, order: int | None = None,
         raise StepError(f"{what}: the axis makes no step in xd — calibration needs steps "
                         "(004: 10 up and 10 down of 10 µm)")
     u = u - u[0]
+    level = float(np.median(y - u))  # the reference's zero: the fits see ref from about 0 whatever it is
+    y = y - level
     orders = [order] if order else list(range(1, max_order + 1))
     N = len(y)
+    record = N / fs
+    max_decay = DECAY_FRACTION * record
     best = None
     bic = {}
-    worst_pole = 0.0
+    arx_unstable = {}   # order → the ARX start's largest |z|
+    set_aside = {}      # order → why the fit was not accepted
     for n in orders:
         start = _arx(u, y, n)
         rho = float(np.max(np.abs(np.roots(start[1])), initial=0.0))
-        if rho >= 1.0:  # the data themselves say the loop is unstable: never "stabilise" it away
-            worst_pole = max(worst_pole, rho)
+        if rho >= 1.0:  # never "stabilise" an unstable start away silently
+            arx_unstable[n] = rho
             continue
         b, a, c, ssr = _oe(u, y, n, start)
         p = 2 * n + 2
         bic[n] = float(N * np.log(max(ssr, 1e-300) / N) + p * np.log(N))
-        if np.all(np.abs(np.roots(a)) < 1.0) and (best is None or bic[n] < best[0]):
-            best = (bic[n], b, a, c, ssr)
+        fit = LoopModel(b, a, fs)
+        tau = fit.decay_times_s()
+        k = int(np.argmax(tau))
+        if tau[k] > max_decay:
+            z = fit.poles_z[k]
+            zs = f"{z.real:.6g}" if abs(z.imag) <= 1e-12 * abs(z) else f"{z.real:.4g}{z.imag:+.4g}j"
+            set_aside[n] = (f"a pole at z = {zs} (|z| = {abs(z):.9g}) decaying in {tau[k]:.3g} s"
+                            + (", ringing at the Nyquist frequency" if z.real < 0 else ""))
+            continue
+        if best is None or bic[n] < best[0]:
+            best = (bic[n], b, a, c + level, ssr)
     if best is None:
-        raise StepError(f"{what}: the identified model is unstable (a pole at |z| = {worst_pole:.4g} ≥ 1): "
-                        "the data do not describe a damped measuring loop — check the xd/ref columns")
+        raise StepError(_no_model_message(what, order, orders, arx_unstable, set_aside, max_decay, record))
     _, b, a, c, ssr = best
-    return LoopModel(b, a, fs, float(np.sqrt(ssr / N)), bic, steps)
+    model = LoopModel(b, a, fs, float(np.sqrt(ssr / N)), bic, steps, record, set_aside)
+    g = model.dc_gain
+    if not g > 0.0:
+        raise StepError(f"{what}: the identified DC gain is {g:.4g} ≤ 0 — ref moves against xd: the reference "
+                        "sensor's sign is likely reversed (negate ref)")
+    return model
+
+
+def _no_model_message(what, order, orders, arx_unstable, set_aside, max_decay, record) -> str:
+    if order is not None and order in arx_unstable:
+        return (f"{what}: order {order} cannot be fitted: its ARX start (the linear least-squares fit the "
+                f"output-error fit starts from, biased by the reference's noise) has a pole at |z| = "
+                f"{arx_unstable[order]:.4g} ≥ 1 — try another order, or leave order empty to choose it by BIC")
+    if not set_aside:  # every order's start unstable: the data themselves run away
+        return (f"{what}: the identified model is unstable at every order {orders[0]}–{orders[-1]} (a pole "
+                f"at |z| = {max(arx_unstable.values()):.4g} ≥ 1): the data do not describe a damped measuring "
+                "loop — check the xd/ref columns")
+    why = "; ".join(f"order {n}: {r}" for n, r in set_aside.items())
+    if arx_unstable:
+        why += "; " + ", ".join(f"order {n}: unstable ARX start (|z| = {r:.4g})" for n, r in arx_unstable.items())
+    advice = ("try another order, or leave order empty to choose it by BIC" if order is not None else
+              "check the calibration (steps that settle well within the record, the reference's noise)")
+    return (f"{what}: no model whose poles decay within {DECAY_FRACTION:g} of the {record:.3g} s calibration "
+            f"record ({max_decay:.3g} s): {why} — the record does not show a pole that slow decaying, so it "
+            f"is not identified (in practice a fitting artefact) and would ring through the correction; {advice}")
+
+
+def model_warnings(model) -> list[str]:
+    """What a report should say about an accepted model: a DC gain far from 1."""
+    g = model.dc_gain
+    lo, hi = DC_GAIN_PLAUSIBLE
+    if lo <= g <= hi:
+        return []
+    how = f"{g / hi:.3g}× the largest" if g > hi else f"{lo / g:.3g}× below the smallest"
+    return [f"the DC gain is {g:.4g} ({how} plausible, {lo:g}–{hi:g}): at rest the sensor point follows the "
+            "carriage (a gain ≈ 1); this far off, ref and xd are likely in different units or the wrong "
+            "columns, and the correction scales every displacement by it"]
 
 
 #: frequencies (Hz) at which reports quote the loop's phase lag

@@ -8,8 +8,13 @@ with Gm identified from ``calibration`` (core.dynamics.identify, as `dynamic_id`
 ``z_raw`` (z before) and ``dynamic_error`` = z_raw − z (mm).
 
 Vibration analysis in the report: PSD of the sensor signal in time and along the surface, its
-largest peaks, the phase lag of the sensor point behind the carriage over the scan (Hilbert), the
-aliased frequency of each known vibration (``vibrations``) and the sampling advice of 000 §3.1.
+largest peaks, the phase lag of the sensor point behind the carriage, the aliased frequency of each
+known vibration (``vibrations``) and the sampling advice of 000 §3.1. Two lags: ``phase_lag_model_deg``,
+the model's lag at the frequency of the largest peak of the encoder's spectrum (the loop's lag for the
+scan's dominant content), and ``phase_lag_scan_deg``, the median over the scan of the Hilbert phase
+difference between Gm·xd and xd — weighted by amplitude, so it follows the scan's largest (usually
+slowest) content (0.0003° on a scan whose 12 Hz form lags 0.9°); it is not the loop's lag at any one
+frequency.
 """
 from __future__ import annotations
 
@@ -79,7 +84,12 @@ class DynamicStep(Step):
     Params = DynamicParams
 
     def run(self, cloud, params: DynamicParams, ctx: Context) -> StepResult:
-        from pointspro.core.dynamics.identify import LoopModel, identify_from_file, model_report
+        from pointspro.core.dynamics.identify import (
+            LoopModel,
+            identify_from_file,
+            model_report,
+            model_warnings,
+        )
         from pointspro.core.dynamics.timeseries import sampling_rate
         from pointspro.core.dynamics.vibration import (
             advice,
@@ -128,18 +138,25 @@ class DynamicStep(Step):
         e = z_raw - z
         ctx.progress.update(0.8, "vibrations")
         f, ps = psd_time(xc, fs)
+        fd, pd_ = psd_time(xd, fs)
+        dom = dominant_peaks(fd, pd_, 1, fmin=2 * fd[1]) if fd.size > 3 else []
         speed = float(np.sum(np.hypot(np.diff(cloud.x), np.diff(cloud.y))) / (t[-1] - t[0]))
         peaks = dominant_peaks(f, ps, 3, fmin=1.0)
         report = {
             "model": model_report(model), "fs_hz": fs, "samples": cloud.n,
             "dynamic_error_rms_um": float(np.std(e) * 1e3), "dynamic_error_pv_um": float(np.ptp(e) * 1e3),
+            "phase_lag_model_deg": ({"frequency_hz": dom[0], "lag_deg": float(model.phase_lag_deg(dom)[0])}
+                                    if dom else None),
             "phase_lag_scan_deg": phase_lag_hilbert_deg(xd, sensor_point) if cloud.n > 100 else None,
             "scan_speed_mm_s": speed, "sensor_psd_peaks_hz": peaks,
             "vibrations": [{"frequency_hz": v, "aliased_hz": float(aliased_frequency(v, fs)),
                             "above_nyquist": bool(v > fs / 2)} for v in params.vibrations],
             "advice": advice(fs, params.vibrations, speed) if params.vibrations else [],
-            "warnings": [],
+            "warnings": model_warnings(model),
         }
+        if not np.isfinite(model.record_s) and model.slowest_decay_s > t[-1] - t[0]:
+            report["warnings"].append(f"the model has a pole decaying in {model.slowest_decay_s:.3g} s, longer than "
+                                      "the scan: its correction rings on through it — identify the model again")
         out = cloud.replace(xyz=np.column_stack([cloud.x, cloud.y, z]),
                             channels={"z_raw": z_raw, "dynamic_error": e})
         arts["dynamic.png"] = png_artifact(_figure, t, z_raw, z, cloud.x, cloud.y, fs)

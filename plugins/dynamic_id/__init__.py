@@ -4,13 +4,21 @@ Reads the calibration series (``calibration``: a CSV with columns t (s), xd and 
 up and 10 down of 10 µm) and fits Gm by output error with the order chosen by BIC
 (core.dynamics.identify). Writes ``dynamic_model.json`` (what the `dynamic` step's ``model`` reads)
 and ``dynamic_fit.png``; reports the order, poles, resonances, DC gain, phase lag at 1, 5, 15, 50 Hz
-and the fit's RMS. The cloud passes through unchanged (run it in the recipe that corrects, or alone).
+and the fit's RMS, the real poles too (``real_poles``: z, decay time; a negative one alternates every
+sample) and the orders set aside (``orders_set_aside``: a pole decaying slower than a quarter of the
+calibration record). Refused: a DC gain ≤ 0 (ref's sign reversed); warned of: one outside 0.5–2. The
+cloud passes through unchanged (run it in the recipe that corrects, or alone).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from pointspro.core.dynamics.identify import LAG_FREQUENCIES, identify_from_file, model_report  # noqa: F401  (LAG_FREQUENCIES: this step's report)
+from pointspro.core.dynamics.identify import (  # noqa: F401  (LAG_FREQUENCIES: this step's report)
+    LAG_FREQUENCIES,
+    identify_from_file,
+    model_report,
+    model_warnings,
+)
 from pointspro.core.step import Context, Params, Step, StepResult, param
 
 
@@ -66,7 +74,13 @@ class DynamicIdStep(Step):
         path = ctx.resolve(params.calibration, "calibration")
         names = (params.t, params.xd, params.ref)
         model, cols = identify_from_file(path, names, params.order, params.max_order, ctx, self.id)
-        report = {"calibration": str(path), **model_report(model), "warnings": []}
+        report = {"calibration": str(path), **model_report(model), "warnings": model_warnings(model)}
+        better = sorted(n for n, v in model.bic.items() if n in model.set_aside and v < model.bic[model.order])
+        if better:
+            report["warnings"].append(
+                f"order{'s' if len(better) > 1 else ''} {', '.join(map(str, better))} fitted the calibration "
+                f"better (BIC) but {'were' if len(better) > 1 else 'was'} set aside: "
+                f"{model.set_aside[better[0]]}, not seen to decay in the record; order {model.order} is used")
         if model.modes() and max(m["frequency_hz"] for m in model.modes()) > 0.8 * model.fs / 2:
             report["warnings"].append("a resonance lies near the Nyquist frequency: modes above it "
                                       "appear aliased; sample faster to resolve them")
