@@ -1,17 +1,34 @@
 """`register`: best-fit a measured cloud to a mesh nominal (parts with no equation: CAD STL/PLY).
 
 1. Coarse: open3d ICP, point-to-plane (Chen & Medioni 1992; open3d's registration_icp works in
-   float64), measured points against points sampled densely on the mesh with its normals, from the
-   identity (the operator placed the part near nominal) or from matched centroids.
-2. Fine: Gauss–Newton least squares of the exact signed point-to-triangle distances (float64,
-   core.surfaces.mesh: the BVH only finds the triangle), 6 rigid parameters
-        p' = R(ω) R₀ p + t,   ∂d/∂t = n̂,   ∂d/∂ω = p' × n̂   (small-rotation update),
-   with the parameters' standard uncertainties σ²(JᵀJ)⁻¹, σ² = Σd²/(N − 6), and a warning when a
-   motion is undetermined by the shape (condition number — a surface of revolution cannot fix its
-   own rotation about its axis).
+   float64, here on one thread so that a run repeats bit for bit), measured points against points
+   sampled on the mesh with its normals (a fixed seed), from the identity (the operator placed the
+   part near nominal) or from matched centroids.
+2. Motions the nominal does not fix are found at the start or ICP pose (the SVD of J below): *free*
+   (a symmetry — a plane's two slides and spin, a surface of revolution's spin, a sphere's three
+   rotations) or *weak* (fixed only by the mesh's facets: a sphere's mesh; the singular value of J
+   with the vertex normals interpolated is below FACET_FACTOR × ‖J_facets − J_smooth‖₂). They are held
+   at the start pose — removed from ICP's motion (where ICP drifted 5–11 mm on a tilted plane) and
+   from every least-squares step —, named in the report (``free_motions``, ``weak_motions``) and the
+   warnings, and their parameter gets no uncertainty.
+3. The better of the start and ICP poses (exact distance RMS over every point) starts a
+   Levenberg–Marquardt least squares of the exact signed point-to-triangle distances (float64, the
+   BVH only finds the triangle), the motions not held as parameters,
+        p' = R(ω) R₀ p + t,   ∂d/∂t = ∇d,   ∂d/∂ω = p' × ∇d   (small-rotation update),
+   ∇d the face normal, or the direction to the foot on an edge; a step that raises the cost is
+   refused and the damping raised. Standard uncertainties from the same scaled, truncated SVD:
+   σ²(JᵀJ)⁻¹ over the fitted motions, σ² = Σd²/(N − fitted).
+4. Refused in one line: fewer than MIN_FITNESS of the points with their foot inside the nominal (not
+   on the mesh's boundary; a unit mismatch named from the bounding boxes: ×10³, ×10⁶, ×25.4), a cloud
+   on a handful of a mesh's facets with such a size ratio, and a residual above RESIDUAL_FLOOR_MM and
+   RATIO_LIMIT of the nominal's own departure from a plane (a local minimum).
 Output: the cloud in the mesh (part) frame; ``residual`` = signed distance to the mesh (mm, positive
-on the +z side). The report gives the transform measuring → part as a 4 × 4 matrix, the rotation
-as angles about x, y, z (deg, R = Rz·Ry·Rx) and the RMS before and after.
+on the +z side). The residual includes the mesh's chordal error (its facets against the surface they
+approximate); the report estimates it, ``chord_deviation_um`` (RMS over the points of the sagitta
+L²/(8R) = Lθ/8 of the triangle under them, L an edge, θ the angle of its vertex normals) and warns
+when it reaches the residual's RMS. The report gives the transform measuring → part as a 4 × 4
+matrix, the rotation as angles about x, y, z (deg, R = Rz·Ry·Rx), the RMS before and after,
+``fitness`` (share of points over the nominal) and ``start`` (which pose the least squares began at).
 
 Mesh checks (core.io.mesh, read through pymeshlab — open3d for PLY): no faces, non-manifold edges
 or vertices, holes (a sheet has one outer boundary, its outline; a solid none: other boundary loops
@@ -64,10 +81,18 @@ def _target_points(surf, p, n):
 
     count = int(min(max(4 * n, 50_000), 500_000))
     if isinstance(surf, MeshSurface):
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(surf.vertices),
-                                         o3d.utility.Vector3iVector(surf.triangles))
-        mesh.compute_triangle_normals()
-        return mesh.sample_points_uniformly(number_of_points=count, use_triangle_normal=True)
+        # uniform over the area, with a fixed seed: the same input gives the same result (open3d's
+        # sample_points_uniformly drew anew each run — a review: 1.26 then 1.44 mm on one input)
+        V, F = surf.vertices, surf.triangles
+        area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+        rng = np.random.default_rng(0)
+        k = np.minimum(np.searchsorted(np.cumsum(area) / area.sum(), rng.random(count)), len(F) - 1)
+        r1, r2 = np.sqrt(rng.random(count)), rng.random(count)
+        a, b, c = (V[F[k, j]] for j in range(3))
+        pts = (1 - r1)[:, None] * a + (r1 * (1 - r2))[:, None] * b + (r1 * r2)[:, None] * c
+        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+        pc.normals = o3d.utility.Vector3dVector(surf.face_normals[k])
+        return pc
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
     pad = 0.1 * (hi - lo)
     k = int(np.sqrt(count))
@@ -139,6 +164,7 @@ class RegisterStep(Step):
         p = cloud.xyz
         if cloud.n < 6:
             raise StepError(f"{cloud.n} points cannot fix a rigid transform (6 parameters)")
+        geo = _Geometry(surf)
         ctx.progress.update(0.05, "sampling the mesh")
         target = _target_points(surf, p, cloud.n)
         src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p.copy()))
@@ -146,58 +172,125 @@ class RegisterStep(Step):
         if params.init == "centroid":
             T0[:3, 3] = np.asarray(target.get_center()) - p.mean(axis=0)
         extent = float(np.linalg.norm(np.ptp(p, axis=0)))
+        scale = np.array([extent] * 3 + [1.0] * 3)  # rotations as the arc at the extent: all in mm
         dmax = params.max_distance or 0.05 * extent
         ctx.progress.update(0.15, "ICP")
-        icp = o3d.pipelines.registration.registration_icp(
-            src, target, dmax, T0, o3d.pipelines.registration.TransformationEstimationPointToPlane(),
-            o3d.pipelines.registration.ICPConvergenceCriteria(relative_fitness=1e-9, relative_rmse=1e-9,
-                                                              max_iteration=params.icp_iterations))
-        T = np.asarray(icp.transformation, dtype=np.float64).copy()
+        # one thread: open3d's parallel sums come in a varying order, and ICP's pose differed by up
+        # to 0.015 (rotation) between two runs on one input (measured on the review's tilted plane)
+        pin = hasattr(o3d.utility, "set_max_threads")  # not in every open3d
+        threads = o3d.utility.get_max_threads() if pin else None
+        if pin:
+            o3d.utility.set_max_threads(1)
+        try:
+            icp = o3d.pipelines.registration.registration_icp(
+                src, target, dmax, T0, o3d.pipelines.registration.TransformationEstimationPointToPlane(),
+                o3d.pipelines.registration.ICPConvergenceCriteria(
+                    relative_fitness=1e-9, relative_rmse=1e-9, max_iteration=params.icp_iterations))
+        finally:
+            if pin:
+                o3d.utility.set_max_threads(threads)
+        T_icp = np.asarray(icp.transformation, dtype=np.float64).copy()
         ctx.progress.check()
-        q = p @ T[:3, :3].T + T[:3, 3]
-        d = surf.foot_point(q)[2]
-        rms_icp = float(np.sqrt(np.mean(d * d)))
-        warnings = []
-        if icp.fitness < 0.9:
-            warnings.append(f"ICP matched only {icp.fitness:.0%} of the points within {dmax:g} mm: "
-                            "check the start (init) or max_distance")
-        it = 0
-        JtJ = None
-        for it in range(1, params.refine_iterations + 1):
+        # the motions the nominal leaves free (a plane's slides and spin, a surface of revolution's
+        # spin) or fixes only by its facets (a sphere's mesh): point-to-plane ICP drifts along them
+        # (a review: 5–11 mm on a tilted plane, the points off the mesh, residual 0.7–1.7 mm, exit 0).
+        # They are found where more points lie over the nominal (start or ICP pose) and held at the
+        # start pose: removed from ICP's motion and from every least-squares step.
+        ev0, ev1 = geo.evaluate(_apply(T0, p)), geo.evaluate(_apply(T_icp, p))
+        held, motions = _held_motions(ev1 if ev1.inside.sum() >= ev0.inside.sum() else ev0, extent)
+        T_icp = _hold(T_icp, T0, held, extent)
+        # the better of the start and the (held) ICP pose, by the exact distance to the nominal over
+        # every point (a point off the mesh counts with its distance to the mesh's edge)
+        ev1 = geo.evaluate(_apply(T_icp, p))
+        start = "ICP" if ev1.cost <= ev0.cost else "start"
+        T, ev = (T_icp, ev1) if start == "ICP" else (T0, ev0)
+        if not np.isfinite(ev.cost):
+            raise StepError("the nominal is not defined where the points lie, from the start nor after "
+                            "ICP: check the nominal, the start (init) and the units")
+        rms_icp = float(np.sqrt(ev1.cost)) if np.isfinite(ev1.cost) else float("inf")
+        B = _complement(held)
+        it = accepted = 0
+        lam = 0.0  # Levenberg–Marquardt: a step that raises the exact cost is refused, lam raised
+        while it < params.refine_iterations and B.shape[1]:
+            it += 1
             ctx.progress.check()
             ctx.progress.update(0.3 + 0.6 * it / max(params.refine_iterations, 1), "least squares")
-            _, n, d = surf.foot_point(q)
-            J = np.column_stack([np.cross(q, n), n])  # ∂d/∂(ω, t)
-            # columns in the same unit (a rotation as the arc it moves a point at the extent, mm), not
-            # each scaled to unit norm: on a surface of revolution ∂d/∂ω_z is rounding noise, which
-            # unit scaling blew up to rotation steps of 10¹¹° (residual 0.1 → 286 µm, issue 16's
-            # review); here the null direction's singular value is cut and that motion held
-            scale = np.array([extent] * 3 + [1.0] * 3)
-            step, *_ = np.linalg.lstsq(J / scale, -d, rcond=NULL_MOTION)
-            step /= scale
-            R = _rot(step[:3])
-            T = np.vstack([np.column_stack([R @ T[:3, :3], R @ T[:3, 3] + step[3:]]), [0, 0, 0, 1]])
-            q = p @ T[:3, :3].T + T[:3, 3]
-            if np.max(np.abs(step[:3])) * extent < 1e-12 and np.max(np.abs(step[3:])) < 1e-12:
+            J = np.column_stack([np.cross(ev.x, ev.grad), ev.grad]) / scale @ B  # ∂d/∂(ω, t), scaled
+            done = False
+            for _ in range(12):
+                if lam:
+                    D = np.sqrt(lam * (np.einsum("ij,ij->j", J, J) + 1e-12 * np.max(J * J) * len(J)))
+                    A, b = np.vstack([J, np.diag(D)]), np.concatenate([-ev.d, np.zeros(len(D))])
+                else:
+                    A, b = J, -ev.d
+                z, *_ = np.linalg.lstsq(A, b, rcond=NULL_MOTION)
+                step = (B @ z) / scale
+                Tn = _compose(step, T)
+                evn = geo.evaluate(_apply(Tn, p))
+                tiny = np.max(np.abs(step[:3])) * extent < 1e-12 and np.max(np.abs(step[3:])) < 1e-12
+                if evn.cost < ev.cost:
+                    # converged: the step's gain is rounding (10⁻¹⁰ of the cost) or the step is
+                    done = tiny or ev.cost - evn.cost <= 1e-10 * ev.cost
+                    T, ev, accepted = Tn, evn, accepted + 1
+                    lam = 0.0 if lam <= 1e-6 else lam / 10
+                    break
+                if tiny:
+                    done = True
+                    break
+                lam = 1e-6 if not lam else lam * 10
+            else:
+                done = True  # no step lowers the cost: at the minimum (to rounding)
+            if done:
                 break
-        foot, n, d = surf.foot_point(q)
-        J = np.column_stack([np.cross(q, n), n])
-        JtJ = J.T @ J
-        dof = max(cloud.n - 6, 1)
+        q, d = ev.x, ev.d
+        fitness = float(np.mean(ev.inside))
+        hint = _unit_hint(surf, p)
+        if fitness < MIN_FITNESS:
+            raise StepError(
+                f"only {fitness:.0%} of the points lie over the nominal after the fit (the rest fall "
+                f"beyond its edge; residual {np.sqrt(ev.cost) * 1e3:.4g} µm RMS): "
+                + (hint if hint else "the cloud does not match the nominal — check the start (init, "
+                   "max_distance), the part's orientation and that the nominal covers the measured area"))
+        if hint and ev.ids is not None and len(np.unique(ev.ids[ev.inside])) < 10:
+            # over the mesh but on a few of its facets: a mesh 10³ times too large (µm read as mm)
+            raise StepError(f"the points lie on {len(np.unique(ev.ids[ev.inside]))} of the mesh's "
+                            f"{len(surf.triangles)} triangles: {hint}")
+        rms = float(np.sqrt(np.mean(d * d)))
+        shape = _shape_rms(q - d[:, None] * ev.grad)
+        if rms > RESIDUAL_FLOOR_MM and rms > RATIO_LIMIT * shape:
+            # a local minimum: ICP and the least squares start from near the nominal only (a review:
+            # a freeform turned 90° about z, residual 1.07 mm RMS on 4 mm of sag, fitness 95 %)
+            raise StepError(
+                f"the fit left a residual of {rms:.4g} mm RMS, {rms / shape:.2g} × the nominal's own "
+                f"departure from a plane over the points ({shape:.4g} mm RMS): a local minimum, not "
+                "the part — ICP starts from the measured pose (init: identity) or the centroids: "
+                "bring the cloud near the nominal's orientation first")
+        warnings = []
+        dof = max(cloud.n - B.shape[1], 1)
         s2 = float(d @ d) / dof
-        scale = np.sqrt(np.diag(JtJ))
-        scale[scale == 0] = 1.0
-        cond = float(np.linalg.cond(JtJ / np.outer(scale, scale)))
-        free = _free_motions(J, extent)
-        cov = np.linalg.pinv(JtJ, rcond=NULL_MOTION ** 2) * s2
-        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+        J = np.column_stack([np.cross(q, ev.grad), ev.grad]) / scale
+        sd, cond = _uncertainties(J, B, [m for m, _ in motions], s2, scale)
+        free = [m for m, kind in motions if kind == "free"]
+        weak = [m for m, kind in motions if kind == "weak"]
         if free:
             warnings.append(f"the shape does not fix {' and '.join(free)} (a symmetric surface): held "
-                            "where ICP left it, its uncertainty not given")
-            sd[[_MOTIONS.index(m) for m in free]] = np.nan
-        elif cond > 1e6:
+                            "at the start pose, no uncertainty given for it")
+        if weak:
+            warnings.append(f"only the mesh's facets fix {' and '.join(weak)} (the surface it approximates "
+                            f"leaves {'it' if len(weak) == 1 else 'them'} free or nearly): held at the "
+                            "start pose, no uncertainty given for it")
+        if cond > 1e6:
             warnings.append(f"the shape barely fixes every rigid motion (condition {cond:.3g}): a nearly "
                             "symmetric surface leaves a rotation or a slide weakly determined")
+        if fitness < 0.99:
+            warnings.append(f"{1 - fitness:.1%} of the points lie beyond the nominal's edge: their "
+                            "residual is the distance to the edge")
+        chord = geo.chord(ev)
+        if chord is not None and chord[0] >= rms > 0:
+            warnings.append(f"the mesh's facets depart from the surface they approximate by about "
+                            f"{chord[0] * 1e3:.3g} µm (chordal error, up to {chord[1] * 1e3:.3g} µm), "
+                            f"comparable to the residual ({rms * 1e3:.3g} µm RMS), which includes it: "
+                            "a finer mesh would measure the part, not its tessellation")
         from scipy.spatial.transform import Rotation
 
         rz, ry, rx = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
@@ -210,11 +303,15 @@ class RegisterStep(Step):
             "uncertainty": {k: (None if not np.isfinite(v) else float(v)) for k, v in zip(
                 ("rx_deg", "ry_deg", "rz_deg", "tx", "ty", "tz"),
                 (np.degrees(sd[0]), np.degrees(sd[1]), np.degrees(sd[2]), sd[3], sd[4], sd[5]))},
-            "icp_fitness": float(icp.fitness), "icp_rms_um": rms_icp * 1e3,
+            "free_motions": free, "weak_motions": weak, "start": start,
+            "icp_fitness": float(icp.fitness), "icp_rms_um": rms_icp * 1e3, "fitness": fitness,
             "refine_iterations": it, "condition_number": cond,
-            "residual_rms_um": float(np.sqrt(np.mean(d * d)) * 1e3),
+            "residual_rms_um": rms * 1e3,
             "residual_pv_um": float(np.ptp(d) * 1e3), "warnings": warnings,
         }
+        if chord is not None:
+            report["chord_deviation_um"] = chord[0] * 1e3
+            report["chord_deviation_max_um"] = chord[1] * 1e3
         out = cloud.replace(xyz=q, channels={"residual": d}, meta={"frame": "part"})
         return StepResult(out, report)
 
@@ -227,12 +324,240 @@ class RegisterStep(Step):
 NULL_MOTION = 1e-9
 _MOTIONS = ("rotation about x", "rotation about y", "rotation about z", "a slide along x",
             "a slide along y", "a slide along z")
+#: a motion whose singular value (smooth normals) is below this many times the facets' share of J
+#: (‖J_facets − J_smooth‖₂) is fixed by the tessellation rather than by the surface: weak, held
+FACET_FACTOR = 0.1
+#: the least share of points whose foot lies over the nominal (not on its edge) for a result
+MIN_FITNESS = 0.9
+#: the vertex-normal angle (rad) above which an edge is a feature of the part (a crease), not curvature
+_CREASE = np.radians(30.0)
+#: a residual above RESIDUAL_FLOOR_MM and RATIO_LIMIT of the nominal's own departure from a plane over
+#: the points is a local minimum, refused (the rule of core.geometry.nominal_check for misalignment)
+RESIDUAL_FLOOR_MM = 0.1
+RATIO_LIMIT = 0.25
+_AXES = "xyz"
 
 
-def _free_motions(J, extent) -> list[str]:
-    """The rigid motions (of ``_MOTIONS``) the surface leaves free: the dominant parameter of each
-    right-singular vector of J (rotation columns × extent, all in mm) whose singular value is below
-    NULL_MOTION of the largest — rotation about z on a surface of revolution, a slide on a plane."""
-    sv, vt = np.linalg.svd(J / np.array([extent] * 3 + [1.0] * 3), full_matrices=False)[1:]
-    null = vt[sv < NULL_MOTION * sv[0]]
-    return sorted({_MOTIONS[int(np.argmax(np.abs(v)))] for v in null}, key=_MOTIONS.index)
+def _apply(T, p):
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def _compose(step, T):
+    """The update p' = R(ω)·(T p) + t of step (ω, t) composed with T."""
+    R = _rot(step[:3])
+    return np.vstack([np.column_stack([R @ T[:3, :3], R @ T[:3, 3] + step[3:]]), [0, 0, 0, 1]])
+
+
+class _Eval:
+    """The points x (part frame) against the nominal: signed distance d, its gradient ``grad`` (the
+    face normal over a face, the direction to the foot on an edge), the facet and smooth (vertex
+    normals interpolated) normals at the foot, whether the foot lies over the nominal (``inside``:
+    not on the mesh's boundary, inside an analytic nominal's aperture), the triangle (mesh)."""
+
+    def __init__(self, x, d, grad, nf, ns, inside, ids=None):
+        self.x, self.d, self.grad, self.nf, self.ns, self.inside, self.ids = x, d, grad, nf, ns, inside, ids
+        self.cost = float(np.mean(d * d)) if np.all(np.isfinite(d)) else float("inf")
+
+
+class _Geometry:
+    """What register needs of the nominal beyond ``foot_point``: for a mesh the boundary edges and
+    vertices (a foot on them lies beyond the nominal), vertex normals (the smooth surface the facets
+    approximate) and each triangle's chordal deviation."""
+
+    def __init__(self, surf):
+        from pointspro.core.surfaces.mesh import MeshSurface
+
+        self.surf = surf
+        self.mesh = isinstance(surf, MeshSurface)
+        if not self.mesh:
+            return
+        V, F = surf.vertices, surf.triangles
+        nv = len(V)
+        # edge opposite vertex k of each triangle: (1, 2), (2, 0), (0, 1)
+        e = np.stack([F[:, [1, 2]], F[:, [2, 0]], F[:, [0, 1]]], axis=1)  # (T, 3, 2)
+        key = np.min(e, axis=2) * nv + np.max(e, axis=2)
+        _, inv, count = np.unique(key.ravel(), return_inverse=True, return_counts=True)
+        self.bedge = (count[inv] == 1).reshape(key.shape)
+        self.bvert = np.zeros(nv, bool)
+        self.bvert[e[self.bedge].ravel()] = True
+        cr = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # area-weighted, +z (MeshSurface)
+        vn = np.zeros_like(V)
+        for k in range(3):
+            np.add.at(vn, F[:, k], cr)
+        norm = np.linalg.norm(vn, axis=1)
+        norm[norm == 0] = 1.0
+        self.vn = vn / norm[:, None]
+        # chordal deviation (sagitta) of each triangle: along each edge of length L whose end normals
+        # differ by θ, the surface bends by radius R ≈ L/θ and its chord departs by L²/(8R) = Lθ/8;
+        # an edge whose normals differ by more than _CREASE is a crease of the part, not a curvature
+        a, b = self.vn[e[..., 0]], self.vn[e[..., 1]]
+        theta = np.arccos(np.clip(np.einsum("ijk,ijk->ij", a, b), -1.0, 1.0))
+        L = np.linalg.norm(V[e[..., 0]] - V[e[..., 1]], axis=2)
+        self.sagitta = np.max(np.where(theta <= _CREASE, L * theta / 8, 0.0), axis=1)
+
+    def evaluate(self, x) -> _Eval:
+        from pointspro.core.errors import DomainError
+
+        if not self.mesh:
+            try:
+                foot, n, d = self.surf.foot_point(x)
+            except DomainError:
+                nan = np.full(len(x), np.nan)
+                return _Eval(x, nan, np.zeros_like(x), np.zeros_like(x), np.zeros_like(x),
+                             np.zeros(len(x), bool))
+            ap = getattr(self.surf, "aperture", None)
+            inside = (np.hypot(foot[:, 0], foot[:, 1]) <= ap / 2 * (1 + 1e-12)) if ap else \
+                np.ones(len(x), bool)
+            return _Eval(x, d, n, n, n, inside & np.isfinite(d))
+        import open3d as o3d
+
+        from pointspro.core.surfaces.mesh import closest_point_on_triangles
+
+        surf = self.surf
+        q32 = o3d.core.Tensor((x - surf._origin).astype(np.float32))
+        ids = surf._raycasting().compute_closest_points(q32)["primitive_ids"].numpy().astype(np.int64)
+        tri = surf.triangles[ids]
+        a, b, c = (surf.vertices[tri[:, k]] for k in range(3))
+        foot = closest_point_on_triangles(x, a, b, c)
+        diff = x - foot
+        dist = np.linalg.norm(diff, axis=1)
+        nf = surf.face_normals[ids]
+        s = np.sign(np.einsum("ij,ij->i", diff, nf))
+        s[s == 0] = 1.0
+        d = dist * s
+        # the exact gradient of the signed distance: toward the foot on an edge or a vertex
+        off = dist > 1e-12 * (1.0 + np.abs(x).max())
+        grad = nf.copy()
+        grad[off] = diff[off] * (s[off] / dist[off])[:, None]
+        # barycentric coordinates of the foot: on the mesh's boundary when it lies on a boundary
+        # edge or at a boundary vertex
+        v0, v1, v2 = b - a, c - a, foot - a
+        d00, d01, d11 = (np.einsum("ij,ij->i", u, w) for u, w in ((v0, v0), (v0, v1), (v1, v1)))
+        d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
+        den = d00 * d11 - d01 * d01
+        bv = (d11 * d20 - d01 * d21) / den
+        bw = (d00 * d21 - d01 * d20) / den
+        bary = np.column_stack([1.0 - bv - bw, bv, bw])
+        eps = 1e-9
+        edge = np.any((bary <= eps) & self.bedge[ids], axis=1)
+        vert = np.any((bary >= 1 - eps) & self.bvert[tri], axis=1)
+        ns = np.einsum("ik,ikj->ij", np.clip(bary, 0, 1), self.vn[tri])
+        ns /= np.linalg.norm(ns, axis=1)[:, None]
+        return _Eval(x, d, grad, nf, ns, ~(edge | vert), ids)
+
+    def chord(self, ev):
+        """(RMS, max) over the points over the mesh of the chordal deviation of the triangle under
+        them (mm); None for an analytic nominal."""
+        if not self.mesh:
+            return None
+        s = self.sagitta[ev.ids[ev.inside]] if np.any(ev.inside) else self.sagitta
+        return float(np.sqrt(np.mean(s * s))), float(np.max(s))
+
+
+def _held_motions(ev, extent):
+    """The rigid motions to hold: an orthonormal basis (6 × k, scaled parameters: rotations × extent,
+    mm) and their names with "free" (the surface's symmetry: a singular value below NULL_MOTION of
+    the largest) or "weak" (a singular value of the smooth surface's J below FACET_FACTOR times what
+    the facets add to J: fixed by the tessellation, not by the part — a sphere's mesh). Judged over
+    the points whose foot lies over the nominal."""
+    m = ev.inside if ev.inside.sum() >= 6 else np.ones(len(ev.d), bool)
+    x, nf, ns = ev.x[m], ev.nf[m], ev.ns[m]
+    scale = np.array([extent] * 3 + [1.0] * 3)
+    Jf = np.column_stack([np.cross(x, nf), nf]) / scale
+    Js = np.column_stack([np.cross(x, ns), ns]) / scale
+    sv, vt = np.linalg.svd(Js, full_matrices=False)[1:]
+    facets = float(np.linalg.norm(Jf - Js, 2)) if ev.ids is not None else 0.0
+    free = sv < NULL_MOTION * sv[0]
+    weak = ~free & (sv < FACET_FACTOR * facets)
+    held = free | weak
+    N = vt[held].T
+    kinds = ["free" if f else "weak" for f in free[held]]
+    return N, _name_motions(N, kinds)
+
+
+def _name_motions(N, kinds):
+    """Names of the motions spanned by N (scaled): its rotations by their axis ("rotation about z"),
+    the motions with no rotation by their direction ("a slide along x"); each with its kind."""
+    if not N.shape[1]:
+        return []
+    U, S, Wt = np.linalg.svd(N[:3], full_matrices=True)
+    W = Wt.T
+    S = np.concatenate([S, np.zeros(N.shape[1] - len(S))])
+    names = []
+    for i in range(N.shape[1]):
+        # the kind of the held direction closest to this combination
+        kind = kinds[int(np.argmax(np.abs(W[:, i])))]
+        if S[i] > 0.1:
+            names.append((f"rotation about {_AXES[int(np.argmax(np.abs(U[:, i])))]}", kind))
+        else:
+            v = (N @ W[:, i])[3:]
+            names.append((f"a slide along {_AXES[int(np.argmax(np.abs(v)))]}", kind))
+    rank = {n: k for k, n in enumerate(f"rotation about {a}" for a in _AXES)}
+    rank.update({f"a slide along {a}": 3 + k for k, a in enumerate(_AXES)})
+    out = []
+    for n, k in sorted(names, key=lambda nk: rank[nk[0]]):
+        if (n, k) not in out:
+            out.append((n, k))
+    return out
+
+
+def _hold(T, T0, N, extent):
+    """T with its motion from T0 along the held motions N (scaled) removed."""
+    if not N.shape[1]:
+        return T
+    from scipy.spatial.transform import Rotation
+
+    Rd = T[:3, :3] @ T0[:3, :3].T
+    xi = np.concatenate([Rotation.from_matrix(Rd).as_rotvec() * extent, T[:3, 3] - Rd @ T0[:3, 3]])
+    xi = xi - N @ (N.T @ xi)
+    return _compose(np.concatenate([xi[:3] / extent, xi[3:]]), T0)
+
+
+def _complement(N):
+    """An orthonormal basis (6 × (6 − k)) of the motions not held."""
+    if not N.shape[1]:
+        return np.eye(6)
+    Q = np.linalg.qr(N, mode="complete")[0]
+    return Q[:, N.shape[1]:]
+
+
+def _uncertainties(J, B, held_names, s2, scale):
+    """Standard uncertainties of (ω, t) and the condition number (of JᵀJ, scaled), from the same
+    scaled, truncated SVD as the fit: σ²(JᵀJ)⁻¹ over the motions fitted (B), the held ones held (the
+    parameters' uncertainty at the held pose); none (NaN) for the parameter each held motion is named
+    by — its value is a convention (the start pose), not a measurement."""
+    sv, vt = np.linalg.svd(J @ B, full_matrices=False)[1:]
+    keep = sv > NULL_MOTION * sv[0]
+    Vk = B @ vt[keep].T
+    cov = (Vk / sv[keep] ** 2) @ Vk.T * s2 / np.outer(scale, scale)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    sd[[_MOTIONS.index(m) for m in held_names]] = np.nan
+    cond = float((sv[0] / sv[keep][-1]) ** 2)
+    return sd, cond
+
+
+def _shape_rms(feet) -> float:
+    """RMS distance of the feet (points on the nominal) from their best-fit plane (mm)."""
+    c = feet - feet.mean(axis=0)
+    return float(np.linalg.svd(c, compute_uv=False)[-1] / np.sqrt(len(c)))
+
+
+def _unit_hint(surf, p) -> str:
+    """A likely unit mismatch between the cloud and a mesh, from their bounding boxes ("" if none)."""
+    V = getattr(surf, "vertices", None)
+    if V is None:
+        return ""
+    a, b = float(np.linalg.norm(np.ptp(V, axis=0))), float(np.linalg.norm(np.ptp(p, axis=0)))
+    if a <= 0 or b <= 0:
+        return ""
+    r = a / b
+    cases = [(1e6, "the mesh in µm and the points in m"), (1e3, "the mesh in µm and the points in mm, "
+             "or the mesh in mm and the points in m"), (25.4, "the mesh in mm and the points in inches"),
+             (1 / 25.4, "the mesh in inches and the points in mm"),
+             (1e-3, "the mesh in m and the points in mm, or the mesh in mm and the points in µm"),
+             (1e-6, "the mesh in m and the points in µm")]
+    for f, what in cases:
+        if abs(np.log(r / f)) < np.log(2.5):
+            return (f"the mesh is {r:.4g}× the size of the cloud (bounding-box diagonals "
+                    f"{a:.4g} and {b:.4g}): a unit mismatch — {what}? Scale one of them")
+    return ""
