@@ -710,6 +710,20 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
         # flipped). Gwyddion's igorfile.c flips the wave vertically for its y-down image rows — the
         # same picture as the wave's own y up (checked pixel by pixel on spot_1-1000nm.ibw)
         h, valid = h[:, ::-1], valid[:, ::-1]
+    elif fmt == "ezd":
+        # Nanosurf .nid/.ezd: stored line q lies at the file's own y = Dim1Min + q·Dim1Range/Lines
+        # (the slow axis, y up), whatever its "Scan direction": lines are stored by position, not
+        # by time. On st_nid-1.nid ("Up", CurLine=255) the feedback's settling transient is in
+        # lines 0–3, the first ones scanned; on Nanosurf's own "Down" examples (NSFopen,
+        # CurLine=0) the scan ran from line 255 to 0 — SBS-PMMA.nid's one z step falls in line
+        # 251's backward trace between a raised 252 and a normal 250. Nanosurf's readers
+        # (NSFopen, nanosurf's nid_reader: reshape(Lines, Points), plotted origin="lower") and
+        # Gwyddion's ezdfile.c (rows flipped for its y-down image) ignore the direction too.
+        # SurfaceTopography 1.27 flips dimension 1 (np.fliplr), which put line 0 at y max: a
+        # y mirror (checked pixel by pixel on st_nid-1.nid; no .ezd file was at hand, it shares the
+        # reader and Gwyddion's flip); undone here. Dim0Min/Dim1Min are not applied: the first
+        # pixel is at the origin, as for the other maps
+        h, valid = h[:, ::-1], valid[:, ::-1]
     # SurfaceTopography's arrays are (x, y): index [i, j] is column i, row j
     xyz, chans = _to_cloud(X_mm.T, Y_mm.T, h.T * to_mm, valid.T, path)
     return xyz, chans, {"instrument_format": fmt, "instrument_reader": reader.name(),
