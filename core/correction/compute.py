@@ -1,10 +1,11 @@
 """The correction the next run takes, from a form-error map (docs/conventions.md, Correction).
 
     E      form error on the map grid, residual = z − sag (part frame, mm), piston and tilt removed
-           over the clear aperture (set-up, not form)
-    E_ext  E continued past the clear aperture: each node outside takes the value of the nearest node
-           inside (constant along the normal of the rim), so the filter and the tool path have data
-           to the run-out
+           over the clear aperture (set-up, not form); scattered points: only at nodes inside the
+           points' hull (as bspline_map's map), none beyond the outermost point
+    E_ext  E continued past the data's edge and the clear aperture: each node without a measured
+           value takes the value of the nearest measured node (constant along the rim's normal),
+           so the filter and the tool path have data to the run-out
     F      E_ext low-passed by the areal Gaussian filter of ISO 16610-61 (the 1-D weighting function
            of ISO 16610-21 in x and in y: σ = α λc / √(2π), α = √(ln 2 / π); 50 % transmission at the
            cutoff wavelength λc)
@@ -85,8 +86,9 @@ def regular_grid(x, y, v, rtol: float = 1e-6):
 
 @dataclass
 class ErrorMap:
-    """The form error E (mm) on the working grid xs × ys (mm): NaN where not measured. ``covered``
-    marks the nodes the measurement supports (for the coverage check)."""
+    """The form error E (mm) on the working grid xs × ys (mm): NaN where not measured (scattered
+    points: outside the clear aperture, or beyond the points — grid_map's hull rule). ``covered``
+    marks the nodes the measurement supports (cells of a knot: for the coverage check)."""
 
     xs: np.ndarray
     ys: np.ndarray
@@ -157,15 +159,25 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
     xs = working_axes(cx - outer, cx + outer, 0.0, h)
     ys = working_axes(cy - outer, cy + outer, 0.0, h)
     _check_grid_size(xs, ys, h)
-    from ..maps.grid import coverage_mask
+    from ..maps.grid import HULL_REACH, _sampling_scale, coverage_mask, inside_the_points
 
+    px, py = x[inside], y[inside]
     # a node is supported when its knot cell (or a neighbour, closed) holds points: the spline is
     # determined there by data — a star pattern's rim between spokes is, a missing sector is not
-    covered = coverage_mask(x[inside], y[inside], xs, ys, spline.h)
+    covered = coverage_mask(px, py, xs, ys, spline.h)
     E = spline.grid(xs, ys)
     disk = (xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2 <= radius * radius
-    E = np.where(disk, E, np.nan)
-    miss = v[inside] - spline(x[inside], y[inside])
+    # the measured nodes: supported, and inside the convex hull of the points around them — as
+    # bspline_map's map (core.maps.grid.grid_map: the same reach, HULL_REACH × the sampling scale).
+    # The cells alone took the spline's values up to a knot beyond the outermost point, where it is
+    # extrapolated noise (30 nm noise on a 100 mm disk: those nodes erred by up to 0.9 µm and put it
+    # into dz); the nodes between the data's edge and the aperture's rim are continued from the
+    # nearest measured node like the run-out (compute_correction), the coverage check still counts
+    # the cells (a rim within a knot of the data is covered)
+    reach = HULL_REACH * _sampling_scale(spline, px, py)
+    measured = inside_the_points(px, py, xs, ys, covered & disk, reach)
+    E = np.where(measured, E, np.nan)
+    miss = v[inside] - spline(px, py)
     return ErrorMap(xs, ys, E, covered & disk, float(h),
                     f"smoothing B-spline of the points (knots every {spline.h:.4g} mm)",
                     float(spline.h), float(np.sqrt(np.mean(miss * miss))))
@@ -284,10 +296,12 @@ def compute_correction(em: ErrorMap, *, center, radius: float, extend: float, cu
     known = inside & np.isfinite(E)
     Xi = np.broadcast_to(X, E.shape)[known]
     Yi = np.broadcast_to(Y, E.shape)[known]
-    # piston and tilt removed over the aperture first, then the nearest-node continuation (holes
-    # inside, ≤ 1 %, and everything outside): continued the other way round, the rim's tilted values
-    # minus the plane extrapolated made a ramp outside the aperture (a review: a 1 µm bump on 2e-4
-    # rad of tilt wrote dz −0.43…+0.53 µm beyond the rim, and a removal map ≥ 0.36 µm deep everywhere)
+    # piston and tilt removed over the measured nodes first, then the nearest-node continuation
+    # (holes inside — ≤ 1 % of the aperture uncovered, plus a scattered map's band between the
+    # outermost points and the rim — and everything outside): continued the other way round, the
+    # rim's tilted values minus the plane extrapolated made a ramp outside the aperture (a review: a
+    # 1 µm bump on 2e-4 rad of tilt wrote dz −0.43…+0.53 µm beyond the rim, and a removal map
+    # ≥ 0.36 µm deep everywhere)
     p = plane_fit(Xi, Yi, E[known])
     E = E - (p[0] + p[1] * X + p[2] * Y)
     idx = ndimage.distance_transform_edt(~known, return_distances=False, return_indices=True)
