@@ -54,13 +54,13 @@ class Params(BaseModel):
             from pydantic_core import PydanticCustomError  # lax mode takes 1 and 0.0 as yes and no
 
             raise PydanticCustomError("bool_number", "Input should be true or false (got {got})", {"got": v})
-        if f.annotation in (float, int, float | None, int | None) and isinstance(v, str) and _numeric(v):
-            # lax mode reads the text "1_290" (a word in YAML 1.2: `diameter: 1_290`) or a quoted
-            # "1290" as the number; a number is written as one (a review)
-            from pydantic_core import PydanticCustomError
+        if f.annotation in (float, int, float | None, int | None) and isinstance(v, str):
+            from .yamlio import NUMBER_TEXT, numeric_text
 
-            raise PydanticCustomError("number_text", "Input should be a number, not text "
-                                      "(write it without quotes or underscores)")
+            if numeric_text(v):  # lax mode would read "1_290" or a quoted "1290" as the number
+                from pydantic_core import PydanticCustomError
+
+                raise PydanticCustomError("number_text", NUMBER_TEXT)
         if isinstance(v, (bool, list, tuple, dict)):
             from .yamlio import bool_as_number
 
@@ -76,15 +76,6 @@ class Params(BaseModel):
             raise ValueError(f"written by a newer version ({from_version}) of this step "
                              f"than the installed one ({cls.schema_version})")
         return data
-
-
-def _numeric(text: str) -> bool:
-    """Text Python would read as a number ("1_290", " 1290"): pydantic's lax mode would."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def param(default: Any = ..., *, unit: str | None = None, help: str, file: bool = False,

@@ -322,6 +322,21 @@ def _holds_bool(value) -> bool:
     return False
 
 
+#: the words of the refusal of a number written as text (a step's parameter, a surface's key)
+NUMBER_TEXT = "Input should be a number, not text (write it without quotes or underscores)"
+
+
+def numeric_text(text: str) -> bool:
+    """Text Python would read as a number ("1_290", " 1290", "3.33e-4"): pydantic's lax mode would
+    take it as the number, where a number is written as one (a review: `diameter: 1_290`, a word in
+    YAML 1.2, and a quoted "1290" both ran)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def bool_as_number(annotation, value, name: str | None = None):
     """A pydantic error (type ``bool_not_number``) when ``value`` holds a true/false where
     ``annotation`` wants a number; None otherwise. Its message names the place within the value

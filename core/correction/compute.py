@@ -159,7 +159,7 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
     xs = working_axes(cx - outer, cx + outer, 0.0, h)
     ys = working_axes(cy - outer, cy + outer, 0.0, h)
     _check_grid_size(xs, ys, h)
-    from ..maps.grid import HULL_REACH, _sampling_scale, coverage_mask, inside_the_points
+    from ..maps.grid import coverage_mask, hull_reach, inside_the_points
 
     px, py = x[inside], y[inside]
     # a node is supported when its knot cell (or a neighbour, closed) holds points: the spline is
@@ -174,7 +174,7 @@ def error_map(x, y, v, *, center, radius: float, outer, spacing: float | None,
     # into dz); the nodes between the data's edge and the aperture's rim are continued from the
     # nearest measured node like the run-out (compute_correction), the coverage check still counts
     # the cells (a rim within a knot of the data is covered)
-    reach = HULL_REACH * _sampling_scale(spline, px, py)
+    reach = hull_reach(spline, px, py)
     measured = inside_the_points(px, py, xs, ys, covered & disk, reach)
     E = np.where(measured, E, np.nan)
     miss = v[inside] - spline(px, py)

@@ -387,9 +387,15 @@ def grid_map(spline: TensorBSpline, spacing: float, px, py, *, diameter: float |
         keep &= coverage_mask(px, py, xs, ys, spline.h / 2.0)
         bx0, bx1, by0, by1 = spline.bounds
         keep &= ((xs[None, :] >= bx0) & (xs[None, :] <= bx1)) & ((ys[:, None] >= by0) & (ys[:, None] <= by1))
-        keep = inside_the_points(px, py, xs, ys, keep, HULL_REACH * _sampling_scale(spline, px, py))
+        keep = inside_the_points(px, py, xs, ys, keep, hull_reach(spline, px, py))
     z = np.where(keep, z, np.nan)
     return MapGrid(xs, ys, z, float(spacing))
+
+
+def hull_reach(spline: TensorBSpline, px, py) -> float:
+    """How far around a node ``inside_the_points`` looks (mm): HULL_REACH × the sampling scale —
+    the map's rule, shared by the correction's error map (core/correction/compute.py)."""
+    return HULL_REACH * _sampling_scale(spline, px, py)
 
 
 def _sampling_scale(spline: TensorBSpline, px, py) -> float:

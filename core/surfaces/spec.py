@@ -10,7 +10,6 @@
 """
 from __future__ import annotations
 
-import functools
 import re
 import types
 import typing
@@ -20,7 +19,7 @@ from typing import Annotated, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, field_validator, model_validator
 from pydantic_core import PydanticCustomError, ValidationError
 
-from ..yamlio import bool_as_number, yaml_word
+from ..yamlio import NUMBER_TEXT, bool_as_number, numeric_text, yaml_word
 from .base import NominalSurface
 from .even_asphere import EvenAsphere
 from .forbes import QBfsAsphere, QConAsphere
@@ -29,19 +28,6 @@ from .xy_polynomial import XYPolynomial
 
 _TERM = re.compile(r"x([0-9]+)y([0-9]+)")  # fullmatch: "x2y0\n" and "x２y0" are not terms
 _INT = TypeAdapter(int)
-
-
-@functools.cache
-def _step_number():
-    """A step's parameters with one number: the steps' own check (core.step.Params) of a number
-    written as text, applied here to one value at a time rather than written twice. Imported when
-    first needed: core.step imports core.surfaces."""
-    from ..step import Params
-
-    class _Number(Params):
-        value: float | None = None
-
-    return _Number
 
 
 def _texts(ann, value, path=()):
@@ -79,23 +65,20 @@ def _texts(ann, value, path=()):
 def number_as_text(annotation, value, name: str | None = None):
     """A pydantic error (type ``number_text``) when ``value`` holds a number written as text where
     ``annotation`` wants a number — `aperture: 1_300` (a word in YAML 1.2) or `c: "3.33e-4"`, which
-    pydantic's lax mode would read as the number — refused with the steps' own check and words
-    (core.step.Params); None otherwise (text that is no number is left to pydantic's own message).
+    pydantic's lax mode would read as the number — refused with the steps' own rule and words
+    (core.yamlio.numeric_text, NUMBER_TEXT); None otherwise (text that is no number is left to
+    pydantic's own message).
     As core.yamlio.bool_as_number's: its context has ``keys`` (``name``, the field the value is of,
     then the mapping keys down to the text) and ``detail`` (the message without them)."""
     for path, text in _texts(annotation, value, (("in", name),) if name is not None else ()):
-        try:
-            _step_number()(value=text)
-        except ValidationError as e:
-            why = next((err["msg"] for err in e.errors() if err["type"] == "number_text"), None)
-            if why is None:
-                continue
-            n = next((i for i, (kind, _) in enumerate(path) if kind != "in"), len(path))
-            keys = [str(k) for _, k in path[:n]]  # the keys down to it ('A', '4'); the rest: "item 2: …"
-            where = "'s ".join(f"item {k + 1}" if kind == "item" else f"key {yaml_word(k)}"
-                               for kind, k in path[n:])
-            detail = (f"{where}: " if where else "") + f"{why} (got {text!r})"
-            return PydanticCustomError("number_text", "{detail}", {"keys": keys, "detail": detail})
+        if not numeric_text(text):
+            continue
+        n = next((i for i, (kind, _) in enumerate(path) if kind != "in"), len(path))
+        keys = [str(k) for _, k in path[:n]]  # the keys down to it ('A', '4'); the rest: "item 2: …"
+        where = "'s ".join(f"item {k + 1}" if kind == "item" else f"key {yaml_word(k)}"
+                           for kind, k in path[n:])
+        detail = (f"{where}: " if where else "") + f"{NUMBER_TEXT} (got {text!r})"
+        return PydanticCustomError("number_text", "{detail}", {"keys": keys, "detail": detail})
     return None
 
 
