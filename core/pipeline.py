@@ -91,6 +91,7 @@ def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None, reuse=(
     ``_reusable``): the same numbers to rounding, the time of a whole Zernike fit and a whole
     B-spline fit saved (a third of a 12.6 M-point map's run; issues 17, 26)."""
     from .metrics import form_metrics
+    from .metrics.area_weights import area_weights, weighting_words
     from .metrics.pupil import is_flat, pupil_of
 
     s = {"points_in": cloud_in.n, "points_out": cloud_out.n, "rms_um": None, "pv_um": None,
@@ -116,8 +117,10 @@ def summarize(cloud_in: PointCloud, cloud_out: PointCloud, surface=None, reuse=(
     pupil = pupil_of(x, y, surface, centre)
     pvr_parts, spline = _reusable(cloud_out, v, pupil, reuse) if s["figures_of"] == "residual" \
         else (None, None)
+    weights = area_weights(x, y)
     s.update(form_metrics(x, y, v, pupil.radius, center=pupil.center, pvr_parts=pvr_parts,
-                          spline=spline))
+                          spline=spline, weights=weights))
+    s["rms_over"] = weighting_words(weights)
     s["pupil"] = pupil.report()
     return s
 

@@ -60,9 +60,9 @@ def _count_calls(monkeypatch):
         calls["pvr"] += 1
         return real_pvr(*a, **k)
 
-    def slope(x, y, r, spline=None):
+    def slope(x, y, r, spline=None, weights=None):
         calls["spline"] += spline is None  # fitted here, not taken from the step
-        return real_slope(x, y, r, spline)
+        return real_slope(x, y, r, spline, weights)
     monkeypatch.setattr(form, "pvr", pvr)
     monkeypatch.setattr(form, "slope_rms_urad", slope)
     return calls

@@ -44,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import PointsProError
+from ..metrics.area_weights import area_weights, weighted_rms
 from ..metrics.sampling import plain_best_fits
 
 #: the ISO quantities (key → how the notation names it)
@@ -82,9 +83,10 @@ def form_deviation(cloud, surface):
                          "surface is not a flat (add misalignment or register)")
 
 
-def iso_quantities(x, y, w, center, keys=None) -> dict[str, float]:
+def iso_quantities(x, y, w, center, keys=None, weights=None) -> dict[str, float]:
     """The ISO 10110-5 quantities (µm) of form deviation ``w`` (mm) at points (x, y) (mm) about
-    ``center`` (module doc); ``keys`` limits which are returned (all by default)."""
+    ``center`` (module doc); ``keys`` limits which are returned (all by default). ``weights``: the
+    points' areas for the RMS figures (core.metrics.area_weights; None: an even sampling)."""
     from ..metrics import zernike as zk
 
     x, y, w = (np.asarray(a, dtype=np.float64) for a in (x, y, w))
@@ -131,9 +133,9 @@ def iso_quantities(x, y, w, center, keys=None) -> dict[str, float]:
     if "irr_um" in keys:
         out["irr_um"] = float(np.ptp(irr)) * 1e3
     if "rmst_um" in keys:
-        out["rmst_um"] = float(np.std(d_t)) * 1e3
+        out["rmst_um"] = weighted_rms(d_t, weights) * 1e3
     if "rmsi_um" in keys:
-        out["rmsi_um"] = float(np.std(irr)) * 1e3
+        out["rmsi_um"] = weighted_rms(irr, weights) * 1e3
     if "rsi_um" in keys:
         rho = np.linspace(float(rr.min()) / R, 1.0, RADIAL_SAMPLES)
         s = np.zeros_like(rho)
@@ -142,7 +144,7 @@ def iso_quantities(x, y, w, center, keys=None) -> dict[str, float]:
             s += coef[j] * zk.zernike(nn, 0, rho, 0.0)
         out["rsi_um"] = float(np.ptp(s)) * 1e3
     if "rmsa_um" in keys:
-        out["rmsa_um"] = float(np.std(irr - A[:, rs] @ coef[rs])) * 1e3 if rs else float(np.std(irr)) * 1e3
+        out["rmsa_um"] = weighted_rms(irr - A[:, rs] @ coef[rs] if rs else irr, weights) * 1e3
     return out
 
 
@@ -170,15 +172,16 @@ def _solve(A, w):
     return np.linalg.lstsq(A, w, rcond=None)[0]
 
 
-def summary_quantities(x, y, w, surface, keys, centre=None) -> dict[str, float]:
+def summary_quantities(x, y, w, surface, keys, centre=None, weights=None) -> dict[str, float]:
     """The summary's figures named in ``keys``, computed as core.pipeline.summarize does (``centre``:
-    the pupil centre the recipe gives, core.metrics.pupil.recipe_centre)."""
+    the pupil centre the recipe gives, core.metrics.pupil.recipe_centre; ``weights``: the points'
+    areas, core.metrics.area_weights)."""
     from ..metrics.form import pvr, slope_rms_urad
     from ..metrics.pupil import pupil_of
 
     out = {}
     if "rms_um" in keys:
-        out["rms_um"] = float(np.sqrt(np.mean((w - w.mean()) ** 2))) * 1e3
+        out["rms_um"] = weighted_rms(w, weights) * 1e3
     if "pv_um" in keys:
         out["pv_um"] = float(np.ptp(w)) * 1e3
     if "pvr_um" in keys:
@@ -187,7 +190,7 @@ def summary_quantities(x, y, w, surface, keys, centre=None) -> dict[str, float]:
         if p is not None:  # else not computed on these points (the verdict says so)
             out["pvr_um"] = p * 1e3
     if "slope_rms_urad" in keys:
-        s = slope_rms_urad(x, y, w)
+        s = slope_rms_urad(x, y, w, weights=weights)
         if s is not None:
             out["slope_rms_urad"] = s
     return out
@@ -207,11 +210,13 @@ def compute(cloud, surface, keys, centre=None) -> dict[str, float]:
     if areal and _is_profile(cloud, is_profile):
         raise PointsProError(f"tolerance: {', '.join(ISO_KEYS.get(k, k) for k in areal)} need an area; a "
                              "stylus profile has none (a profile's limits: rms_um, pv_um)")
-    out = summary_quantities(x, y, w, surface, keys, centre)
+    # the RMS figures over the area, as the summary's (a stylus profile has none: its points' mean)
+    weights = None if _is_profile(cloud, is_profile) else area_weights(x, y)
+    out = summary_quantities(x, y, w, surface, keys, centre, weights)
     iso = [k for k in keys if k in ISO_KEYS]
     if iso:
         c = pupil_of(x, y, surface, centre).center
-        out.update(iso_quantities(x, y, w, c, iso))
+        out.update(iso_quantities(x, y, w, c, iso, weights))
     return out
 
 

@@ -194,6 +194,7 @@ def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = Non
     ``centre``: the pupil centre the recipe gives (core.metrics.pupil.recipe_centre)."""
     from ..maps.bspline import default_knot_spacing, fit_bspline
     from ..metrics import zernike as zk
+    from ..metrics.area_weights import area_weights, weighted_rms
     from ..metrics.form import PVR_TERMS, slope_rms_urad
     from ..metrics.pupil import is_flat, pupil_of
     from ..pipeline import _is_stylus_profile, remove_piston_tilt
@@ -209,9 +210,11 @@ def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = Non
     else:
         return out
     v = np.asarray(v, dtype=np.float64)
-    out["rms_um"] = float(np.sqrt(np.mean((v - v.mean()) ** 2))) * 1e3
+    profile = _is_stylus_profile(cloud)
+    weights = None if profile else area_weights(x, y)  # as summarize: RMS over the area
+    out["rms_um"] = weighted_rms(v, weights) * 1e3
     out["pv_um"] = float(np.ptp(v)) * 1e3
-    if _is_stylus_profile(cloud):
+    if profile:
         return out
     pupil = pupil_of(x, y, surface, centre)
     pairs = _PAIRS.get(PVR_TERMS) or _PAIRS.setdefault(PVR_TERMS, zk.terms(PVR_TERMS, "fringe"))
@@ -232,7 +235,7 @@ def summary_figures(cloud: PointCloud, surface, knot_spacing: float | None = Non
             out["_knot_spacing"] = h
         except ValueError:
             spline = None
-    s = slope_rms_urad(x, y, v, spline) if spline is not None else None
+    s = slope_rms_urad(x, y, v, spline, weights) if spline is not None else None
     if s is not None:
         out["slope_rms_urad"] = s
     return out
