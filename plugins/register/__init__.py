@@ -1,9 +1,22 @@
 """`register`: best-fit a measured cloud to a mesh nominal (parts with no equation: CAD STL/PLY).
 
-1. Coarse: open3d ICP, point-to-plane (Chen & Medioni 1992; open3d's registration_icp works in
-   float64, here on one thread so that a run repeats bit for bit), measured points against points
-   sampled on the mesh with its normals (a fixed seed), from the identity (the operator placed the
-   part near nominal) or from matched centroids.
+1. Coarse: ICP, point-to-plane (Chen & Medioni 1992), measured points against points sampled on
+   the mesh with its normals (a fixed seed), from the identity (the operator placed the part near
+   nominal) or from matched centroids (``_icp``). With x = T p, q the nearest sample (scipy's
+   cKDTree, exact) within dmax (max_distance) and n its normal, each iteration solves the
+   point-to-plane step linearised for a small rotation ω about the matched points' centroid c (Low
+   2004, "Linear least-squares optimization for point-to-plane ICP surface registration", UNC
+   TR04-004):
+        r = (x − q)·n,   J = [(x − c) × n, n],   (JᵀJ) (ω, t) = −Jᵀr,
+   (a motion the samples do not fix gets no step), then T ← [R(ω) | c + t − R(ω)c] T with R(ω)
+   exact (Rodrigues), re-orthonormalised; it stops when the fitness (share of the points matched)
+   and their RMS distance to the match change by under 10⁻⁹ (open3d's registration_icp's criterion;
+   open3d did this stage before: threaded, its sums came in a varying order and the pose changed
+   run to run; on one thread it was slow — on a 200,000-point freeform 3.8 s, threaded 2.7 s, this
+   one 1.6 s, the same pose to 10⁻¹¹), or after ``icp_iterations``. Float64; each point's search
+   is its own (threads: core.parallel.thread_count), the sums are numpy's and BLAS's on one thread
+   (the whole step runs in core.parallel.single_threaded_blas): the pose is the same bits on every
+   run, whatever the threads.
 2. Motions the nominal does not fix are found at the start or ICP pose (the SVD of J below): *free*
    (a symmetry — a plane's two slides and spin, a surface of revolution's spin, a sphere's three
    rotations) or *weak* (fixed only by the mesh's facets: a sphere's mesh; the singular value of J
@@ -23,12 +36,18 @@
    on a handful of a mesh's facets with such a size ratio, and a residual above RESIDUAL_FLOOR_MM and
    RATIO_LIMIT of the nominal's own departure from a plane (a local minimum).
 Output: the cloud in the mesh (part) frame; ``residual`` = signed distance to the mesh (mm, positive
-on the +z side). The residual includes the mesh's chordal error (its facets against the surface they
-approximate); the report estimates it, ``chord_deviation_um`` (RMS over the points of the sagitta
-L²/(8R) = Lθ/8 of the triangle under them, L an edge, θ the angle of its vertex normals) and warns
-when it reaches the residual's RMS. The report gives the transform measuring → part as a 4 × 4
-matrix, the rotation as angles about x, y, z (deg, R = Rz·Ry·Rx), the RMS before and after,
-``fitness`` (share of points over the nominal) and ``start`` (which pose the least squares began at).
+outside the part, on the side its faces face): the faces are oriented coherently (the two faces on
+an edge run it in opposite directions), each connected piece as a whole facing +z (a sheet: the sum
+of its area-weighted normals has z > 0) or outward (a closed piece: positive enclosed volume). On a
+height field that is the +z side, as z − sag; on an undercut wall (a face facing −z out of the part)
+and a closed solid's underside it is outside the part too (it was the +z side of each face, which
+MeshSurface turns to +z: a point outside an undercut read negative). The residual includes the
+mesh's chordal error (its facets against the surface they approximate); the report estimates it,
+``chord_deviation_um`` (RMS over the points of the sagitta L²/(8R) = Lθ/8 of the triangle under
+them, L an edge, θ the angle of its vertex normals) and warns when it reaches the residual's RMS.
+The report gives the transform measuring → part as a 4 × 4 matrix, the rotation as angles about x,
+y, z (deg, R = Rz·Ry·Rx), the RMS before and after, ``fitness`` (share of points over the nominal)
+and ``start`` (which pose the least squares began at).
 
 Mesh checks (core.io.mesh, read through pymeshlab — open3d for PLY): no faces, non-manifold edges
 or vertices, holes (a sheet has one outer boundary, its outline; a solid none: other boundary loops
@@ -38,7 +57,7 @@ pymeshlab repairs it and the report lists what was repaired (``mesh_repaired``).
 """
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 
@@ -72,10 +91,9 @@ def mesh_problems(vertices, triangles) -> list[str]:
 
 
 def _target_points(surf, p, n):
-    """ICP target: points with normals sampled densely on the nominal (a mesh's faces uniformly; an
-    analytic surface on a grid over the cloud's footprint, 10 % wider, inside its aperture)."""
-    import open3d as o3d
-
+    """ICP target: points (M, 3) and their unit normals (M, 3) sampled densely on the nominal (a
+    mesh's faces uniformly, each point with its face's normal; an analytic surface on a grid over the
+    cloud's footprint, 10 % wider, inside its aperture)."""
     from pointspro.core.errors import DomainError
     from pointspro.core.surfaces.mesh import MeshSurface
 
@@ -90,9 +108,7 @@ def _target_points(surf, p, n):
         r1, r2 = np.sqrt(rng.random(count)), rng.random(count)
         a, b, c = (V[F[k, j]] for j in range(3))
         pts = (1 - r1)[:, None] * a + (r1 * (1 - r2))[:, None] * b + (r1 * r2)[:, None] * c
-        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-        pc.normals = o3d.utility.Vector3dVector(surf.face_normals[k])
-        return pc
+        return pts, surf.face_normals[k]
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
     pad = 0.1 * (hi - lo)
     k = int(np.sqrt(count))
@@ -106,9 +122,7 @@ def _target_points(surf, p, n):
         gz = surf.sag(gx, gy)
     except DomainError as e:
         raise StepError(f"the nominal is not defined over the cloud's footprint: {e}") from None
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.column_stack([gx, gy, gz])))
-    pc.normals = o3d.utility.Vector3dVector(surf.normal(gx, gy))
-    return pc
+    return np.column_stack([gx, gy, gz]), np.asarray(surf.normal(gx, gy), dtype=np.float64)
 
 
 def _rot(w):
@@ -158,38 +172,35 @@ class RegisterStep(Step):
         return surf, str(p), list(surf.mesh_info.get("repaired", []))
 
     def run(self, cloud, params: RegisterParams, ctx: Context) -> StepResult:
-        import open3d as o3d
+        import scipy.spatial  # noqa: F401 — loads scipy's BLAS before it is pinned below (kept 1 thread)
 
+        from pointspro.core.parallel import single_threaded_blas
+
+        # BLAS on one thread: its calls here are narrow (N × 3 poses, 6 × 6 sums, N × 6 least
+        # squares), where threads only synchronise (p @ R.T took 108 ms instead of 4 ms beside a busy
+        # core) and split the sums in an order that depends on the thread count — the pose is the
+        # same bits whatever the threads (core.parallel)
+        with single_threaded_blas():
+            return self._run(cloud, params, ctx)
+
+    def _run(self, cloud, params: RegisterParams, ctx: Context) -> StepResult:
         surf, name, repaired = self._load(params, ctx)
         p = cloud.xyz
         if cloud.n < 6:
             raise StepError(f"{cloud.n} points cannot fix a rigid transform (6 parameters)")
-        geo = _Geometry(surf)
+        order = _locality_order(p)
+        geo = _Geometry(surf, order)
         ctx.progress.update(0.05, "sampling the mesh")
-        target = _target_points(surf, p, cloud.n)
-        src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p.copy()))
+        tp, tn = _target_points(surf, p, cloud.n)
         T0 = np.eye(4)
         if params.init == "centroid":
-            T0[:3, 3] = np.asarray(target.get_center()) - p.mean(axis=0)
+            T0[:3, 3] = tp.mean(axis=0) - p.mean(axis=0)
         extent = float(np.linalg.norm(np.ptp(p, axis=0)))
         scale = np.array([extent] * 3 + [1.0] * 3)  # rotations as the arc at the extent: all in mm
         dmax = params.max_distance or 0.05 * extent
         ctx.progress.update(0.15, "ICP")
-        # one thread: open3d's parallel sums come in a varying order, and ICP's pose differed by up
-        # to 0.015 (rotation) between two runs on one input (measured on the review's tilted plane)
-        pin = hasattr(o3d.utility, "set_max_threads")  # not in every open3d
-        threads = o3d.utility.get_max_threads() if pin else None
-        if pin:
-            o3d.utility.set_max_threads(1)
-        try:
-            icp = o3d.pipelines.registration.registration_icp(
-                src, target, dmax, T0, o3d.pipelines.registration.TransformationEstimationPointToPlane(),
-                o3d.pipelines.registration.ICPConvergenceCriteria(
-                    relative_fitness=1e-9, relative_rmse=1e-9, max_iteration=params.icp_iterations))
-        finally:
-            if pin:
-                o3d.utility.set_max_threads(threads)
-        T_icp = np.asarray(icp.transformation, dtype=np.float64).copy()
+        icp = _icp(p[order], tp, tn, T0, dmax, params.icp_iterations, extent, check=ctx.progress.check)
+        T_icp = icp.T
         ctx.progress.check()
         # the motions the nominal leaves free (a plane's slides and spin, a surface of revolution's
         # spin) or fixes only by its facets (a sphere's mesh): point-to-plane ICP drifts along them
@@ -198,10 +209,11 @@ class RegisterStep(Step):
         # start pose: removed from ICP's motion and from every least-squares step.
         ev0, ev1 = geo.evaluate(_apply(T0, p)), geo.evaluate(_apply(T_icp, p))
         held, motions = _held_motions(ev1 if ev1.inside.sum() >= ev0.inside.sum() else ev0, extent)
-        T_icp = _hold(T_icp, T0, held, extent)
+        if held.shape[1]:  # nothing held: T_icp and ev1 stand
+            T_icp = _hold(T_icp, T0, held, extent)
+            ev1 = geo.evaluate(_apply(T_icp, p))
         # the better of the start and the (held) ICP pose, by the exact distance to the nominal over
         # every point (a point off the mesh counts with its distance to the mesh's edge)
-        ev1 = geo.evaluate(_apply(T_icp, p))
         start = "ICP" if ev1.cost <= ev0.cost else "start"
         T, ev = (T_icp, ev1) if start == "ICP" else (T0, ev0)
         if not np.isfinite(ev.cost):
@@ -348,6 +360,95 @@ def _compose(step, T):
     return np.vstack([np.column_stack([R @ T[:3, :3], R @ T[:3, 3] + step[3:]]), [0, 0, 0, 1]])
 
 
+#: ICP's normal equations: eigenvalues of JᵀJ (scaled) below this fraction of the largest are motions
+#: the sampled nominal does not fix (singular value < 10⁻⁵): no step along them — ICP drifted 5–11 mm
+#: along a plane's free slides; stage 3 fits what ICP leaves, with its own, finer threshold
+ICP_NULL = 1e-10
+#: ICP stops when neither the fitness nor the correspondences' RMS distance changes by this much
+ICP_RELATIVE = 1e-9
+
+
+class _ICPResult(NamedTuple):
+    T: np.ndarray        # 4 × 4, measuring → part
+    fitness: float       # share of the points with a correspondence within dmax
+    rmse: float          # RMS distance of the points to their correspondence (mm)
+    iterations: int
+
+
+def _locality_order(p):
+    """A permutation of the points that keeps neighbours together (the leaf order of a k-d tree on
+    them): neighbour searches in that order reuse the search tree in cache — a 200,000-point query
+    took 0.14 s instead of 0.39 s (k-d tree), a closest-triangle search 0.17 s instead of 0.31 s."""
+    from scipy.spatial import cKDTree
+
+    return np.asarray(cKDTree(p, balanced_tree=False, compact_nodes=False).indices, dtype=np.int64)
+
+
+def _icp(p, tp, tn, T0, dmax, iterations, extent, workers=None, check=None) -> _ICPResult:
+    """Stage 1, point-to-plane ICP (Chen & Medioni 1992) of the points p (best in a spatially coherent
+    order: ``_locality_order``) to the target points tp with unit normals tn, from the pose T0.
+
+    Each iteration, with x_i = T p_i: q_i the nearest target point (scipy's cKDTree, exact, built once;
+    the points searched on ``workers`` threads, default core.parallel.thread_count — each search on its
+    own, the answer the same for any count), kept where ‖x_i − q_i‖ ≤ dmax; then the rigid step about
+    their centroid c that minimises the point-to-plane distances, linearised for a small rotation ω
+    (Low 2004, "Linear least-squares optimization for point-to-plane ICP surface registration",
+    TR04-004, UNC; R(ω) ≈ I + [ω]×):
+        r_i = (x_i − q_i)·n_i,   J_i = [(x_i − c) × n_i, n_i],   (JᵀJ) (ω, t) = −Jᵀr,
+    columns scaled (ω × extent, mm), solved by the eigen-decomposition of the 6 × 6 with eigenvalues
+    below ICP_NULL of the largest left out (no step along a motion the samples do not fix); then
+        T ← [R(ω) | c + t − R(ω) c] T,   R(ω) exact (Rodrigues), T's rotation re-orthonormalised
+    (U Vᵀ of its SVD). Stops after ``iterations`` or when the fitness (share of the points with a
+    correspondence) and the RMSE (RMS of ‖x_i − q_i‖ over them) — open3d's registration_icp's
+    definitions and criterion — both change by less than ICP_RELATIVE. Float64 throughout; the sums
+    are numpy's and BLAS's on one thread (the caller's core.parallel.single_threaded_blas, and here):
+    the same bits on every run, whatever the thread count."""
+    from scipy.spatial import cKDTree
+
+    from pointspro.core.parallel import single_threaded_blas, thread_count
+
+    workers = max(1, int(workers or thread_count()))
+    tree = cKDTree(tp, balanced_tree=False)
+    scale = np.array([extent] * 3 + [1.0] * 3)
+    n = len(p)
+
+    def match(T):
+        x = _apply(T, p)
+        dist, idx = tree.query(x, k=1, distance_upper_bound=dmax, workers=workers)
+        ok = idx < len(tp)  # none within dmax: idx = len(tp), dist = inf
+        k = int(np.count_nonzero(ok))
+        dk = dist[ok]
+        return x, idx, ok, k / n, (float(np.sqrt(dk @ dk / k)) if k else 0.0)
+
+    with single_threaded_blas():
+        T = np.array(T0, dtype=np.float64)
+        x, idx, ok, fitness, rmse = match(T)
+        it = 0
+        while it < iterations and fitness > 0:
+            it += 1
+            if check is not None:
+                check()
+            xs, j = x[ok], idx[ok]
+            q, nn = tp[j], tn[j]
+            c = xs.mean(axis=0)
+            r = np.einsum("ij,ij->i", xs - q, nn)
+            J = np.column_stack([np.cross(xs - c, nn), nn]) / scale
+            w, V = np.linalg.eigh(J.T @ J)
+            keep = w > ICP_NULL * w[-1]
+            z = -(V[:, keep] @ ((V[:, keep].T @ (J.T @ r)) / w[keep])) / scale
+            R = _rot(z[:3])
+            U = np.eye(4)
+            U[:3, :3], U[:3, 3] = R, c + z[3:] - R @ c
+            T = U @ T
+            u, _, vt = np.linalg.svd(T[:3, :3])
+            T[:3, :3] = u @ vt
+            f0, e0 = fitness, rmse
+            x, idx, ok, fitness, rmse = match(T)
+            if abs(fitness - f0) < ICP_RELATIVE and abs(rmse - e0) < ICP_RELATIVE:
+                break
+    return _ICPResult(T, fitness, rmse, it)
+
+
 class _Eval:
     """The points x (part frame) against the nominal: signed distance d, its gradient ``grad`` (the
     face normal over a face, the direction to the foot on an edge), the facet and smooth (vertex
@@ -364,10 +465,11 @@ class _Geometry:
     vertices (a foot on them lies beyond the nominal), vertex normals (the smooth surface the facets
     approximate) and each triangle's chordal deviation."""
 
-    def __init__(self, surf):
+    def __init__(self, surf, order=None):
         from pointspro.core.surfaces.mesh import MeshSurface
 
         self.surf = surf
+        self.order = order  # the points' search order (_locality_order): the same answers, faster
         self.mesh = isinstance(surf, MeshSurface)
         if not self.mesh:
             return
@@ -375,12 +477,23 @@ class _Geometry:
         nv = len(V)
         # edge opposite vertex k of each triangle: (1, 2), (2, 0), (0, 1)
         e = np.stack([F[:, [1, 2]], F[:, [2, 0]], F[:, [0, 1]]], axis=1)  # (T, 3, 2)
-        key = np.min(e, axis=2) * nv + np.max(e, axis=2)
-        _, inv, count = np.unique(key.ravel(), return_inverse=True, return_counts=True)
-        self.bedge = (count[inv] == 1).reshape(key.shape)
+        key = (np.min(e, axis=2) * nv + np.max(e, axis=2)).ravel()
+        srt = np.argsort(key, kind="stable")
+        ks = key[srt]
+        grp = np.cumsum(np.concatenate([[True], ks[1:] != ks[:-1]])) - 1
+        count = np.empty(len(key), np.int64)
+        count[srt] = np.bincount(grp)[grp]  # faces on each triangle's edge
+        self.bedge = (count == 1).reshape(F.shape)
         self.bvert = np.zeros(nv, bool)
         self.bvert[e[self.bedge].ravel()] = True
         cr = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # area-weighted, +z (MeshSurface)
+        # the faces' sides: +z each (MeshSurface), turned where that breaks the mesh's coherent
+        # orientation (an undercut, a closed solid's underside, a wall's facets at n_z ≈ 0)
+        side = _coherent_sides(V, F, e, key, srt, count, cr)
+        self.fn = surf.face_normals
+        if side is not None:
+            self.fn = surf.face_normals * side[:, None]
+            cr = cr * side[:, None]
         vn = np.zeros_like(V)
         for k in range(3):
             np.add.at(vn, F[:, k], cr)
@@ -414,14 +527,16 @@ class _Geometry:
         from pointspro.core.surfaces.mesh import closest_point_on_triangles
 
         surf = self.surf
-        q32 = o3d.core.Tensor((x - surf._origin).astype(np.float32))
-        ids = surf._raycasting().compute_closest_points(q32)["primitive_ids"].numpy().astype(np.int64)
+        o = self.order if self.order is not None and len(self.order) == len(x) else slice(None)
+        q32 = o3d.core.Tensor((x[o] - surf._origin).astype(np.float32))
+        ids = np.empty(len(x), np.int64)
+        ids[o] = surf._raycasting().compute_closest_points(q32)["primitive_ids"].numpy()
         tri = surf.triangles[ids]
         a, b, c = (surf.vertices[tri[:, k]] for k in range(3))
         foot = closest_point_on_triangles(x, a, b, c)
         diff = x - foot
         dist = np.linalg.norm(diff, axis=1)
-        nf = surf.face_normals[ids]
+        nf = self.fn[ids]
         s = np.sign(np.einsum("ij,ij->i", diff, nf))
         s[s == 0] = 1.0
         d = dist * s
@@ -452,6 +567,45 @@ class _Geometry:
             return None
         s = self.sagitta[ev.ids[ev.inside]] if np.any(ev.inside) else self.sagitta
         return float(np.sqrt(np.mean(s * s))), float(np.max(s))
+
+
+def _coherent_sides(V, F, e, key, srt, count, cr):
+    """±1 per face: the side of each (+z-oriented, MeshSurface) face that faces out of the part, so
+    that the faces are coherently oriented — the two faces on each edge run it in opposite directions
+    —, and each connected piece as a whole faces +z (a sheet: the sum of its area-weighted normals has
+    z > 0) or outward (a closed piece: its enclosed volume, Σ a·(b × c)/6, is positive). None when
+    the +z faces already are coherent (a height field: every face +z, nothing turned). e: the
+    triangles' edges (T, 3, 2), key their vertex pairs (3T), srt key's sort, count the faces on each."""
+    ks = key[srt]
+    pair = np.flatnonzero((ks[1:] == ks[:-1]) & (count[srt[:-1]] == 2))
+    a, b = srt[pair], srt[pair + 1]  # the two sides (face·3 + edge) of each interior edge
+    start = e[..., 0].ravel()
+    same = start[a] == start[b]  # both faces run the edge the same way: one of them is turned
+    if not np.any(same):
+        return None
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    # each face in its two orientations (f, f + T): coherent neighbours join the same orientations,
+    # incoherent ones the opposite; a connected piece becomes two components, one per orientation
+    T = len(F)
+    f, g = a // 3, b // 3
+    gs = np.where(same, g + T, g)
+    rows = np.concatenate([f, f + T])
+    cols = np.concatenate([gs, np.where(same, g, g + T)])
+    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(2 * T, 2 * T)).tocsr()
+    lab = connected_components(graph, directed=False)[1]
+    lab0, lab1 = lab[:T], lab[T:]
+    side = np.where(lab0 > lab1, -1.0, 1.0)  # each piece's faces as its smaller-labelled orientation
+    piece = np.minimum(lab0, lab1)
+    closed = np.bincount(piece, weights=(count.reshape(F.shape) == 1).sum(axis=1)) == 0
+    c = V - V.mean(axis=0)
+    vol = np.einsum("ij,ij->i", c[F[:, 0]], np.cross(c[F[:, 1]], c[F[:, 2]]))
+    facing = np.where(closed[piece], np.bincount(piece, weights=side * vol)[piece],
+                      np.bincount(piece, weights=side * cr[:, 2])[piece])
+    side = np.where(facing < 0, -side, side)
+    side[lab0 == lab1] = 1.0  # a non-orientable piece (refused by the mesh check): +z as it is
+    return side
 
 
 def _held_motions(ev, extent):
