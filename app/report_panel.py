@@ -118,7 +118,7 @@ class ReportPanel(QtWidgets.QWidget):
         if r is None:
             return ""
         if row <= 0:
-            from pointspro.core.statement import figure_rows, pupil_text, verdict_banner_html
+            from pointspro.core.statement import figure_rows, pupil_text, verdict_banner_html, weighting_text
 
             s = r.summary()
             # in the unit their size asks for; with an uncertainty value ± U95, noise bias removed
@@ -128,7 +128,7 @@ class ReportPanel(QtWidgets.QWidget):
             if s.get("figures_of"):  # what the figures are of, and PVr's pupil (as report.html)
                 pupil = s.get("pupil") or {}
                 page += (f"<p style='color:#555'>Figures of the {html.escape(s['figures_of'])}"
-                         + html.escape(pupil_text(pupil)) + ".</p>")
+                         + html.escape(pupil_text(pupil)) + html.escape(weighting_text(s)) + ".</p>")
             page += table_html({"points in": s["points_in"], "points out": s["points_out"], **figures})
             if s.get("uncertainty"):
                 from pointspro.core.report import uncertainty_html

@@ -240,10 +240,11 @@ def render_html(report: dict, folder=None) -> str:
     if summary:
         what = s.get("figures_of") or "residual"
         pupil = s.get("pupil") or {}
-        from .statement import pupil_text
+        from .statement import pupil_text, weighting_text
 
         note = (f"<p class='muted'>Figures of the {html.escape(what)}" + html.escape(pupil_text(pupil))
-                + (f" — {html.escape(str(pupil.get('centre_from', '')))}" if pupil else "") + ".</p>")
+                + (f" — {html.escape(str(pupil.get('centre_from', '')))}" if pupil else "")
+                + html.escape(weighting_text(s)) + ".</p>")
         parts += ["<h2>Form error</h2>", note, table_html(summary), _img(folder, "form_error.png")]
     if s.get("uncertainty"):
         parts += uncertainty_html(s["uncertainty"], folder)

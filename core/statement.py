@@ -146,6 +146,17 @@ def _num(v) -> str:
     return "—" if v is None else f"{v:.4g}"
 
 
+def weighting_text(summary: dict) -> str:
+    """"; RMS and slope RMS over the area (…)" when the summary weighted its points by area (a star or
+    spiral scan, core/metrics/area_weights.py); "" on an even sampling, where the points' mean is the
+    area's."""
+    over = str(summary.get("rms_over") or "")
+    if not over.startswith("area"):
+        return ""
+    return ("; RMS and slope RMS over the area: the points are unevenly spread (a star or spiral scan), "
+            "each weighted by the area it stands for")
+
+
 def pupil_text(pupil: dict | None) -> str:
     """"; PVr's pupil: centre (1.5 mm, -2 mm), radius 650 mm" for the report and the window, each
     length in the unit its size asks for; "" without a pupil; a number the report could not hold

@@ -61,6 +61,7 @@ def test_example_batch_writes_outputs_and_leaves_input_alone(run_cli, tmp_path):
     assert weighted_rms(cloud["residual"], w) * 1e3 == pytest.approx(s["rms_um"], rel=1e-9)
     html = (folder / "report.html").read_text(encoding="utf-8")
     assert "Clear aperture" in html and "asphere_cmm.csv" in html
+    assert "RMS and slope RMS over the area" in html  # the star scan's weighting, said
     assert _sha(DATA) == before
     assert "asphere_cmm.csv: ok" in out
     assert not list((tmp_path / "out").glob(".*"))  # no temporary leftovers
