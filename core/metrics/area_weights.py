@@ -22,13 +22,21 @@ area. This is exact where the density varies with the distance from that centre 
 spiral, concentric rings, a full or partial raster — and, because each circle gets its area whatever
 its angular sampling, a star's empty sectors between its lines need no special care. Its limits,
 stated: a density that varies around the circle (two dense patches; an uneven star) is weighted by
-its radius only; concentric rings give their outermost ring a whole band of area where it stands for
-half of one (measured: RMS up to 5–7 % high with 20 rings). Measured against the area integral over
+its radius only; points on rings (concentric rings, a star's steps along its lines) give the
+outermost ring a whole band of area — right where the scan stops half a step inside the aperture,
+as the example's star does (points at the centres of their cells), twice its share where the last
+ring lies on the aperture's edge (12 lines at 2 mm steps: RMS 9–13 % high on an edge roll-off; 20
+rings: 5–7 %); a star with adjacent lines missing leaves those sectors unmeasured, which no weight
+restores (three adjacent of 12: astigmatism 10 % low, the points' mean 23 %); under ~200 points
+(a 12-line star at 10 mm steps) the weights are no better than the points' mean. Measured against the area integral over
 the hull (stars of 5–24 lines, spirals of 10–80 turns, a dense patch, annular stars and spirals;
 spherical aberration, astigmatism with a ripple, an edge, a central bump): within −3.3…+3.5 % where
 the points' RMS was −19…+166 % off (the central bump on an annulus, whose values there are tiny:
 +10 %). Even samplings get no weights — the plain mean is the area mean there, to the last bit:
-those core.metrics.sampling.uniform_sampling recognises (pixel maps, rasters, ≥ 2,500 even points),
+pixel maps (points on a lattice holding at least MAP_OCCUPANCY of its nodes in their hull: a map's
+valid pixels are its measured area, dropouts or not — interferometer practice; a sparse subset of a
+lattice, a fine patch in a coarse raster, is weighted), those core.metrics.sampling.uniform_sampling
+recognises (rasters, ≥ 2,500 even points),
 and those whose four radial quarters come out with mean weights within EVEN_RATIO of each other (a
 small raster off its lattice after probe compensation, random points; a star's or a spiral's
 quarters differ 2.5–10×). Cost: 0.02–0.2 s for 10³–10⁴ points (a sort and a hull).
@@ -51,6 +59,9 @@ PEAK = 6.0
 #: below this ratio of the largest to the smallest mean weight of the four radial quarters of the
 #: points the sampling is even (the plain mean stands)
 EVEN_RATIO = 1.3
+#: the share of a lattice's nodes inside the points' hull that must hold a point for the points to be
+#: a map's pixels (a map with 30 % dropouts: 0.7; a cross of two profiles: ~2 × step / radius)
+MAP_OCCUPANCY = 0.5
 
 
 def area_weights(x, y) -> np.ndarray | None:
@@ -58,14 +69,22 @@ def area_weights(x, y) -> np.ndarray | None:
     sample their area evenly (the plain mean is the area mean) or are too few to weigh (< 64)."""
     from scipy.ndimage import gaussian_filter1d
 
-    from .sampling import uniform_sampling
+    from .sampling import on_lattice, uniform_sampling
 
     x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     n = x.size
-    if n < 64 or uniform_sampling(x, y):
+    if n < 64:
         return None
     hull = _hull(x, y)
     if hull is None:
+        return None
+    if on_lattice(x, y):
+        # a pixel map, however many pixels dropped out: its valid pixels are the measured area
+        # (interferometer practice). Not a sparse subset of a lattice — two or three profiles in a
+        # cross, a fine patch in a coarse raster —, whose points are not a map's pixels
+        if _lattice_occupancy(x, y, hull) >= MAP_OCCUPANCY:
+            return None
+    elif uniform_sampling(x, y):
         return None
     c = density_centre(x, y)
     r = np.hypot(x - c[0], y - c[1])
@@ -174,6 +193,22 @@ def _share_in_hull(hull, c, radii) -> np.ndarray:
             inside &= e[0] * px + e[1] * py + e[2] <= 1e-9 * np.maximum(radii[:, None], 1e-300)
         return inside.mean(axis=1)
     return (radii[:, None] <= np.maximum(reach, 0.0)[None, :] * (1 + 1e-12)).mean(axis=1)
+
+
+def _lattice_occupancy(x, y, hull) -> float:
+    """Points per lattice node inside the hull: N · step_x · step_y / hull area (the steps: the
+    smallest differences between distinct coordinates, as core.metrics.sampling.on_lattice reads
+    them)."""
+    from scipy.spatial import ConvexHull
+
+    steps = []
+    for a in (x, y):
+        d = np.diff(np.unique(a))
+        d = d[d > 1e-12 * max(float(np.ptp(a)), 1e-300)]
+        steps.append(float(d.min()) if d.size else 0.0)
+    step = max(x.size // 200_000, 1)
+    area = float(ConvexHull(np.column_stack([x[::step], y[::step]])).volume)
+    return x.size * steps[0] * steps[1] / area if area > 0 else 1.0
 
 
 def _close_gaps(occupied: np.ndarray, gap: int) -> np.ndarray:
