@@ -296,9 +296,13 @@ def grid_map_figure(grid, title="Form-error map"):
     return fig
 
 
-def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None):
+def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None, weights=None):
     """Two maps side by side on their own scales (each about its mean: piston is not shown, each in
-    the unit its size asks for); x2, y2 when the point sets differ."""
+    the unit its size asks for); x2, y2 when the point sets differ. ``weights``: the points' areas
+    (core.metrics.area_weights; one per point, both panels) for the RMS in the titles — over the area
+    (docs/conventions.md, Summary figures); None: the points' plain RMS (an even sampling)."""
+    from .metrics.area_weights import weighted_rms
+
     fig = _figure(11, 4.6)
     ax1, ax2 = fig.subplots(1, 2)
     # binned in mm, then about the mean: the bins' means are linear in the values, so no full-length
@@ -309,7 +313,8 @@ def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None)
         mean = float(vals.mean())
         img, ext = _binned(px, py, vals)
         img = img - mean
-        _map_axes(fig, ax, img, ext, "", f"{when} {what}: RMS {format_length(np.std(vals), 4)}")
+        rms = np.std(vals) if weights is None else weighted_rms(vals, weights)
+        _map_axes(fig, ax, img, ext, "", f"{when} {what}: RMS {format_length(rms, 4)}")
     return fig
 
 

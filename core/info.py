@@ -2,9 +2,9 @@
 
 The reader chosen, the number of points, the channels with their units, the extents (mm), the grid
 of a map (rows × columns, pixel) or the mean nearest-neighbour spacing of a scattered cloud, and a
-quick look at the heights: RMS and PV of z after removing the least-squares plane (piston and tilt,
-about the bounding-box centre as in the summary, docs/conventions.md "Summary figures"). Nothing is
-written; the file is read exactly as `--batch` reads it.
+quick look at the heights: RMS (over the area) and PV of z after removing the least-squares plane
+(piston and tilt, about the bounding-box centre as in the summary, docs/conventions.md "Summary
+figures"). Nothing is written; the file is read exactly as `--batch` reads it.
 """
 from __future__ import annotations
 
@@ -53,8 +53,14 @@ def describe(path, options: dict | None = None) -> dict:
         d["spacing_mm"] = mean_spacing(cloud.xyz)
     d["z_plane_removed"] = None
     if cloud.n >= 3:
+        from .metrics.area_weights import area_weights, weighted_rms
+        from .pipeline import _is_stylus_profile
+
         r = remove_piston_tilt(cloud.x, cloud.y, cloud.z)
-        rms, pv = float(np.sqrt(np.mean((r - r.mean()) ** 2))), float(np.ptp(r))
+        # RMS over the area, as the summary (docs/conventions.md, Summary figures): a star scan's points
+        # crowd its centre; a map, an even sampling and stylus profiles: the points' plain RMS
+        w = None if grid or _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
+        rms, pv = weighted_rms(r, w), float(np.ptp(r))
         d["z_plane_removed"] = {"rms_mm": rms, "pv_mm": pv, "rms": format_length(rms),
                                 "pv": format_length(pv)}
     return d

@@ -74,9 +74,14 @@ def cloud_html(cloud) -> str:
         pairs.append(("extent x × y × z", _extent(cloud)))
         v, what = _map_of(cloud)
         if v is not None:
-            d = v - v.mean()
+            from .metrics.area_weights import area_weights, weighted_rms
+            from .pipeline import _is_stylus_profile
+
+            # over the area, as the summary (docs/conventions.md, Summary figures): a star scan's
+            # points crowd its centre; an even sampling and stylus profiles: the points' plain RMS
+            w = None if _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
             pairs.append((f"RMS / PV of the {what}",
-                          f"{format_length(float(np.sqrt(np.mean(d * d))))} / {format_length(float(np.ptp(v)))}"))
+                          f"{format_length(weighted_rms(v, w))} / {format_length(float(np.ptp(v)))}"))
             s = _subsample(cloud.n)
             fig = _png(scattered_map(cloud.x[s], cloud.y[s], v[s], title=what.capitalize()))
     return f"<div><b>PointCloud</b>{_table(pairs)}{fig}</div>"

@@ -83,7 +83,9 @@ def test_one_hidden_effect_at_nm_amplitude_is_named(tmp_path, case):
     surface, scan, hidden, seed = ONE[case]
     (name, params), = hidden.items()
     rep = run(tmp_path, surface, scan, [hidden], seed=seed)
-    assert rep["gap_before"]["rms_um"] > 1.3 * NOISE * 1e3, rep["gap_before"]  # a gap of a few nm
+    # a gap of a few nm, over the area since the gap's RMS is (docs/conventions.md, Summary figures): the
+    # spirals crowd their centre, and straightness's gap reads 2.47 nm there, 2.77 nm over its points
+    assert rep["gap_before"]["rms_um"] > 1.2 * NOISE * 1e3, rep["gap_before"]
     assert names(rep)[:1] == [name], (names(rep), rep["ambiguous_with"])
     assert rep["verdict"] in ("explained", "ambiguous")
     assert rep["gap_after"]["rms_um"] <= 1.1 * NOISE * 1e3, rep["gap_after"]

@@ -103,7 +103,11 @@ def test_extra_dof_vertex_radius_and_conic():
     res = run(measured(true, DATA2_POSE, x, y, e), design,
               dof=["alpha", "beta", "dx", "dy", "dz", "radius", "conic"])
     rep = res.report
-    assert rep["R"] == pytest.approx(2085, abs=1e-3) and rep["k"] == pytest.approx(-0.97, abs=1e-5)
+    # the fit takes form out, so it is weighted by the points' areas (a star: core/geometry/posed_fit.py
+    # form_weights); the estimated weights cost k 2e-5 here (17 nm of sag at the rim), where the
+    # points' fit is exact only because this astigmatism is orthogonal to power on an even star
+    assert rep["R"] == pytest.approx(2085, abs=1e-3) and rep["k"] == pytest.approx(-0.97, abs=3e-5)
+    assert rep["fit_weights"].startswith("area")
     assert rep["uncertainty"]["R"] > 0 and rep["surface"]["type"] == "even_asphere"
     assert np.sqrt(np.mean((res.cloud["residual"] - e) ** 2)) < 5e-6
 

@@ -7,15 +7,20 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, RecipeError
+from ..metrics.area_weights import area_weights, weighted_rms
 from ..simulate.effects import ScanContext
 from .select import RHO_GATE, select, separate_by
 
 REGION_MIN_SIGMA = 5.0
 
 
-def _stats(v) -> dict:
+def _stats(v, w=None) -> dict:
+    """The reported RMS and PV of a gap (µm): the RMS over the area (``w``: the points' areas,
+    core.metrics.area_weights; None: an even sampling, the points' plain RMS), docs/conventions.md,
+    Summary figures. Only what is reported: the selection's statistics (F, BIC, σ) stay the points'."""
     v = np.asarray(v)
-    return {"rms_um": float(np.sqrt(np.mean((v - v.mean()) ** 2)) * 1e3), "pv_um": float(np.ptp(v) * 1e3)}
+    rms = np.sqrt(np.mean((v - v.mean()) ** 2)) if w is None else weighted_rms(v, w)
+    return {"rms_um": float(rms * 1e3), "pv_um": float(np.ptp(v) * 1e3)}
 
 
 def regions(x, y, r, sigma, cells=24) -> list[dict]:
@@ -111,7 +116,11 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     res = select(ctx, gap, bootstrap=bootstrap)
     sigma = res["sigma"]
     effects = list(model.effects) if model is not None else []
-    found, effects = found_effects(res, effects)
+    from ..pipeline import _is_stylus_profile
+
+    # the points' areas for the reported gap RMS (a star or a spiral crowds its centre); None: even
+    w = None if _is_stylus_profile(meas) else area_weights(meas.x, meas.y)
+    found, effects = found_effects(res, effects, w)
     ambiguous = ambiguities(res, sigma)
     updated = None
     if model is not None:
@@ -120,9 +129,9 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     regs = regions(meas.x, meas.y, after - after.mean(), sigma)
     structure = bool(regs) or res["rms"] > 1.25 * sigma
     report = {
-        "verdict": verdict(structure, ambiguous, found), "gap_before": _stats(gap), "gap_after": _stats(after),
+        "verdict": verdict(structure, ambiguous, found), "gap_before": _stats(gap, w), "gap_after": _stats(after, w),
         "noise_um": sigma * 1e3, "noise_um_of_gap": res["sigma_gap"] * 1e3, "found": found, "ambiguous_with": ambiguous,
-        "unexplained": {"rms_um": _stats(after)["rms_um"] if structure else 0.0, "regions": regs if structure else [],
+        "unexplained": {"rms_um": _stats(after, w)["rms_um"] if structure else 0.0, "regions": regs if structure else [],
                         **({"note": correlated_note(res["rho1"], res["dropped_under_correlated_noise"])}
                            if structure and res["rho1"] > RHO_GATE else {})},
         "checks": {"chi2_p": res["chi2_p"], "residual_lag1_autocorrelation": res["rho1"],
@@ -137,7 +146,7 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
         "measured": str(measured), "model": str(model_path) if model_path else None,
         "simulated": str(simulated) if simulated else None, "warnings": warnings,
     }
-    _write(Path(out_dir), report, updated, effects, ctx, gap, after, found, res["order"])
+    _write(Path(out_dir), report, updated, effects, ctx, gap, after, found, res["order"], w)
     return report
 
 
@@ -375,15 +384,16 @@ def linear_interpolation(pts, values, q, nearest, chunk: int = 20_000) -> np.nda
     return out
 
 
-def found_effects(res: dict, effects: list[dict]) -> tuple[list[dict], list[dict]]:
+def found_effects(res: dict, effects: list[dict], w=None) -> tuple[list[dict], list[dict]]:
     """Each chosen effect in the order it entered, with its parameters in the library's units, their
-    uncertainties, the gap after it and its evidence; and the model's effects with them added."""
+    uncertainties, the gap after it (its RMS over the area: ``w``, the points' areas) and its evidence;
+    and the model's effects with them added."""
     found = []
     for f in res["found"]:
         params, unc, st = f["params"], f["uncertainty"], f["stage"]
         effects = _merge(effects, f["effect"], params)
         entry = {"effect": f["effect"], "params": params, "uncertainty": unc,
-                 "gap_after": _stats(f["resid_upto"]),
+                 "gap_after": _stats(f["resid_upto"], w),
                  "evidence": {"F": st.F, "p": st.p, "delta_bic": st.delta_bic, "vif_max": f["vif_max"],
                               "stability": res["stability"].get(f["effect"]),
                               "ssr_before_um2": st.ssr_before * 1e6, "ssr_after_um2": st.ssr_after * 1e6}}
@@ -447,7 +457,8 @@ def verdict(structure: bool, ambiguous: list, found: list) -> str:
     return "nothing_missing"
 
 
-def _write(out_dir: Path, report: dict, updated, effects: list[dict], ctx, gap, after, found, order) -> None:
+def _write(out_dir: Path, report: dict, updated, effects: list[dict], ctx, gap, after, found, order,
+           w=None) -> None:
     """explain.json, model.updated.yaml (the model with the found effects, or just the effects when
     the gap came from a simulated file), the figures and explain.html — all or nothing."""
     from ..io.atomic import atomic_dir
@@ -462,16 +473,17 @@ def _write(out_dir: Path, report: dict, updated, effects: list[dict], ctx, gap, 
 
             (tmp / "model.updated.yaml").write_text(yaml.safe_dump({"effects": effects}, sort_keys=False),
                                                     encoding="utf-8")
-        _figures(tmp, ctx, gap, after, found, order)
+        _figures(tmp, ctx, gap, after, found, order, w)
         (tmp / "explain.html").write_text(_html(report, tmp), encoding="utf-8")
 
 
-def _figures(folder, ctx, gap, after, found, order):
+def _figures(folder, ctx, gap, after, found, order, w=None):
     """gap_map.png (before/after maps) and gap_views.png: the gap against radius, spindle angle,
     time and scan velocity, and its spectrum along the scan — the first found effect's view first."""
     from ..figures import _figure, before_after, save_png
 
-    save_png(before_after(ctx.x, ctx.y, gap, after, what="adding the found effects"), folder / "gap_map.png")
+    save_png(before_after(ctx.x, ctx.y, gap, after, what="adding the found effects", weights=w),
+             folder / "gap_map.png")
     t = ctx.t[order]
     uniform = np.ptp(t) > 0 and np.std(np.diff(t)) < 1e-3 * np.mean(np.diff(t))
     speed = scan_speed(ctx.x, ctx.y, ctx.t)

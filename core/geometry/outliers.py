@@ -66,7 +66,7 @@ def pull_on_pose(surface, xyz_out, fit, kind: str, offset: float, residual_all) 
 
 
 def refit_without_outliers(surface, xyz, dof, initial: dict, kind: str, k: float, fit, part, residual, *,
-                           offset: float = 0.0, max_iter: int = 100, check=None):
+                           offset: float = 0.0, max_iter: int = 100, check=None, weights=None):
     """(fit, part, residual, excluded mask or None, report entries) — module doc. ``fit``, ``part``
     and ``residual``: the fit on every point, its part-frame points (or None) and its residual;
     ``initial``: the recipe's initial/held pose; ``kind``: "vertical" or "normal". When the points
@@ -91,7 +91,7 @@ def refit_without_outliers(surface, xyz, dof, initial: dict, kind: str, k: float
                        "many outliers: run knn_denoise, then this step again)")
             if excluded.any():  # back to the fit on all points
                 fit = PosedSurfaceFit(surface, xyz, dof, initial, kind, offset=offset, max_iter=max_iter,
-                                      check=check).fit()
+                                      check=check, weights=weights).fit()
                 part, residual = residuals_at(fit, xyz, kind, offset)
             return fit, part, residual, None, {"excluded_from_pose": 0, "warnings": [warning]}
         if first:
@@ -108,7 +108,7 @@ def refit_without_outliers(surface, xyz, dof, initial: dict, kind: str, k: float
             check()
         start = {**initial, **{nm: fit.values[nm] for nm in fit.names if nm in POSE_DOF}}
         fit = PosedSurfaceFit(surface, xyz[~excluded], dof, start, kind, offset=offset, max_iter=max_iter,
-                              check=check).fit()
+                              check=check, weights=None if weights is None else weights[~excluded]).fit()
         part, residual = residuals_at(fit, xyz, kind, offset)
     if not excluded.any():
         return fit, part, residual, None, {"excluded_from_pose": 0}

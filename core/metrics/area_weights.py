@@ -62,6 +62,8 @@ EVEN_RATIO = 1.3
 #: the share of a lattice's nodes inside the points' hull that must hold a point for the points to be
 #: a map's pixels (a map with 30 % dropouts: 0.7; a cross of two profiles: ~2 × step / radius)
 MAP_OCCUPANCY = 0.5
+#: the points whose coordinates tell a lattice (and its steps) from scattered points
+LATTICE_HEAD = 200_000
 
 
 def area_weights(x, y) -> np.ndarray | None:
@@ -69,7 +71,7 @@ def area_weights(x, y) -> np.ndarray | None:
     sample their area evenly (the plain mean is the area mean) or are too few to weigh (< 64)."""
     from scipy.ndimage import gaussian_filter1d
 
-    from .sampling import on_lattice, uniform_sampling
+    from .sampling import _steps_whole, uniform_sampling
 
     x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     n = x.size
@@ -78,11 +80,14 @@ def area_weights(x, y) -> np.ndarray | None:
     hull = _hull(x, y)
     if hull is None:
         return None
-    if on_lattice(x, y):
-        # a pixel map, however many pixels dropped out: its valid pixels are the measured area
-        # (interferometer practice). Not a sparse subset of a lattice — two or three profiles in a
-        # cross, a fine patch in a coarse raster —, whose points are not a map's pixels
-        if _lattice_occupancy(x, y, hull) >= MAP_OCCUPANCY:
+    head = slice(0, LATTICE_HEAD)
+    if _steps_whole(x[head], y[head], x, y):
+        # a pixel map (its first LATTICE_HEAD points on one lattice — core.metrics.sampling.on_lattice
+        # on all of a 12.6 M-pixel map sorts both coordinates, seconds), however many pixels dropped
+        # out: its valid pixels are the measured area (interferometer practice). Not a sparse subset of
+        # a lattice — two or three profiles in a cross, a fine patch in a coarse raster —, whose
+        # points are not a map's pixels
+        if _lattice_occupancy(x[head], y[head], x.size, hull) >= MAP_OCCUPANCY:
             return None
     elif uniform_sampling(x, y):
         return None
@@ -104,8 +109,15 @@ def area_weights(x, y) -> np.ndarray | None:
     mid = (np.arange(bins) + 0.5) * width
     ring = 2.0 * np.pi * mid * _share_in_hull(hull, c, mid)  # dA/dr inside the hull
     with np.errstate(divide="ignore", invalid="ignore"):
-        per_point = np.where(dn_dr > 0, ring / dn_dr, 0.0)
-    w = per_point[k]
+        per_bin = np.where(dn_dr > 0, ring / dn_dr, 0.0)
+    # linear in r between the bins' middles (over the radii the points span): a ring's points, whose
+    # radii differ by rounding or a pose's slight tilt, get the same weight to that order — taken bin
+    # by bin, a ring on a bin's edge split into two weights in a cos 2θ pattern, which leaked a
+    # star's astigmatism into a fitted radius and conic
+    ok = spanned & (dn_dr > 0)
+    if not ok.any():
+        return None
+    w = np.interp(r, mid[ok], per_bin[ok])
     if not (np.all(np.isfinite(w)) and w.sum() > 0):
         return None
     # an even sampling that uniform_sampling could not judge (under 2,500 points; a raster whose
@@ -195,20 +207,34 @@ def _share_in_hull(hull, c, radii) -> np.ndarray:
     return (radii[:, None] <= np.maximum(reach, 0.0)[None, :] * (1 + 1e-12)).mean(axis=1)
 
 
-def _lattice_occupancy(x, y, hull) -> float:
-    """Points per lattice node inside the hull: N · step_x · step_y / hull area (the steps: the
-    smallest differences between distinct coordinates, as core.metrics.sampling.on_lattice reads
-    them)."""
-    from scipy.spatial import ConvexHull
-
+def _lattice_occupancy(xh, yh, n: int, hull) -> float:
+    """Points per lattice node inside the hull: n · step_x · step_y / hull area, the steps the smallest
+    differences between distinct coordinates of the first points ``xh``, ``yh`` (whole rows of a
+    map: its steps; a step read too long only makes a map of more pixels — the points' mean, the
+    safe side)."""
     steps = []
-    for a in (x, y):
+    for a in (xh, yh):
         d = np.diff(np.unique(a))
         d = d[d > 1e-12 * max(float(np.ptp(a)), 1e-300)]
         steps.append(float(d.min()) if d.size else 0.0)
-    step = max(x.size // 200_000, 1)
-    area = float(ConvexHull(np.column_stack([x[::step], y[::step]])).volume)
-    return x.size * steps[0] * steps[1] / area if area > 0 else 1.0
+    area = _hull_area(hull)
+    return n * steps[0] * steps[1] / area if area > 0 else 1.0
+
+
+def _hull_area(equations) -> float:
+    """Area of the convex polygon given by its edges' half-planes (a·x + b·y + c ≤ 0): its vertices
+    are the consecutive edges' intersections, ordered by the edges' normal angle."""
+    a, b, c = equations[:, 0], equations[:, 1], equations[:, 2]
+    order = np.argsort(np.arctan2(b, a))
+    a, b, c = a[order], b[order], c[order]
+    a2, b2, c2 = np.roll(a, -1), np.roll(b, -1), np.roll(c, -1)
+    det = a * b2 - a2 * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = (b * c2 - b2 * c) / det
+        py = (c * a2 - c2 * a) / det
+    ok = np.isfinite(px) & np.isfinite(py)
+    px, py = px[ok], py[ok]
+    return float(0.5 * abs(np.dot(px, np.roll(py, -1)) - np.dot(py, np.roll(px, -1))))
 
 
 def _close_gaps(occupied: np.ndarray, gap: int) -> np.ndarray:

@@ -3,9 +3,9 @@
 Each point's probe position X on the X slide (mm, signed, the spindle axis at 0) and spindle angle c
 (channel, deg) look up e(X, c) in ``map`` (kinematic_map.json from `kinematic_map`, bilinear,
 periodic in c); z − e replaces z (and residual − e the residual, when present). The channel
-``kinematic_error`` keeps e (mm). The report gives the removed error, the range of X, and the
-flatness (PV about the least-squares plane) before and after, in nm, and warns when the compensation
-made the flatness worse.
+``kinematic_error`` keeps e (mm). The report gives the removed error (its RMS over the area:
+docs/conventions.md, Summary figures), the range of X, and the flatness (PV about the least-squares
+plane) before and after, in nm, and warns when the compensation made the flatness worse.
 
 X from the point's x, y (workpiece frame, mm, on the spindle axis) and c (``probe_x: auto``): in 003's
 frame (core.kinematics.htm) the point probed is X·(cos c, −sin c), so X = x·cos c − y·sin c — negative
@@ -120,7 +120,14 @@ class KinematicStep(Step):
                 f"the compensation made the flatness worse: {before:.4g} nm before, {after:.4g} nm after — the "
                 f"map may not fit this scan (another machine or set-up, the spindle angle's zero or sense, the "
                 f"probe's side: probe_x), or the machine's error happened to offset the surface's own form")
-        report = {"removed_rms_nm": float(np.std(e) * 1e6), "removed_pv_nm": float(np.ptp(e) * 1e6),
+        from pointspro.core.metrics.area_weights import area_weights, weighted_rms
+        from pointspro.core.pipeline import _is_stylus_profile
+
+        # the removed error's RMS over the area (docs/conventions.md, Summary figures): an on-machine
+        # spiral or star crowds its centre; an even sampling (and stylus profiles): np.std as before
+        w = None if _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
+        removed_rms = np.std(e) if w is None else weighted_rms(e, w)
+        report = {"removed_rms_nm": float(removed_rms * 1e6), "removed_pv_nm": float(np.ptp(e) * 1e6),
                   "flatness_before_nm": before, "flatness_after_nm": after, "map": str(p),
                   "probe_x_range_mm": [float(r.min()), float(r.max())] if r.size else [],
                   "points_at_negative_x": int(np.sum(r < 0)),

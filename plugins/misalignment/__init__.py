@@ -25,7 +25,7 @@ import numpy as np
 from pydantic import field_validator
 
 from pointspro.core.errors import StepError
-from pointspro.core.geometry.posed_fit import PosedSurfaceFit
+from pointspro.core.geometry.posed_fit import fit_over_the_area
 from pointspro.core.params.pose import (
     EXCLUDE_HELP,
     FIVE_DOF,
@@ -73,8 +73,9 @@ class MisalignmentStep(Step):
             return StepResult(out, report, arts)
         dof, note = dof_for_surface(surface, params.dof, "dof" in params.model_fields_set)
         try:
-            fit = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "vertical",
-                                  max_iter=params.max_iterations, check=ctx.progress.check).fit()
+            # weighted by the points' areas when the fit takes form out (radius, conic, A_n free)
+            fit, weights = fit_over_the_area(surface, cloud.xyz, dof, params.initial.as_dof(), "vertical",
+                                             max_iter=params.max_iterations, check=ctx.progress.check)
             part, residual = fit.part, fit.residuals  # p = Rᵀ(q − t) and z − sag(x, y) at the solution
             excluded, exclusion = None, {}
             if params.exclude_beyond is not None:
@@ -83,7 +84,8 @@ class MisalignmentStep(Step):
                 ctx.progress.update(0.6, "outliers")
                 fit, part, residual, excluded, exclusion = refit_without_outliers(
                     surface, cloud.xyz, dof, params.initial.as_dof(), "vertical", params.exclude_beyond,
-                    fit, part, residual, max_iter=params.max_iterations, check=ctx.progress.check)
+                    fit, part, residual, max_iter=params.max_iterations, check=ctx.progress.check,
+                    weights=weights)
         except StepError as e:
             from pointspro.core.geometry.nominal_check import check_failed_fit
             from pointspro.core.profiles import with_profile_hint
@@ -99,6 +101,8 @@ class MisalignmentStep(Step):
                   params.max_iterations, ctx.progress.check)
         ctx.progress.update(0.9, "residual")
         report = fit.report()
+        if weights is not None:  # the design parameters' fit over the area (core/geometry/posed_fit.py)
+            report["fit_weights"] = "area: each point weighted by the area it stands for (an uneven sampling)"
         report.update(residual_rms_um=float(np.sqrt(np.mean(residual ** 2)) * 1e3),
                       residual_pv_um=float(np.ptp(residual) * 1e3),
                       warnings=list(fit.warnings) + ([note] if note else []) + exclusion.pop("warnings", []),
@@ -130,5 +134,9 @@ def _before_after(surface, measured, part, residual):
             np.subtract(m[:, 2], surface.sag(m[:, 0], m[:, 1]), out=before[s:s + len(m)])
     except DomainError:
         return scattered_map(part[:, 0], part[:, 1], residual, "residual after removing the pose")
+    from pointspro.core.metrics.area_weights import area_weights
+
+    # the titles' RMS over the area (docs/conventions.md, Summary figures): the same points in both
+    # panels, each standing for its area in the part frame (as the summary weighs the residual)
     return before_after(measured[:, 0], measured[:, 1], before, residual, what="pose removal",
-                        x2=part[:, 0], y2=part[:, 1])
+                        x2=part[:, 0], y2=part[:, 1], weights=area_weights(part[:, 0], part[:, 1]))

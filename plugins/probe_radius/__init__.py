@@ -30,7 +30,7 @@ import numpy as np
 from pydantic import field_validator
 
 from pointspro.core.errors import DomainError, StepError
-from pointspro.core.geometry.posed_fit import PosedSurfaceFit
+from pointspro.core.geometry.posed_fit import PosedSurfaceFit, fit_over_the_area
 from pointspro.core.params.pose import (
     EXCLUDE_HELP,
     FIVE_DOF,
@@ -149,11 +149,11 @@ class ProbeRadiusStep(Step):
             out, report = run_profiles(cloud, profiles, params, ctx, surface, check_no_fold)
             return StepResult(out, report)
         dof, note = dof_for_surface(surface, params.dof, "dof" in params.model_fields_set)
-        fitter = PosedSurfaceFit(surface, cloud.xyz, dof, params.initial.as_dof(), "normal",
-                                 offset=s * rho_b, max_iter=params.max_iterations,
-                                 check=ctx.progress.check)
         try:
-            fit = fitter.fit()
+            # weighted by the points' areas when the fit takes form out (radius, conic, A_n free)
+            fit, weights = fit_over_the_area(surface, cloud.xyz, dof, params.initial.as_dof(), "normal",
+                                             offset=s * rho_b, max_iter=params.max_iterations,
+                                             check=ctx.progress.check)
         except (StepError, DomainError) as e:
             # a ball larger than the part's radius of curvature makes the offset surface fold, which
             # the fit meets as "outside the conic's domain" (a review: 55 mm on a 50 mm sphere): say so
@@ -190,12 +190,14 @@ class ProbeRadiusStep(Step):
             first = fit
             fit, part, e, excluded, exclusion = refit_without_outliers(
                 surface, cloud.xyz, dof, params.initial.as_dof(), "normal", params.exclude_beyond, fit, None, e,
-                offset=s * rho_b, max_iter=params.max_iterations, check=ctx.progress.check)
+                offset=s * rho_b, max_iter=params.max_iterations, check=ctx.progress.check, weights=weights)
             if fit is not first:
                 foot, n, dist = fit.surface.foot_point(part)
         check_no_fold(fit.surface, foot, s, rho_b)
         side_warning = _other_side_check(surface, cloud.xyz, dof, params, e, ctx)
         report = fit.report()
+        if weights is not None:  # the design parameters' fit over the area (core/geometry/posed_fit.py)
+            report["fit_weights"] = "area: each point weighted by the area it stands for (an uneven sampling)"
         report.update(exclusion)
         if excluded is not None:
             rows = cloud["index"][excluded] if "index" in cloud.channels else np.flatnonzero(excluded)

@@ -159,7 +159,7 @@ class ZernikeStep(Step):
             reuse["pvr"] = {"xyz": cloud.xyz, "center": c, "fit_pv": _ptp_of_difference(after, resid),
                             "rest_rms": float(np.sqrt(np.mean(resid ** 2)))}
             del resid
-        rms_before, rms_after = _std(v), _std(after)
+        rms_before, rms_after = _std(v), _std(after)  # the guard's: the points' RMS, as the fit's
         if gone and rms_after > 1.05 * rms_before:
             # Removing least-squares terms cannot raise the RMS unless the kept and the removed terms
             # trade against each other (nearly dependent on this sampling): the "form" left is then
@@ -172,6 +172,12 @@ class ZernikeStep(Step):
         if cond > 1e6:
             warnings.append(f"the terms are nearly dependent on these points (condition {cond:.3g}): "
                             "fewer terms, or a fuller sampling of the aperture")
+        # the report's RMS is over the area (docs/conventions.md, Summary figures): a star scan crowds
+        # its centre, and its points' RMS read astigmatism ~20 % low (tests/test_area_rms_reports.py);
+        # an even sampling: the points' RMS, as before
+        w = _area_weights(cloud)
+        if w is not None:
+            rms_before, rms_after = _std(v, w), _std(after, w)
         j0 = zk.first_index(params.ordering)
         rows = [{"j": j0 + i, "n": n, "m": m, "name": zk.name_of(n, m),
                  "coefficient_nm": float(coef[i] * 1e6), "uncertainty_nm": float(sd[i] * 1e6),
@@ -198,7 +204,7 @@ class ZernikeStep(Step):
                                               f"{params.normalization})"),
             "zernike_removed.png": png_artifact(before_after, x, y, v, after,
                                                 what="removing " + (", ".join(map(str, params.remove))
-                                                                    or "nothing")),
+                                                                    or "nothing"), weights=w),
         }
         ctx.log.info("%d terms fitted (condition %.3g), %d removed; RMS %.4g → %.4g µm", len(pairs), cond,
                      len(gone), rms_before * 1e3, rms_after * 1e3)
@@ -235,17 +241,29 @@ def _count_outside(x, y, c, r: float) -> int:
     return out
 
 
-def _std(v) -> float:
-    """np.std(v) (about the mean, two passes) in chunks: no full-length temporary."""
+def _std(v, w=None) -> float:
+    """np.std(v) (about the mean, two passes) in chunks: no full-length temporary. ``w``: the points'
+    areas (core.metrics.area_weights), then over the area: √(Σ w (v − v̄_w)² / Σ w), v̄_w = Σ w v / Σ w
+    (core.metrics.area_weights.weighted_rms)."""
     n = len(v)
     if not n:
         return float("nan")
-    m = float(np.sum(v)) / n
+    total = n if w is None else float(np.sum(w))
+    m = (float(np.sum(v)) if w is None else float(np.dot(w, v))) / total
     acc = 0.0
     for s in range(0, n, _CHUNK):
         d = v[s:s + _CHUNK] - m
-        acc += float(d @ d)
-    return float(np.sqrt(acc / n))
+        acc += float(d @ d) if w is None else float(np.dot(w[s:s + _CHUNK], d * d))
+    return float(np.sqrt(acc / total))
+
+
+def _area_weights(cloud):
+    """The points' areas for the reported RMS (core.metrics.area_weights), as the summary takes them:
+    None on an even sampling (the plain mean stands, to the last bit) and for stylus profiles (no area)."""
+    from pointspro.core.metrics.area_weights import area_weights
+    from pointspro.core.pipeline import _is_stylus_profile
+
+    return None if _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
 
 
 def _um(v_mm: float) -> str:
