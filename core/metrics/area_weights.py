@@ -77,11 +77,12 @@ def area_weights(x, y) -> np.ndarray | None:
     n = x.size
     if n < 64:
         return None
-    hull = _hull(x, y)
-    if hull is None:
-        return None
+    hull = None
     head = slice(0, LATTICE_HEAD)
     if _steps_whole(x[head], y[head], x, y):
+        hull = _hull(x, y)
+        if hull is None:
+            return None
         # a pixel map (its first LATTICE_HEAD points on one lattice — core.metrics.sampling.on_lattice
         # on all of a 12.6 M-pixel map sorts both coordinates, seconds), however many pixels dropped
         # out: its valid pixels are the measured area (interferometer practice). Not a sparse subset of
@@ -89,8 +90,12 @@ def area_weights(x, y) -> np.ndarray | None:
         # points are not a map's pixels
         if _lattice_occupancy(x[head], y[head], x.size, hull) >= MAP_OCCUPANCY:
             return None
-    elif uniform_sampling(x, y):
+    elif uniform_sampling(x, y):  # a raster off its lattice, ≥ 2,500 even points: no hull needed
         return None
+    if hull is None:
+        hull = _hull(x, y)
+        if hull is None:
+            return None
     c = density_centre(x, y)
     r = np.hypot(x - c[0], y - c[1])
     r_max = float(r.max())
