@@ -53,13 +53,13 @@ def describe(path, options: dict | None = None) -> dict:
         d["spacing_mm"] = mean_spacing(cloud.xyz)
     d["z_plane_removed"] = None
     if cloud.n >= 3:
-        from .metrics.area_weights import area_weights, weighted_rms
-        from .pipeline import _is_stylus_profile
+        from .metrics.area_weights import weighted_rms
+        from .pipeline import area_weights_of
 
         r = remove_piston_tilt(cloud.x, cloud.y, cloud.z)
         # RMS over the area, as the summary (docs/conventions.md, Summary figures): a star scan's points
         # crowd its centre; a map, an even sampling and stylus profiles: the points' plain RMS
-        w = None if grid or _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
+        w = None if grid else area_weights_of(cloud)
         rms, pv = weighted_rms(r, w), float(np.ptp(r))
         d["z_plane_removed"] = {"rms_mm": rms, "pv_mm": pv, "rms": format_length(rms),
                                 "pv": format_length(pv)}

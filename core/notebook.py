@@ -74,12 +74,12 @@ def cloud_html(cloud) -> str:
         pairs.append(("extent x × y × z", _extent(cloud)))
         v, what = _map_of(cloud)
         if v is not None:
-            from .metrics.area_weights import area_weights, weighted_rms
-            from .pipeline import _is_stylus_profile
+            from .metrics.area_weights import weighted_rms
+            from .pipeline import area_weights_of
 
             # over the area, as the summary (docs/conventions.md, Summary figures): a star scan's
             # points crowd its centre; an even sampling and stylus profiles: the points' plain RMS
-            w = None if _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
+            w = area_weights_of(cloud)
             pairs.append((f"RMS / PV of the {what}",
                           f"{format_length(weighted_rms(v, w))} / {format_length(float(np.ptp(v)))}"))
             s = _subsample(cloud.n)

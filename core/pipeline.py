@@ -161,6 +161,14 @@ def _is_stylus_profile(cloud) -> bool:
         return False
 
 
+def area_weights_of(cloud):
+    """The points' areas for an RMS over the area (core.metrics.area_weights), as the summary takes
+    them: None on an even sampling (the plain mean stands) and for stylus profiles (no area)."""
+    from .metrics.area_weights import area_weights
+
+    return None if _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
+
+
 def remove_piston_tilt(x, y, z):
     """z − (a + b·x + c·y), the least-squares plane about the points' bounding-box centre (mm)."""
     x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, RecipeError
-from ..metrics.area_weights import area_weights, weighted_rms
+from ..metrics.area_weights import weighted_rms
 from ..simulate.effects import ScanContext
 from .select import RHO_GATE, select, separate_by
 
@@ -116,10 +116,10 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     res = select(ctx, gap, bootstrap=bootstrap)
     sigma = res["sigma"]
     effects = list(model.effects) if model is not None else []
-    from ..pipeline import _is_stylus_profile
+    from ..pipeline import area_weights_of
 
     # the points' areas for the reported gap RMS (a star or a spiral crowds its centre); None: even
-    w = None if _is_stylus_profile(meas) else area_weights(meas.x, meas.y)
+    w = area_weights_of(meas)
     found, effects = found_effects(res, effects, w)
     ambiguous = ambiguities(res, sigma)
     updated = None

@@ -120,12 +120,12 @@ class KinematicStep(Step):
                 f"the compensation made the flatness worse: {before:.4g} nm before, {after:.4g} nm after — the "
                 f"map may not fit this scan (another machine or set-up, the spindle angle's zero or sense, the "
                 f"probe's side: probe_x), or the machine's error happened to offset the surface's own form")
-        from pointspro.core.metrics.area_weights import area_weights, weighted_rms
-        from pointspro.core.pipeline import _is_stylus_profile
+        from pointspro.core.metrics.area_weights import weighted_rms
+        from pointspro.core.pipeline import area_weights_of
 
         # the removed error's RMS over the area (docs/conventions.md, Summary figures): an on-machine
         # spiral or star crowds its centre; an even sampling (and stylus profiles): np.std as before
-        w = None if _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
+        w = area_weights_of(cloud)
         removed_rms = np.std(e) if w is None else weighted_rms(e, w)
         report = {"removed_rms_nm": float(removed_rms * 1e6), "removed_pv_nm": float(np.ptp(e) * 1e6),
                   "flatness_before_nm": before, "flatness_after_nm": after, "map": str(p),

@@ -175,7 +175,9 @@ class ZernikeStep(Step):
         # the report's RMS is over the area (docs/conventions.md, Summary figures): a star scan crowds
         # its centre, and its points' RMS read astigmatism ~20 % low (tests/test_area_rms_reports.py);
         # an even sampling: the points' RMS, as before
-        w = _area_weights(cloud)
+        from pointspro.core.pipeline import area_weights_of
+
+        w = area_weights_of(cloud)
         if w is not None:
             rms_before, rms_after = _std(v, w), _std(after, w)
         j0 = zk.first_index(params.ordering)
@@ -256,14 +258,6 @@ def _std(v, w=None) -> float:
         acc += float(d @ d) if w is None else float(np.dot(w[s:s + _CHUNK], d * d))
     return float(np.sqrt(acc / total))
 
-
-def _area_weights(cloud):
-    """The points' areas for the reported RMS (core.metrics.area_weights), as the summary takes them:
-    None on an even sampling (the plain mean stands, to the last bit) and for stylus profiles (no area)."""
-    from pointspro.core.metrics.area_weights import area_weights
-    from pointspro.core.pipeline import _is_stylus_profile
-
-    return None if _is_stylus_profile(cloud) else area_weights(cloud.x, cloud.y)
 
 
 def _um(v_mm: float) -> str:
