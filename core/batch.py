@@ -215,7 +215,8 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
             # the figures (and the steps' other files) shared between this process and forked ones
             # where cores are free (core/io/background.py share_out); in list order otherwise
             workers = thread_count() if fork_csv else 1
-            if workers > 1 and len(tasks) > 1:
+            if workers > 1 and len(tasks) > 1 and any(name.endswith(".png") for name, _ in tasks):
+                # (not for --figures none: matplotlib's load is ~0.2 s of a process's start)
                 from .figures import preload
 
                 timed("matplotlib loaded before the figure processes fork", preload)

@@ -69,8 +69,6 @@ LATTICE_HEAD = 200_000
 def area_weights(x, y) -> np.ndarray | None:
     """Per-point areas (mm², summing to the measured area) for an area mean, or None where the points
     sample their area evenly (the plain mean is the area mean) or are too few to weigh (< 64)."""
-    from scipy.ndimage import gaussian_filter1d
-
     from .sampling import _steps_whole, uniform_sampling
 
     x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
@@ -106,6 +104,8 @@ def area_weights(x, y) -> np.ndarray | None:
     # dN/dr smoothed over the bandwidth, normalised by the smoothed indicator of the radii the points
     # span (gaps up to 2h closed): reflected at 0 and at the outermost radius, and no leak into a
     # hole (an annular part's bore), whose edge would otherwise read half its density
+    from scipy.ndimage import gaussian_filter1d  # here: an even sampling (a raster, a map) never needs it
+
     counts = np.bincount(k, minlength=bins).astype(np.float64)
     spanned = _close_gaps(counts > 0, int(np.ceil(2.0 * h / width)))
     norm = gaussian_filter1d(spanned.astype(np.float64), h / width, mode="reflect")
