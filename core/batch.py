@@ -156,7 +156,18 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     or npz — the cloud is ``cloud.<format>``, named in report.json's ``cloud_file``. ``overrides``:
     the ``--set`` texts the recipe was run with, listed in report.json's ``overrides``. ``paths``: a
     ``cluster.PathMap`` that names a worker's private files as the client does, in the report.
-    ``input_sha256``: the input file's digest (``input_digest``), recorded for ``--resume``."""
+    ``input_sha256``: the input file's digest (``input_digest``), recorded for ``--resume``. BLAS
+    runs one thread meanwhile (core.parallel.single_threaded_blas), as in the batch."""
+    from .parallel import single_threaded_blas
+
+    with single_threaded_blas():
+        return _write_outputs(folder, input_path, recipe, result, figures=figures, timings=timings,
+                              fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides,
+                              paths=paths, input_sha256=input_sha256)
+
+
+def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork_csv, cloud_format,
+                   overrides, paths, input_sha256) -> dict:
     from .io.gridcloud import grid_channel, grid_of, write_x3p_cloud
     from .report import SUMMARY_FIGURE, skipped_figures
 

@@ -9,6 +9,7 @@ the whole machine, a worker of a pool one core.
 from __future__ import annotations
 
 import os
+import threading
 
 
 def thread_count() -> int:
@@ -27,31 +28,74 @@ class single_threaded_blas:
     threads only synchronise, and OpenBLAS's waiting threads spin: with another process on the cores
     (a colleague's job, a second batch) they were descheduled mid-call and the summary's B-spline
     solve took 15–26 s instead of 0.23 s, a 50,000-point input 60 s instead of 10 s
-    (benchmarks/bench_input.py, 2026-11-23). Neighbour searches thread by themselves
-    (``thread_count``), untouched. A library loaded while the context is open (scipy's own OpenBLAS,
-    loaded by the first ``scipy.linalg`` import) reads ``OPENBLAS_NUM_THREADS`` and keeps one thread
-    after the context closes; the variable itself is restored."""
+    (benchmarks/bench_input.py, 2026-11-23). The batch ran its inputs inside this context; since
+    2026-11-27 ``run_pipeline``, the summary and ``write_outputs`` open it themselves, so the window
+    and the Python API get it too (a 200,000-point raster in the API with one other busy process:
+    10.6–11.3 s with the default two BLAS threads, 2.9–3.5 s with one; zernike 1.5 s → 0.06 s).
+    Neighbour searches thread by themselves (``thread_count``), untouched. A library loaded while
+    the context is open (scipy's own OpenBLAS, loaded by the first ``scipy.linalg`` import) reads
+    ``OPENBLAS_NUM_THREADS`` and keeps one thread after the context closes; the variable itself is
+    restored.
+
+    Re-entrant and shared between threads: the BLAS thread count and the environment are the
+    process's, not a thread's, so the first context to open sets them and the last to close
+    restores them (a count under a lock) — two pipelines in two threads of the window must not
+    restore the other's setting half-way. threadpoolctl (≥ 3.6) lets only the first thread that set
+    OpenBLAS's (process-wide) pool set it again and silently ignores the others: the window's worker
+    thread would have kept two BLAS threads after any other thread had set a limit. This context
+    takes that control for its set and its restore, and leaves no thread holding it."""
 
     _VARS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+    # the process's one BLAS setting, and how many contexts hold it (see the class doc)
+    _lock = threading.Lock()
+    _depth = 0
+    _held: tuple | None = None
 
     def __enter__(self):
-        from threadpoolctl import threadpool_limits
+        cls = type(self)
+        with cls._lock:
+            if cls._depth == 0:
+                from threadpoolctl import threadpool_limits
 
-        self._saved = {k: os.environ.get(k) for k in self._VARS}
-        os.environ.update({k: "1" for k in self._VARS})
-        self._limits = threadpool_limits(1, user_api="blas")
+                saved = {k: os.environ.get(k) for k in self._VARS}
+                os.environ.update({k: "1" for k in self._VARS})
+                _release_blas_control()
+                cls._held = (saved, threadpool_limits(1, user_api="blas"))
+                _release_blas_control()
+            cls._depth += 1
         return self
 
     def __exit__(self, *exc):
-        try:
-            self._limits.restore_original_limits()
-        finally:
-            for k, v in self._saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+        cls = type(self)
+        with cls._lock:
+            cls._depth -= 1
+            if cls._depth > 0:
+                return False
+            saved, limits = cls._held
+            cls._held = None
+            try:
+                _release_blas_control()
+                limits.restore_original_limits()
+                _release_blas_control()
+            finally:
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
         return False
+
+
+def _release_blas_control() -> None:
+    """Let the next thread that sets OpenBLAS's thread count do it (threadpoolctl's rule, see
+    single_threaded_blas); nothing where threadpoolctl has no such rule."""
+    try:
+        from threadpoolctl import OpenBLASController
+    except ImportError:
+        return
+    clear = getattr(OpenBLASController, "clear_controlling_thread", None)
+    if clear is not None:
+        clear(force=True)
 
 
 def in_chunks(fn, n: int, size: int, threads: int | None = None) -> list:

@@ -69,8 +69,11 @@ class PipelineResult:
     def summary(self) -> dict:
         """summarize() of input and output, computed once (PVr and slope RMS fit a map)."""
         if self._summary is None:
-            self._summary = summarize(self.input_cloud, self.cloud, self.surface,
-                                      reuse=[rec.reuse for rec in self.steps], centre=self.pupil_centre)
+            from .parallel import single_threaded_blas
+
+            with single_threaded_blas():  # the slope RMS's banded B-spline solve (run_pipeline's doc)
+                self._summary = summarize(self.input_cloud, self.cloud, self.surface,
+                                          reuse=[rec.reuse for rec in self.steps], centre=self.pupil_centre)
         s = dict(self._summary)
         if self.uncertainty is not None:
             s["uncertainty"] = self.uncertainty.block()
@@ -263,7 +266,18 @@ def run_pipeline(cloud: PointCloud, recipe: Recipe, *, progress: Progress | None
     After the whole recipe (``upto`` None) and with ``assess``, the recipe's ``uncertainty:`` and
     ``tolerance:`` blocks are evaluated (core/assessment.py) into ``result.uncertainty`` and
     ``result.tolerance``.
+
+    BLAS runs one thread meanwhile (core.parallel.single_threaded_blas: the steps' calls are narrow,
+    and spinning BLAS threads beside another busy process made the window's run 3–4× slower).
     """
+    from .parallel import single_threaded_blas
+
+    with single_threaded_blas():
+        return _run_pipeline(cloud, recipe, progress=progress, log=log, surface=surface, upto=upto,
+                             allowed_dirs=allowed_dirs, assess=assess)
+
+
+def _run_pipeline(cloud, recipe, *, progress, log, surface, upto, allowed_dirs, assess):
     progress = progress or Progress()
     log = log or logging.getLogger("pointspro")
     if surface is None and recipe.surface_spec is not None:

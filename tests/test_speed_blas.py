@@ -65,3 +65,76 @@ def test_form_metrics_same_on_one_blas_thread(seed, n):
         one = form_metrics(x, y, r, 100.0)
     for k in ("rms_um", "pv_um", "pvr_um", "slope_rms_urad"):
         assert one[k] == pytest.approx(many[k], rel=1e-12, abs=0), k
+
+
+def test_pipeline_and_summary_run_on_one_blas_thread(monkeypatch):
+    """The window and the Python API call run_pipeline and result.summary() directly, outside the
+    batch's context: they set one BLAS thread themselves and give the caller's setting back."""
+    from pointspro.core.io import read_cloud
+    from pointspro.core.pipeline import run_pipeline
+    from pointspro.core.recipe import load_recipe
+    from pointspro.plugins.zernike import ZernikeStep
+
+    from .conftest import EXAMPLE
+
+    seen = []
+    real_run = ZernikeStep.run
+
+    def spy(self, cloud, params, ctx):
+        seen.append(set(_blas_threads()))
+        return real_run(self, cloud, params, ctx)
+
+    monkeypatch.setattr(ZernikeStep, "run", spy)
+    import pointspro.core.pipeline as pipeline
+
+    real_summarize = pipeline.summarize
+
+    def spy_summary(*a, **k):
+        seen.append(set(_blas_threads()))
+        return real_summarize(*a, **k)
+
+    monkeypatch.setattr(pipeline, "summarize", spy_summary)
+    rec = load_recipe(EXAMPLE / "recipe.yaml")
+    cloud = read_cloud(EXAMPLE / "asphere_cmm.csv", **rec.input)
+    with threadpool_limits(2, user_api="blas"):
+        result = run_pipeline(cloud, rec)
+        assert set(_blas_threads()) == {2}
+        result.summary()
+        assert set(_blas_threads()) == {2}
+    assert seen == [{1}, {1}]
+
+
+def test_context_shared_between_threads_restores_once_all_have_left():
+    """Two pipelines in two threads (the window): the one that leaves first must not give the
+    other its two BLAS threads back half-way; the last to leave restores the caller's setting."""
+    import threading
+
+    a_in, b_in, a_out = threading.Event(), threading.Event(), threading.Event()
+    during_b = []
+
+    def a():
+        with single_threaded_blas():
+            a_in.set()
+            b_in.wait(10)
+        a_out.set()
+
+    def b():
+        a_in.wait(10)
+        with single_threaded_blas():
+            b_in.set()
+            a_out.wait(10)
+            during_b.append(set(_blas_threads()))
+
+    with threadpool_limits(2, user_api="blas"):
+        ts = [threading.Thread(target=f) for f in (a, b)]
+        for t in ts:
+            t.start()
+        for t in ts:
+            t.join(20)
+        assert during_b == [{1}]
+        assert set(_blas_threads()) == {2}
+        with single_threaded_blas():
+            with single_threaded_blas():
+                assert set(_blas_threads()) == {1}
+            assert set(_blas_threads()) == {1}
+        assert set(_blas_threads()) == {2}
