@@ -103,7 +103,14 @@ class MisalignmentStep(Step):
         report = fit.report()
         if weights is not None:  # the design parameters' fit over the area (core/geometry/posed_fit.py)
             report["fit_weights"] = "area: each point weighted by the area it stands for (an uneven sampling)"
-        report.update(residual_rms_um=float(np.sqrt(np.mean(residual ** 2)) * 1e3),
+        from pointspro.core.metrics.area_weights import area_weights, weighted_rms, weighting_words
+
+        # the residual's RMS over the area, as the summary's (docs/conventions.md, Summary): a star or
+        # spiral crowds its centre, where a plain mean over the points read ±20 % off; the points'
+        # areas in the part frame, as the design fit's (None on an even sampling: the plain RMS)
+        area = weights if weights is not None else area_weights(part[:, 0], part[:, 1])
+        rms = float(np.sqrt(np.mean(residual ** 2))) if area is None else weighted_rms(residual, area)
+        report.update(residual_rms_um=rms * 1e3, residual_rms_over=weighting_words(area),
                       residual_pv_um=float(np.ptp(residual) * 1e3),
                       warnings=list(fit.warnings) + ([note] if note else []) + exclusion.pop("warnings", []),
                       **exclusion)
@@ -118,12 +125,13 @@ class MisalignmentStep(Step):
         out = cloud.replace(xyz=part, channels={"residual": residual}, meta={"frame": "part"})
         from pointspro.core.figures import png_artifact
 
-        arts = {"misalignment.png": png_artifact(_before_after, surface, cloud.xyz, part, residual)}
+        arts = {"misalignment.png": png_artifact(_before_after, surface, cloud.xyz, part, residual, area)}
         return StepResult(out, report, arts)
 
 
-def _before_after(surface, measured, part, residual):
-    """z − sag(x, y) as measured (the pose still in it) beside the residual in the part frame."""
+def _before_after(surface, measured, part, residual, area):
+    """z − sag(x, y) as measured (the pose still in it) beside the residual in the part frame;
+    ``area``: the points' areas in the part frame (None: an even sampling)."""
     from pointspro.core.errors import DomainError
     from pointspro.core.figures import before_after, scattered_map
 
@@ -134,9 +142,7 @@ def _before_after(surface, measured, part, residual):
             np.subtract(m[:, 2], surface.sag(m[:, 0], m[:, 1]), out=before[s:s + len(m)])
     except DomainError:
         return scattered_map(part[:, 0], part[:, 1], residual, "residual after removing the pose")
-    from pointspro.core.metrics.area_weights import area_weights
-
     # the titles' RMS over the area (docs/conventions.md, Summary figures): the same points in both
     # panels, each standing for its area in the part frame (as the summary weighs the residual)
     return before_after(measured[:, 0], measured[:, 1], before, residual, what="pose removal",
-                        x2=part[:, 0], y2=part[:, 1], weights=area_weights(part[:, 0], part[:, 1]))
+                        x2=part[:, 0], y2=part[:, 1], weights=area)

@@ -214,9 +214,15 @@ class ProbeRadiusStep(Step):
             n_used = n
         # contact = centre − s·ρ·n̂, with n̂ taken from the part frame to the measuring frame
         contact = cloud.xyz - s * rho_b * (n_used @ fit.pose.rotation.T)
+        from pointspro.core.metrics.area_weights import area_weights, weighted_rms, weighting_words
+
+        # the distance residual's RMS over the area, as the summary's (docs/conventions.md, Summary):
+        # the foot points' areas in the part frame (None on an even sampling: the plain RMS)
+        area = weights if weights is not None else area_weights(foot[:, 0], foot[:, 1])
+        rms = float(np.sqrt(np.mean(e ** 2))) if area is None else weighted_rms(e, area)
         report.update(
             probe_radius=rho_b, side=s, normals=params.normals,
-            distance_residual_rms_um=float(np.sqrt(np.mean(e ** 2)) * 1e3),
+            distance_residual_rms_um=rms * 1e3, distance_residual_rms_over=weighting_words(area),
             distance_residual_pv_um=float(np.ptp(e) * 1e3),
             warnings=list(fit.warnings) + ([note] if note else []) + ([side_warning] if side_warning else [])
             + report.pop("warnings", []))
