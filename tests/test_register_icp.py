@@ -166,3 +166,34 @@ def test_below_a_closed_solid_the_residual_is_positive(tmp_path):
     a = 3 * np.pi / 40
     d = geo.evaluate(np.array([[(r + 0.02) * np.cos(a), (r + 0.02) * np.sin(a), 0.5]])).d
     assert d[0] == pytest.approx(0.02)
+
+
+@pytest.mark.parametrize("turned", [False, True])
+def test_an_in_memory_undercut_sheet_is_registered_not_refused(turned):
+    """A MeshSurface built from arrays with undercut walls: register checked it after each face had
+    been turned to +z, so a coherent sheet read "edges with inconsistent orientation" and was refused
+    (a file was checked as read). It is checked as given now, and the residual outside is +."""
+    from pointspro.core.errors import InputError
+    from pointspro.core.io.mesh import check_mesh
+
+    V, T, prof, out = sheared_wave()
+    T = T[:, ::-1] if turned else T
+    surf = MeshSurface(V, T, source="wave")
+    assert check_mesh(V, surf.triangles).inconsistent_edges > 0  # what register used to judge
+    k = np.arange(3, len(prof) - 3, 2)
+    rng = np.random.default_rng(11)
+    ys = rng.uniform(-2.5, 2.5, len(k))
+    cloud = PointCloud.from_xyz(prof[k, 0], ys, prof[k, 1])  # on the part, walls and crests alike
+    res = reg.RegisterStep().run(cloud, reg.RegisterStep.Params(refine_iterations=3), Context(surface=surf))
+    assert res.report["residual_rms_um"] < 0.5
+    over = out[k, 1] < 0
+    assert over.sum() > 10
+    for side in (1, -1):  # outside the part is +, under the overhangs too
+        xz = prof[k] + side * 0.005 * out[k]
+        d = reg._Geometry(surf).evaluate(np.column_stack([xz[:, 0], ys, xz[:, 1]])).d
+        assert np.allclose(d, side * 0.005, atol=1e-4), (side, d[over][:5])
+    # a flipped face among coherent ones is still refused as given
+    bad = T.copy()
+    bad[7] = bad[7, ::-1]
+    with pytest.raises(InputError, match=r"^wave: unusable nominal mesh: .*inconsistent orientation"):
+        reg.RegisterStep().run(cloud, reg.RegisterStep.Params(), Context(surface=MeshSurface(V, bad, source="wave")))

@@ -71,6 +71,10 @@ class MeshSurface(NominalSurface):
             raise InputError(f"{source or 'mesh'}: a nominal mesh needs vertices and triangles")
         n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
         flip = n[:, 2] < 0  # orient every face so its normal has positive z (docs/conventions.md "Frames and signs")
+        #: the faces as given, in their own winding (zero-area ones too): what a mesh check judges — a
+        #: sheet with undercut walls is coherent as given and would read "inconsistent" once each face
+        #: is turned to +z (register checks an in-memory nominal with these)
+        self.triangles_given = t
         t = t.copy()
         t[flip] = t[flip][:, [0, 2, 1]]
         n[flip] *= -1

@@ -153,7 +153,8 @@ class RegisterStep(Step):
                 return surf, name, []
             if surf.mesh_info is not None:  # read from a file: checked (and repaired) then
                 return surf, name, list(surf.mesh_info.get("repaired", []))
-            chk = check_mesh(surf.vertices, surf.triangles)
+            # the faces as given (MeshSurface turns each to +z, which an undercut's coherent sheet is not)
+            chk = check_mesh(surf.vertices, surf.triangles_given)
             probs = chk.problems()
             if not probs:
                 return surf, name, []
@@ -161,7 +162,7 @@ class RegisterStep(Step):
                 raise InputError(f"{name}: unusable nominal mesh: {', '.join(probs)}"
                                  + (" — fix the mesh or set repair: true" if chk.faces else ""))
             try:
-                v, t, rep = repair_mesh(surf.vertices, surf.triangles, chk)
+                v, t, rep = repair_mesh(surf.vertices, surf.triangles_given, chk)
             except InputError as e:
                 raise InputError(f"{name}: unusable nominal mesh: {e}") from None
             return MeshSurface(v, t, surf.aperture, surf.source), name, rep.done
