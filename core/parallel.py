@@ -9,6 +9,7 @@ the whole machine, a worker of a pool one core.
 from __future__ import annotations
 
 import os
+import sys
 import threading
 
 
@@ -32,10 +33,16 @@ class single_threaded_blas:
     2026-11-27 ``run_pipeline``, the summary and ``write_outputs`` open it themselves, so the window
     and the Python API get it too (a 200,000-point raster in the API with one other busy process:
     10.6–11.3 s with the default two BLAS threads, 2.9–3.5 s with one; zernike 1.5 s → 0.06 s).
-    Neighbour searches thread by themselves (``thread_count``), untouched. A library loaded while
-    the context is open (scipy's own OpenBLAS, loaded by the first ``scipy.linalg`` import) reads
-    ``OPENBLAS_NUM_THREADS`` and keeps one thread after the context closes; the variable itself is
-    restored.
+    Neighbour searches thread by themselves (``thread_count``), untouched.
+
+    Libraries loaded while the context is open: scipy's own OpenBLAS (loaded by the first
+    ``scipy.linalg`` import) is loaded as the first context opens, so that it is limited too and
+    given back its threads after; on the main thread ``OPENBLAS_NUM_THREADS`` and the like are set
+    to 1 as well (a BLAS loaded meanwhile starts with one thread) and restored — not from another
+    thread (the window's worker): changing the environment while Qt's threads may read it is not
+    safe. A BLAS that appeared while the context was open is set back to the default it would have
+    had (the saved ``OPENBLAS_NUM_THREADS``, else the threads the others had) when the last context
+    closes: the window and the Python API leave the caller's numpy and scipy as they found them.
 
     Re-entrant and shared between threads: the BLAS thread count and the environment are the
     process's, not a thread's, so the first context to open sets them and the last to close
@@ -55,13 +62,7 @@ class single_threaded_blas:
         cls = type(self)
         with cls._lock:
             if cls._depth == 0:
-                from threadpoolctl import threadpool_limits
-
-                saved = {k: os.environ.get(k) for k in self._VARS}
-                os.environ.update({k: "1" for k in self._VARS})
-                _release_blas_control()
-                cls._held = (saved, threadpool_limits(1, user_api="blas"))
-                _release_blas_control()
+                cls._held = _limit_blas(self._VARS)
             cls._depth += 1
         return self
 
@@ -71,19 +72,65 @@ class single_threaded_blas:
             cls._depth -= 1
             if cls._depth > 0:
                 return False
-            saved, limits = cls._held
-            cls._held = None
-            try:
-                _release_blas_control()
-                limits.restore_original_limits()
-                _release_blas_control()
-            finally:
-                for k, v in saved.items():
-                    if v is None:
-                        os.environ.pop(k, None)
-                    else:
-                        os.environ[k] = v
+            held, cls._held = cls._held, None
+            _restore_blas(*held)
         return False
+
+
+def _blas_files() -> dict:
+    """{file: threads} of the BLAS libraries loaded in this process."""
+    from threadpoolctl import threadpool_info
+
+    return {i["filepath"]: i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"}
+
+
+def _limit_blas(variables) -> tuple:
+    """One BLAS thread (single_threaded_blas' doc): (saved environment or None, the limiter, the BLAS
+    libraries loaded before)."""
+    import importlib.util
+
+    from threadpoolctl import threadpool_limits
+
+    if "scipy.linalg" not in sys.modules and importlib.util.find_spec("scipy") is not None:
+        import scipy.linalg  # noqa: F401 — its OpenBLAS loaded now, so limited now and restored after
+    saved = None
+    if threading.current_thread() is threading.main_thread():
+        saved = {k: os.environ.get(k) for k in variables}
+        os.environ.update({k: "1" for k in variables})
+    try:
+        before = _blas_files()
+        _release_blas_control()
+        limits = threadpool_limits(1, user_api="blas")
+        _release_blas_control()
+    except BaseException:
+        _restore_environment(saved)
+        raise
+    return saved, limits, before
+
+
+def _restore_blas(saved, limits, before) -> None:
+    try:
+        _release_blas_control()
+        limits.restore_original_limits()
+        appeared = set(_blas_files()) - set(before)
+        if appeared:  # loaded meanwhile, with one thread: the default it would have had
+            from threadpoolctl import ThreadpoolController
+
+            env = (saved or {}).get("OPENBLAS_NUM_THREADS") or ""
+            n = int(env) if env.isdigit() and int(env) > 0 else max([*before.values()] or [thread_count()])
+            for lib in ThreadpoolController().select(filepath=sorted(appeared)).lib_controllers:
+                lib.set_num_threads(n)
+        _release_blas_control()
+    finally:
+        _restore_environment(saved)
+
+
+def _restore_environment(saved) -> None:
+    for k, v in (saved or {}).items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
 
 
 def _release_blas_control() -> None:

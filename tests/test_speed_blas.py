@@ -138,3 +138,36 @@ def test_context_shared_between_threads_restores_once_all_have_left():
                 assert set(_blas_threads()) == {1}
             assert set(_blas_threads()) == {1}
         assert set(_blas_threads()) == {2}
+
+
+def test_a_fresh_process_gets_every_blas_back_after_run_pipeline():
+    """The Python API in a fresh process: scipy's own OpenBLAS is loaded by the pipeline; it used to
+    load while OPENBLAS_NUM_THREADS was 1 and keep one thread for the rest of the process (a review).
+    After run_pipeline and the summary every BLAS has the threads numpy's had before."""
+    import subprocess
+    import sys
+
+    from .conftest import EXAMPLE
+
+    code = ("import sys, json; from threadpoolctl import threadpool_info\n"
+            "import numpy\n"
+            "def blas(): return sorted((i['prefix'], i['num_threads']) for i in threadpool_info() "
+            "if i['user_api'] == 'blas')\n"
+            "before = blas()\n"
+            "from pointspro.core.io import read_cloud\n"
+            "from pointspro.core.pipeline import run_pipeline\n"
+            "from pointspro.core.recipe import load_recipe\n"
+            "rec = load_recipe(sys.argv[1] + '/recipe.yaml')\n"
+            "run_pipeline(read_cloud(sys.argv[1] + '/asphere_cmm.csv', **rec.input), rec).summary()\n"
+            "print(json.dumps([before, blas()]))")
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                           "MKL_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code, str(EXAMPLE)], capture_output=True, text=True,
+                         encoding="utf-8", env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    import json
+
+    before, after = json.loads(out.stdout.strip().splitlines()[-1])
+    n = {t for _, t in before}
+    assert len(n) == 1 and len(after) >= len(before), (before, after)
+    assert {t for _, t in after} == n, (before, after)
