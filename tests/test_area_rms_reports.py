@@ -187,6 +187,25 @@ def test_misalignment_residual_rms_is_over_the_area_on_a_star_plain_on_a_raster(
     assert res.report["residual_rms_over"].startswith("points")
 
 
+def test_misalignment_residual_rms_keeps_a_held_piston_on_every_sampling():
+    """residual_rms_um is about zero on a raster and on a star alike (a review: the star's weighted
+    figure was about the mean and dropped a piston the raster's kept): with dz held and the part
+    2 µm high, both read √(2² + 1²) µm over the area (astigmatism 1 µm RMS)."""
+    from pointspro.core.surfaces import EvenAsphere
+    from pointspro.plugins.misalignment import MisalignmentStep
+
+    surface = EvenAsphere(1 / 500.0, 0.0, {}, 2 * R)
+    params = MisalignmentStep.Params(dof=["alpha", "beta", "dx", "dy"])
+    got = {}
+    for name, (x, y) in (("star", star()[:2]), ("raster", raster(2.0))):
+        q = np.column_stack([x, y, surface.sag(x, y) + astigmatism(x, y) + 2e-3])
+        rep = MisalignmentStep().run(PointCloud(q), params, Context(surface=surface)).report
+        got[name] = rep["residual_rms_um"]
+    truth = float(np.hypot(2.0, area_truth(*star()[:2], astigmatism) * 1e3))
+    assert got["star"] == pytest.approx(truth, rel=0.03), got
+    assert got["raster"] == pytest.approx(truth, rel=0.03), got
+
+
 def test_probe_radius_distance_residual_rms_is_over_the_area_on_a_star():
     """probe_radius's distance_residual_rms_um: the foot points' areas, as the summary's."""
     from pointspro.core.surfaces import EvenAsphere

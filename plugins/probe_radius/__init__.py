@@ -214,12 +214,14 @@ class ProbeRadiusStep(Step):
             n_used = n
         # contact = centre − s·ρ·n̂, with n̂ taken from the part frame to the measuring frame
         contact = cloud.xyz - s * rho_b * (n_used @ fit.pose.rotation.T)
-        from pointspro.core.metrics.area_weights import area_weights, weighted_rms, weighting_words
+        from pointspro.core.metrics.area_weights import area_weights, weighting_words
 
-        # the distance residual's RMS over the area, as the summary's (docs/conventions.md, Summary):
-        # the foot points' areas in the part frame (None on an even sampling: the plain RMS)
+        # the distance residual's RMS over the area (docs/conventions.md, Summary figures): the foot
+        # points' areas in the part frame (None on an even sampling: the plain mean); about zero, as
+        # before, on any sampling: √(Σ w e² / Σ w)
         area = weights if weights is not None else area_weights(foot[:, 0], foot[:, 1])
-        rms = float(np.sqrt(np.mean(e ** 2))) if area is None else weighted_rms(e, area)
+        ms = np.mean(e ** 2) if area is None else np.dot(area, e ** 2) / np.sum(area)
+        rms = float(np.sqrt(ms))
         report.update(
             probe_radius=rho_b, side=s, normals=params.normals,
             distance_residual_rms_um=rms * 1e3, distance_residual_rms_over=weighting_words(area),
