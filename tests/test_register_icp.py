@@ -197,3 +197,21 @@ def test_an_in_memory_undercut_sheet_is_registered_not_refused(turned):
     bad[7] = bad[7, ::-1]
     with pytest.raises(InputError, match=r"^wave: unusable nominal mesh: .*inconsistent orientation"):
         reg.RegisterStep().run(cloud, reg.RegisterStep.Params(), Context(surface=MeshSurface(V, bad, source="wave")))
+
+
+def test_in_memory_height_fields_wound_both_ways_or_with_a_zero_area_face_still_register():
+    """What register accepted before checking faces as given, it accepts still (a review): a height
+    field whose faces are wound both ways (coherent once each is turned to +z) and one with an extra
+    zero-area face (MeshSurface drops it)."""
+    V, T = sheet(freeform, 5, 0.5)
+    mixed = T.copy()
+    mixed[::2] = mixed[::2, ::-1]
+    extra = np.vstack([T, [[0, 0, 1]]])
+    rng = np.random.default_rng(12)
+    x, y = rng.uniform(-4, 4, (2, 300))
+    cloud = PointCloud.from_xyz(x, y, freeform(x, y))
+    for faces in (mixed, extra):
+        surf = MeshSurface(V, faces, source="sheet")
+        assert len(surf.triangles_given) == len(T)
+        res = reg.RegisterStep().run(cloud, reg.RegisterStep.Params(refine_iterations=3), Context(surface=surf))
+        assert res.report["residual_rms_um"] < 1.0  # the facets' chord error (~0.13 µm)

@@ -71,18 +71,21 @@ class MeshSurface(NominalSurface):
             raise InputError(f"{source or 'mesh'}: a nominal mesh needs vertices and triangles")
         n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
         flip = n[:, 2] < 0  # orient every face so its normal has positive z (docs/conventions.md "Frames and signs")
-        #: the faces as given, in their own winding (zero-area ones too): what a mesh check judges — a
-        #: sheet with undercut walls is coherent as given and would read "inconsistent" once each face
-        #: is turned to +z (register checks an in-memory nominal with these)
-        self.triangles_given = t
+        given = t
         t = t.copy()
         t[flip] = t[flip][:, [0, 2, 1]]
         n[flip] *= -1
         norm = np.linalg.norm(n, axis=1)
         keep = norm > 0
         if not np.all(keep):
-            t, n, norm = t[keep], n[keep], norm[keep]
+            t, n, norm, given = t[keep], n[keep], norm[keep], given[keep]  # (fancy indexing: copies)
+        else:
+            given = given.copy()  # not the caller's array
         self.vertices, self.triangles = v, t
+        #: the faces in their own winding (the zero-area ones dropped, as from ``triangles``): a sheet
+        #: with undercut walls is coherent as given and reads "inconsistent" once each face is turned
+        #: to +z — register checks an in-memory nominal both ways (plugins/register)
+        self.triangles_given = given
         self.face_normals = n / norm[:, None]
         self.aperture = None if aperture is None else float(aperture)
         self.source = source

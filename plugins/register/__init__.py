@@ -153,8 +153,14 @@ class RegisterStep(Step):
                 return surf, name, []
             if surf.mesh_info is not None:  # read from a file: checked (and repaired) then
                 return surf, name, list(surf.mesh_info.get("repaired", []))
-            # the faces as given (MeshSurface turns each to +z, which an undercut's coherent sheet is not)
-            chk = check_mesh(surf.vertices, surf.triangles_given)
+            # orientation: coherent as given (a sheet with undercut walls, which MeshSurface's turning
+            # of each face to +z breaks) or once turned to +z (a height field wound both ways) will do
+            faces = surf.triangles
+            chk = check_mesh(surf.vertices, faces)
+            if chk.inconsistent_edges:
+                given = check_mesh(surf.vertices, surf.triangles_given)
+                if given.inconsistent_edges < chk.inconsistent_edges:
+                    faces, chk = surf.triangles_given, given
             probs = chk.problems()
             if not probs:
                 return surf, name, []
@@ -162,7 +168,7 @@ class RegisterStep(Step):
                 raise InputError(f"{name}: unusable nominal mesh: {', '.join(probs)}"
                                  + (" — fix the mesh or set repair: true" if chk.faces else ""))
             try:
-                v, t, rep = repair_mesh(surf.vertices, surf.triangles_given, chk)
+                v, t, rep = repair_mesh(surf.vertices, faces, chk)
             except InputError as e:
                 raise InputError(f"{name}: unusable nominal mesh: {e}") from None
             return MeshSurface(v, t, surf.aperture, surf.source), name, rep.done
