@@ -35,34 +35,34 @@ class single_threaded_blas:
     10.6–11.3 s with the default two BLAS threads, 2.9–3.5 s with one; zernike 1.5 s → 0.06 s).
     Neighbour searches thread by themselves (``thread_count``), untouched.
 
-    Libraries loaded while the context is open: scipy's own OpenBLAS (loaded by the first
-    ``scipy.linalg`` import) is loaded as the first context opens, so that it is limited too and
-    given back its threads after; on the main thread ``OPENBLAS_NUM_THREADS`` and the like are set
-    to 1 as well (a BLAS loaded meanwhile starts with one thread) and restored — not from another
-    thread (the window's worker): changing the environment while Qt's threads may read it is not
-    safe. A BLAS that appeared while the context was open is set back to the default it would have
-    had (the saved ``OPENBLAS_NUM_THREADS``, else the threads the others had) when the last context
-    closes: the window and the Python API leave the caller's numpy and scipy as they found them.
+    scipy's own OpenBLAS (loaded by the first ``scipy.linalg`` import) is loaded as the first context
+    opens, so that it is limited with numpy's and given back its threads after: the window and the
+    Python API leave the caller's BLAS as they found them. The environment is not touched (until
+    2026-11-27 ``OPENBLAS_NUM_THREADS`` was set to 1 meanwhile, so that scipy's BLAS, loaded inside,
+    kept one thread for good; and changing the environment from the window's worker thread while
+    Qt's threads may read it is not safe). The batch's pool workers get their one thread from their
+    environment at start (core.executors).
 
-    Re-entrant and shared between threads: the BLAS thread count and the environment are the
-    process's, not a thread's, so the first context to open sets them and the last to close
-    restores them (a count under a lock) — two pipelines in two threads of the window must not
-    restore the other's setting half-way. threadpoolctl (≥ 3.6) lets only the first thread that set
-    OpenBLAS's (process-wide) pool set it again and silently ignores the others: the window's worker
-    thread would have kept two BLAS threads after any other thread had set a limit. This context
-    takes that control for its set and its restore, and leaves no thread holding it."""
+    Re-entrant and shared between threads: the BLAS thread count is the process's, not a thread's,
+    so the first context to open sets it and the last to close restores it (a count under a lock) —
+    two pipelines in two threads of the window must not restore the other's setting half-way. A
+    forked child (a figure process, a Monte Carlo worker) gets a fresh lock (``os.register_at_fork``):
+    one held by another thread at the fork would never be released there. threadpoolctl (≥ 3.6) lets
+    only the first thread that set OpenBLAS's (process-wide) pool set it again and silently ignores
+    the others: the window's worker thread would have kept two BLAS threads after any other thread
+    had set a limit. This context takes that control for its set and its restore, and leaves no
+    thread holding it."""
 
-    _VARS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
     # the process's one BLAS setting, and how many contexts hold it (see the class doc)
     _lock = threading.Lock()
     _depth = 0
-    _held: tuple | None = None
+    _held = None
 
     def __enter__(self):
         cls = type(self)
         with cls._lock:
             if cls._depth == 0:
-                cls._held = _limit_blas(self._VARS)
+                cls._held = _limit_blas()
             cls._depth += 1
         return self
 
@@ -72,65 +72,33 @@ class single_threaded_blas:
             cls._depth -= 1
             if cls._depth > 0:
                 return False
-            held, cls._held = cls._held, None
-            _restore_blas(*held)
+            limits, cls._held = cls._held, None
+            _release_blas_control()
+            limits.restore_original_limits()
+            _release_blas_control()
         return False
 
 
-def _blas_files() -> dict:
-    """{file: threads} of the BLAS libraries loaded in this process."""
-    from threadpoolctl import threadpool_info
-
-    return {i["filepath"]: i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"}
-
-
-def _limit_blas(variables) -> tuple:
-    """One BLAS thread (single_threaded_blas' doc): (saved environment or None, the limiter, the BLAS
-    libraries loaded before)."""
+def _limit_blas():
+    """One BLAS thread (single_threaded_blas' doc); returns threadpoolctl's limiter, to restore."""
     import importlib.util
 
     from threadpoolctl import threadpool_limits
 
     if "scipy.linalg" not in sys.modules and importlib.util.find_spec("scipy") is not None:
         import scipy.linalg  # noqa: F401 — its OpenBLAS loaded now, so limited now and restored after
-    saved = None
-    if threading.current_thread() is threading.main_thread():
-        saved = {k: os.environ.get(k) for k in variables}
-        os.environ.update({k: "1" for k in variables})
-    try:
-        before = _blas_files()
-        _release_blas_control()
-        limits = threadpool_limits(1, user_api="blas")
-        _release_blas_control()
-    except BaseException:
-        _restore_environment(saved)
-        raise
-    return saved, limits, before
+    _release_blas_control()
+    limits = threadpool_limits(1, user_api="blas")
+    _release_blas_control()
+    return limits
 
 
-def _restore_blas(saved, limits, before) -> None:
-    try:
-        _release_blas_control()
-        limits.restore_original_limits()
-        appeared = set(_blas_files()) - set(before)
-        if appeared:  # loaded meanwhile, with one thread: the default it would have had
-            from threadpoolctl import ThreadpoolController
-
-            env = (saved or {}).get("OPENBLAS_NUM_THREADS") or ""
-            n = int(env) if env.isdigit() and int(env) > 0 else max([*before.values()] or [thread_count()])
-            for lib in ThreadpoolController().select(filepath=sorted(appeared)).lib_controllers:
-                lib.set_num_threads(n)
-        _release_blas_control()
-    finally:
-        _restore_environment(saved)
+def _fresh_lock_in_child() -> None:
+    single_threaded_blas._lock = threading.Lock()
 
 
-def _restore_environment(saved) -> None:
-    for k, v in (saved or {}).items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_fresh_lock_in_child)
 
 
 def _release_blas_control() -> None:
