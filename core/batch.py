@@ -27,7 +27,7 @@ from .io.atomic import why_not_replace
 from .io.background import BackgroundWrite, share_out
 from .io.formats import write_ply_cloud
 from .io.npz import write_npz_cloud
-from .parallel import thread_count
+from .parallel import single_threaded_blas, thread_count
 from .pipeline import run_pipeline
 from .progress import CancelToken, Progress
 from .recipe import Recipe
@@ -273,7 +273,9 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
         # a library's warning (numpy's "invalid value encountered in divide") is one log line
         # naming the input, as the steps' own lines — not two lines of file path and source text
         # on stderr, nor lost in a pool worker's
-        with warnings.catch_warnings():
+        # one BLAS thread for the whole input (core.parallel.single_threaded_blas): the steps', the
+        # summary's and the writer's own contexts nest in it (one library scan an input, not three)
+        with warnings.catch_warnings(), single_threaded_blas():
             warnings.simplefilter("default")
             warnings.showwarning = log_warning
             return _process_input(path, recipe, out_dir, stem, sink=sink, token=token, surface=surface,
