@@ -158,8 +158,6 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     ``cluster.PathMap`` that names a worker's private files as the client does, in the report.
     ``input_sha256``: the input file's digest (``input_digest``), recorded for ``--resume``. BLAS
     runs one thread meanwhile (core.parallel.single_threaded_blas), as in the batch."""
-    from .parallel import single_threaded_blas
-
     with single_threaded_blas():
         return _write_outputs(folder, input_path, recipe, result, figures=figures, timings=timings,
                               fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides,
