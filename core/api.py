@@ -72,7 +72,9 @@ def run(recipe, cloud, *, progress: bool | Callable[[float, str], None] | None =
     ``progress``: a callable ``(fraction, message)``, or True for a bar (tqdm; a widget in Jupyter).
     ``cancel``: a `CancelToken`, a `threading.Event`, or a callable returning True to stop; the run
     then raises `Cancelled`. ``allowed_dirs``: folders parameter files may lie in besides the
-    recipe's (None: any — a script chose its own files)."""
+    recipe's (None: any — a script chose its own files). The steps run with one BLAS thread (their
+    calls are narrow; spinning BLAS threads beside another busy process made a run 3–4× slower); the
+    caller's setting is given back after."""
     from .pipeline import run_pipeline
 
     rec = load(recipe)
