@@ -175,3 +175,12 @@ def test_param_validation():
         MisalignmentStep.Params(dof=[])
     with pytest.raises(ValidationError, match="listed twice"):
         MisalignmentStep.Params(dof=["dx", "dx"])
+
+
+def test_one_point_left_is_named_in_the_singular():
+    """A cloud reduced to one point (here: the other row NaN, dropped on reading) says "1 point"."""
+    from pointspro.core.surfaces import EvenAsphere
+
+    surface = EvenAsphere(1 / 500.0, 0.0, {}, 100.0)
+    with pytest.raises(StepError, match=r"^1 point for 5 parameters: need more points than parameters"):
+        run(np.array([[1.0, 2.0, float(surface.sag(1.0, 2.0))]]), surface)

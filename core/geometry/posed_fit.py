@@ -358,7 +358,8 @@ class PosedSurfaceFit:
     def fit(self) -> PosedFitResult:
         n, k = len(self.q), len(self.free)
         if n <= k:
-            raise StepError(f"{n} points for {k} parameters: need more points than parameters")
+            raise StepError(f"{n} point{'' if n == 1 else 's'} for {k} parameters: need more points than "
+                            "parameters")
         cov3 = _covariance3(self.q)  # 3 × 3, by blocks
         ev = np.linalg.eigvalsh(cov3[:2, :2])  # spreads² of the footprint in x, y
         w3, v3 = np.linalg.eigh(cov3)

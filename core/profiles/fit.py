@@ -167,8 +167,8 @@ class ProfileFit:
         n, k = len(self.s), len(self.free)
         if n <= k:
             named = ", ".join(LABELS.get(f, f) for f in self.free)
-            raise StepError(f"{self.name}: {n} points for {k} parameters ({named}): need more points "
-                            "than parameters — fewer DOF or a longer scan")
+            raise StepError(f"{self.name}: {n} point{'' if n == 1 else 's'} for {k} parameters ({named}): "
+                            "need more points than parameters — fewer DOF or a longer scan")
         if "dz" in self.free and "dz" not in self.given:
             try:
                 vals = dict(self.initial)
