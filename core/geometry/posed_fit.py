@@ -85,6 +85,10 @@ def form_weights(part, free) -> np.ndarray | None:
     return area_weights(part[:, 0], part[:, 1])
 
 
+#: the report's ``fit_weights`` when fit_over_the_area weighted the fit
+FIT_WEIGHTS_NOTE = "area: each point weighted by the area it stands for (an uneven sampling)"
+
+
 def fit_over_the_area(surface, q, free, initial=None, residual="vertical", **kw):
     """(fit, weights): the fit of PosedSurfaceFit(surface, q, free, initial, residual, **kw) and, when
     it takes form out (form_weights), that fit again weighted by the points' areas in the part frame

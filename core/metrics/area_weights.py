@@ -145,6 +145,13 @@ def weighted_rms(v, w) -> float:
     return float(np.sqrt(np.dot(w, d * d) / s))
 
 
+def rms_about_zero(v, w) -> float:
+    """√(Σ w v² / Σ w) — a fit's residual RMS about zero, over the area (a piston the fit leaves, e.g.
+    a held dz, counts); the plain √(mean v²) when w is None (misalignment, probe_radius)."""
+    v = np.asarray(v, dtype=np.float64)
+    return float(np.sqrt(np.mean(v ** 2) if w is None else np.dot(w, v ** 2) / np.sum(w)))
+
+
 def weighting_words(weights) -> str:
     """The summary's ``rms_over``: how its RMS and slope RMS weigh the points."""
     if weights is None:

@@ -25,7 +25,7 @@ import numpy as np
 from pydantic import field_validator
 
 from pointspro.core.errors import StepError
-from pointspro.core.geometry.posed_fit import fit_over_the_area
+from pointspro.core.geometry.posed_fit import FIT_WEIGHTS_NOTE, fit_over_the_area
 from pointspro.core.params.pose import (
     EXCLUDE_HELP,
     FIVE_DOF,
@@ -102,17 +102,16 @@ class MisalignmentStep(Step):
         ctx.progress.update(0.9, "residual")
         report = fit.report()
         if weights is not None:  # the design parameters' fit over the area (core/geometry/posed_fit.py)
-            report["fit_weights"] = "area: each point weighted by the area it stands for (an uneven sampling)"
-        from pointspro.core.metrics.area_weights import area_weights, weighting_words
+            report["fit_weights"] = FIT_WEIGHTS_NOTE
+        from pointspro.core.metrics.area_weights import area_weights, rms_about_zero, weighting_words
 
         # the residual's RMS over the area (docs/conventions.md, Summary figures): a star or spiral
         # crowds its centre, where a plain mean over the points read ±20 % off; the points' areas in
         # the part frame, as the design fit's (None on an even sampling: the plain mean). About zero,
         # as before — the pose's piston (dz held) counts, on any sampling: √(Σ w r² / Σ w)
         area = weights if weights is not None else area_weights(part[:, 0], part[:, 1])
-        ms = np.mean(residual ** 2) if area is None else np.dot(area, residual ** 2) / np.sum(area)
-        rms = float(np.sqrt(ms))
-        report.update(residual_rms_um=rms * 1e3, residual_rms_over=weighting_words(area),
+        report.update(residual_rms_um=rms_about_zero(residual, area) * 1e3,
+                      residual_rms_over=weighting_words(area),
                       residual_pv_um=float(np.ptp(residual) * 1e3),
                       warnings=list(fit.warnings) + ([note] if note else []) + exclusion.pop("warnings", []),
                       **exclusion)

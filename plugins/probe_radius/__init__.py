@@ -30,7 +30,7 @@ import numpy as np
 from pydantic import field_validator
 
 from pointspro.core.errors import DomainError, StepError
-from pointspro.core.geometry.posed_fit import PosedSurfaceFit, fit_over_the_area
+from pointspro.core.geometry.posed_fit import FIT_WEIGHTS_NOTE, PosedSurfaceFit, fit_over_the_area
 from pointspro.core.params.pose import (
     EXCLUDE_HELP,
     FIVE_DOF,
@@ -197,7 +197,7 @@ class ProbeRadiusStep(Step):
         side_warning = _other_side_check(surface, cloud.xyz, dof, params, e, ctx)
         report = fit.report()
         if weights is not None:  # the design parameters' fit over the area (core/geometry/posed_fit.py)
-            report["fit_weights"] = "area: each point weighted by the area it stands for (an uneven sampling)"
+            report["fit_weights"] = FIT_WEIGHTS_NOTE
         report.update(exclusion)
         if excluded is not None:
             rows = cloud["index"][excluded] if "index" in cloud.channels else np.flatnonzero(excluded)
@@ -214,17 +214,16 @@ class ProbeRadiusStep(Step):
             n_used = n
         # contact = centre − s·ρ·n̂, with n̂ taken from the part frame to the measuring frame
         contact = cloud.xyz - s * rho_b * (n_used @ fit.pose.rotation.T)
-        from pointspro.core.metrics.area_weights import area_weights, weighting_words
+        from pointspro.core.metrics.area_weights import area_weights, rms_about_zero, weighting_words
 
         # the distance residual's RMS over the area (docs/conventions.md, Summary figures): the foot
         # points' areas in the part frame (None on an even sampling: the plain mean); about zero, as
         # before, on any sampling: √(Σ w e² / Σ w)
         area = weights if weights is not None else area_weights(foot[:, 0], foot[:, 1])
-        ms = np.mean(e ** 2) if area is None else np.dot(area, e ** 2) / np.sum(area)
-        rms = float(np.sqrt(ms))
         report.update(
             probe_radius=rho_b, side=s, normals=params.normals,
-            distance_residual_rms_um=rms * 1e3, distance_residual_rms_over=weighting_words(area),
+            distance_residual_rms_um=rms_about_zero(e, area) * 1e3,
+            distance_residual_rms_over=weighting_words(area),
             distance_residual_pv_um=float(np.ptp(e) * 1e3),
             warnings=list(fit.warnings) + ([note] if note else []) + ([side_warning] if side_warning else [])
             + report.pop("warnings", []))

@@ -259,7 +259,6 @@ def _std(v, w=None) -> float:
     return float(np.sqrt(acc / total))
 
 
-
 def _um(v_mm: float) -> str:
     from pointspro.core.units import format_length
 
