@@ -19,8 +19,7 @@ def _stats(v, w=None) -> dict:
     core.metrics.area_weights; None: an even sampling, the points' plain RMS), docs/conventions.md,
     Summary figures. Only what is reported: the selection's statistics (F, BIC, σ) stay the points'."""
     v = np.asarray(v)
-    rms = np.sqrt(np.mean((v - v.mean()) ** 2)) if w is None else weighted_rms(v, w)
-    return {"rms_um": float(rms * 1e3), "pv_um": float(np.ptp(v) * 1e3)}
+    return {"rms_um": weighted_rms(v, w) * 1e3, "pv_um": float(np.ptp(v) * 1e3)}
 
 
 def regions(x, y, r, sigma, cells=24) -> list[dict]:
