@@ -110,6 +110,30 @@ def test_bad_input(kw, pattern):
         run(cloud, **kw)
 
 
+def test_the_spacing_check_decides_alike_in_scan_order_and_shuffled():
+    """The window-below-spacing refusal does not build a k-d tree where the points' neighbours in the
+    file's order already show the window is wider than the spacing (issue 17): the bound is never below
+    the exact median spacing, so the decision is the one the exact spacing gives — whatever the order."""
+    from scipy.spatial import cKDTree
+
+    from pointspro.plugins.knn_denoise import _pitch_bound, _sampled
+
+    rng = np.random.default_rng(11)
+    for pts in (np.column_stack(raster(40, 1.5)), rng.uniform(-50, 50, (30_000, 2)),
+                np.repeat(rng.uniform(-5, 5, (500, 2)), 2, axis=0)):  # every point twice: spacing 0
+        for order in (np.arange(len(pts)), rng.permutation(len(pts))):
+            p = pts[order]
+            idx = _sampled(len(p))
+            exact = float(np.median(cKDTree(p).query(p[idx], k=2)[0][:, 1]))
+            assert _pitch_bound(p[:, 0], p[:, 1], idx) >= exact
+    cloud, _ = q1()
+    for order in (np.arange(cloud.n), rng.permutation(cloud.n)):
+        c = PointCloud.from_xyz(*cloud.xyz[order].T, residual=cloud["residual"][order])
+        with pytest.raises(StepError, match=r"smaller than the sampling spacing \(15 mm\)"):
+            run(c, window=4.0, spacing=1.0)
+        assert run(c, window=16.0, spacing=8.0).report["removed"] >= 0
+
+
 def test_identical_points_and_param_rules():
     from pydantic import ValidationError
 
