@@ -212,6 +212,41 @@ def test_cloud_formats_read_back_identical(run_cli, tmp_path):
         assert np.array_equal(z["z"], ref.z)
 
 
+def test_npz_states_the_units_its_numbers_are_in(run_cli, tmp_path):
+    """A channel read in nm is held in mm: cloud.npz says mm beside it, as cloud.csv's header does (it
+    said the input's nm beside numbers in mm — 10⁶ off for anyone reading the file by its metadata);
+    a step's length channel (omega) says mm too, a non-length unit stays as stated; an npz written
+    the old way reads back as mm."""
+    rng = np.random.default_rng(5)
+    rows = "".join(f"{a!r},{b!r},{i * 1e-6!r},{3.0 * i!r},{0.5 * i!r}\n"
+                   for i, (a, b) in enumerate(rng.uniform(-60, 60, (300, 2)).tolist()))
+    src = write(tmp_path / "in.csv", "x,y,z,dev [nm],t [s]\n" + rows)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - knn_denoise: {method: statistical, neighbours: 8}\n")
+    for fmt in ("csv", "npz"):
+        code, _, err = run_cli("--batch", recipe, src, "--out", tmp_path / fmt, "--quiet", "--cloud-format", fmt,
+                               "--figures", "none")
+        assert code == 0, err
+    path = tmp_path / "npz" / "in" / "cloud.npz"
+    with np.load(path, allow_pickle=False) as z:
+        units = json.loads(str(z["pointspro_meta"]))["channel_units"]
+        assert np.allclose(z["dev"][:3], [0.0, 3e-6, 6e-6], rtol=1e-12, atol=0)
+    assert units == {"dev": "mm", "t": "s", "omega": "mm"}
+    header = (tmp_path / "csv" / "in" / "cloud.csv").read_text(encoding="utf-8").splitlines()[0]
+    assert "dev [mm]" in header and "t [s]" in header and "omega [mm]" in header
+    # the former writer's metadata (the input's unit) read back as what the numbers are: mm
+    from pointspro.core.io.npz import read_npz
+
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["pointspro_meta"]))
+    meta["channel_units"] = {"dev": "nm", "t": "s"}
+    arrays["pointspro_meta"] = np.array(json.dumps(meta))
+    old = tmp_path / "old.npz"
+    np.savez(old, **arrays)
+    assert read_npz(old)[2]["channel_units"] == {"dev": "mm", "t": "s"}
+    assert read_cloud(old).meta["channel_units"]["dev"] == "mm"
+
+
 def test_resume_reruns_an_output_of_another_cloud_format(run_cli, tmp_path):
     (m0,) = _small_inputs(tmp_path, 1)
     recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - aperture: {diameter: 90}\n")

@@ -23,12 +23,17 @@ META_KEY = "pointspro_meta"
 
 def write_npz_cloud(cloud, path) -> None:
     """Every column of ``cloud`` and its metadata into ``path`` (atomically)."""
+    from ..units import channel_unit
+
     names = cloud.column_names
     arrays = {n: np.asarray(cloud[n], dtype=np.int64 if cloud[n].dtype.kind in "iu" else np.float64)
               for n in names}
+    # each channel's unit as its numbers are held (as cloud.csv's header states it): a length read
+    # in nm or µm was converted to mm on reading, so it is mm here, not the unit the input stated
+    stated = cloud.meta.get("channel_units") or {}
+    units = {n: u for n in names[3:] if (u := channel_unit(n, stated.get(n) if isinstance(stated, dict) else None))}
     meta = {"units": cloud.meta.get("units", "mm"), "frame": cloud.meta.get("frame", "measuring"),
-            "columns": names, "channel_units": dict(cloud.meta.get("channel_units") or {}),
-            "source": cloud.meta.get("source")}
+            "columns": names, "channel_units": units, "source": cloud.meta.get("source")}
     arrays[META_KEY] = np.array(json.dumps(meta))
     with atomic_path(path) as tmp, open(tmp, "wb") as f:  # a file object: savez adds no ".npz"
         np.savez(f, **arrays)
@@ -98,6 +103,11 @@ def read_npz(path: Path, invalid: str = "drop"):
         xyz = xyz[ok]
         cols = {k: v[ok] for k, v in cols.items()}
         out_meta["invalid_dropped"] = int((~ok).sum())
-    if meta.get("channel_units"):
-        out_meta["channel_units"] = meta["channel_units"]
+    if isinstance(meta.get("channel_units"), dict) and meta["channel_units"]:
+        from ..units import is_length_unit
+
+        # lengths are held in mm: a file written before 2026-11-27 stated the input's nm or µm beside
+        # numbers in mm
+        out_meta["channel_units"] = {n: ("mm" if isinstance(u, str) and is_length_unit(u) else u)
+                                     for n, u in meta["channel_units"].items()}
     return xyz, cols, out_meta
