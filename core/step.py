@@ -62,9 +62,12 @@ class Params(BaseModel):
 
                 raise PydanticCustomError("number_text", NUMBER_TEXT)
         if isinstance(v, (bool, list, tuple, dict)):
-            from .yamlio import bool_as_number
+            from .yamlio import bool_as_number, number_as_text
 
-            error = bool_as_number(f.annotation, v)
+            # and text inside a list or mapping where numbers are wanted: `remove: ['520']`,
+            # `matrix: [[1_0, 0, 0, 0], …]` (1_0 is a word in YAML 1.2), which lax mode would read as
+            # the numbers (a review: a ×10 scale ran with exit 0), refused as a single value is
+            error = bool_as_number(f.annotation, v) or number_as_text(f.annotation, v)
             if error is not None:
                 raise error
         return v

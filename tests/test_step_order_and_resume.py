@@ -4,6 +4,7 @@ that silently gives a wrong result, keys of another aperture shape, an input nam
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -204,6 +205,31 @@ def test_a_number_written_as_text_is_refused(tmp_path, value):
     """YAML 1.2 reads 1_290 and '1290' as text; pydantic's lax mode made them the number (a review)."""
     with pytest.raises(RecipeError, match=r"key 'diameter': Input should be a number, not text"):
         load_recipe(recipe(tmp_path, f"aperture: {{diameter: {value}}}"))
+
+
+@pytest.mark.parametrize("step,where,got", [
+    ("manual_edit: {remove: ['520', '3640']}", "key 'remove': item 1", "'520'"),
+    ("manual_edit: {remove: [12, 5_20]}", "key 'remove': item 2", "'5_20'"),
+    ("manual_edit: {remove_ranges: [[1, '5']]}", "key 'remove_ranges': item 1's item 2", "'5'"),
+    ("transform: {matrix: [[1_0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}",
+     "key 'matrix': item 1's item 1", "'1_0'"),
+    ("aperture: {shape: polygon, vertices: [[0, 0], [100, 0], [100, '1e2'], [0, 100]]}",
+     "key 'vertices': item 3's item 2", "'1e2'"),
+    ("z_scale: {calibration: c.csv, heights: ['3', 3]}", "key 'heights': item 1", "'3'"),
+    ("zernike: {terms: 15, remove: [piston, '4']}", "key 'remove': item 2", "'4'"),
+])
+def test_numbers_written_as_text_inside_lists_are_refused(tmp_path, step, where, got):
+    """Inside a list or a matrix too (a review: `matrix: [[1_0, …]]` ran as a ×10 scale with exit 0,
+    `remove: ['520']` removed row 520): the same refusal as a single value, naming the item."""
+    with pytest.raises(RecipeError, match=rf"{re.escape(where)}: Input should be a number, not text .*\(got {re.escape(got)}\)"):
+        load_recipe(recipe(tmp_path, step))
+
+
+def test_lists_of_numbers_and_words_still_read(tmp_path):
+    r = load_recipe(recipe(tmp_path, "manual_edit: {remove: [3, 520], remove_ranges: [[1, 5]]}",
+                           "zernike: {terms: 15, remove: [piston, tilt, 4]}"))
+    assert list(r.steps[0].params.remove) == [3, 520]
+    assert list(r.steps[1].params.remove) == ["piston", "tilt", 4]
 
 
 def test_a_failed_rerun_says_the_folder_holds_the_earlier_outputs(run_cli, tmp_path):

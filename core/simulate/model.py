@@ -56,10 +56,9 @@ class ModelSpec(BaseModel):
     def _numbers_are_numbers(cls, data):
         """`seed: true`, `scan: {radius: true}` (taken as 1 by pydantic's lax mode) and `seed: "3"`,
         `fs: 4_00` (text, a word in YAML 1.2, taken as the number) are refused, as in a recipe's
-        steps and surface (core.yamlio.bool_as_number, core.surfaces.spec.number_as_text). The
+        steps and surface (core.yamlio.bool_as_number, core.yamlio.number_as_text). The
         surface is checked as a recipe's (load_model), the effects by _known."""
-        from ..surfaces.spec import number_as_text
-        from ..yamlio import bool_as_number
+        from ..yamlio import bool_as_number, number_as_text
 
         if isinstance(data, dict):
             for name, v in data.items():

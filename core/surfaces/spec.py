@@ -11,15 +11,13 @@
 from __future__ import annotations
 
 import re
-import types
-import typing
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, field_validator, model_validator
 from pydantic_core import PydanticCustomError, ValidationError
 
-from ..yamlio import NUMBER_TEXT, bool_as_number, numeric_text, yaml_word
+from ..yamlio import bool_as_number, number_as_text, yaml_word
 from .base import NominalSurface
 from .even_asphere import EvenAsphere
 from .forbes import QBfsAsphere, QConAsphere
@@ -28,58 +26,6 @@ from .xy_polynomial import XYPolynomial
 
 _TERM = re.compile(r"x([0-9]+)y([0-9]+)")  # fullmatch: "x2y0\n" and "x２y0" are not terms
 _INT = TypeAdapter(int)
-
-
-def _texts(ann, value, path=()):
-    """(path, text) of each string in ``value`` where ``ann`` wants a number: a float or int field,
-    a mapping's values, a list's or tuple's items, a nested pydantic model's fields (the path: the
-    ("in", key) and ("item", i) steps down to it, as core.yamlio.bool_as_number's)."""
-    origin, args = typing.get_origin(ann), typing.get_args(ann)
-    if origin is typing.Annotated:
-        yield from _texts(args[0], value, path)
-    elif origin is typing.Union or origin is types.UnionType:
-        if isinstance(value, str) and any(a in (float, int) for a in args):
-            yield path, value
-        elif not isinstance(value, str):
-            for a in args:
-                yield from _texts(a, value, path)
-    elif ann in (float, int):
-        if isinstance(value, str):
-            yield path, value
-    elif isinstance(value, (list, tuple)) and origin in (list, tuple):
-        fixed = origin is tuple and args and not (len(args) == 2 and args[1] is Ellipsis)
-        for i, v in enumerate(value):
-            a = (args[i] if i < len(args) else None) if fixed else (args[0] if args else None)
-            if a is not None:
-                yield from _texts(a, v, (*path, ("item", i)))
-    elif isinstance(value, dict) and origin is dict and len(args) == 2:
-        for k, v in value.items():
-            yield from _texts(args[1], v, (*path, ("in", k)))
-    elif isinstance(value, dict) and isinstance(getattr(ann, "model_fields", None), dict):
-        for k, v in value.items():
-            f = ann.model_fields.get(k) if isinstance(k, str) else None
-            if f is not None:
-                yield from _texts(f.annotation, v, (*path, ("in", k)))
-
-
-def number_as_text(annotation, value, name: str | None = None):
-    """A pydantic error (type ``number_text``) when ``value`` holds a number written as text where
-    ``annotation`` wants a number — `aperture: 1_300` (a word in YAML 1.2) or `c: "3.33e-4"`, which
-    pydantic's lax mode would read as the number — refused with the steps' own rule and words
-    (core.yamlio.numeric_text, NUMBER_TEXT); None otherwise (text that is no number is left to
-    pydantic's own message).
-    As core.yamlio.bool_as_number's: its context has ``keys`` (``name``, the field the value is of,
-    then the mapping keys down to the text) and ``detail`` (the message without them)."""
-    for path, text in _texts(annotation, value, (("in", name),) if name is not None else ()):
-        if not numeric_text(text):
-            continue
-        n = next((i for i, (kind, _) in enumerate(path) if kind != "in"), len(path))
-        keys = [str(k) for _, k in path[:n]]  # the keys down to it ('A', '4'); the rest: "item 2: …"
-        where = "'s ".join(f"item {k + 1}" if kind == "item" else f"key {yaml_word(k)}"
-                           for kind, k in path[n:])
-        detail = (f"{where}: " if where else "") + f"{NUMBER_TEXT} (got {text!r})"
-        return PydanticCustomError("number_text", "{detail}", {"keys": keys, "detail": detail})
-    return None
 
 
 class _Spec(BaseModel):
