@@ -145,7 +145,8 @@ def write_artifact(folder: Path, name: str, art) -> None:
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
                   timings: dict | None = None, fork_csv: bool = False, cloud_format: str = "auto",
-                  overrides=(), paths=None, input_sha256: str | None = None) -> dict:
+                  overrides=(), paths=None, input_sha256: str | None = None,
+                  file_sha256: dict | None = None) -> dict:
     """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
     artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
     and the window's File → Export report. ``figures``: "all", "summary" (form_error.png only) or
@@ -156,16 +157,17 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     or npz — the cloud is ``cloud.<format>``, named in report.json's ``cloud_file``. ``overrides``:
     the ``--set`` texts the recipe was run with, listed in report.json's ``overrides``. ``paths``: a
     ``cluster.PathMap`` that names a worker's private files as the client does, in the report.
-    ``input_sha256``: the input file's digest (``input_digest``), recorded for ``--resume``. BLAS
+    ``input_sha256``: the input file's digest (``input_digest``), ``file_sha256`` those of the files the
+    recipe names (``parameter_file_digests``), recorded for ``--resume``. BLAS
     runs one thread meanwhile (core.parallel.single_threaded_blas), as in the batch."""
     with single_threaded_blas():
         return _write_outputs(folder, input_path, recipe, result, figures=figures, timings=timings,
                               fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides,
-                              paths=paths, input_sha256=input_sha256)
+                              paths=paths, input_sha256=input_sha256, file_sha256=file_sha256)
 
 
 def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork_csv, cloud_format,
-                   overrides, paths, input_sha256) -> dict:
+                   overrides, paths, input_sha256, file_sha256) -> dict:
     from .io.gridcloud import grid_channel, grid_of, write_x3p_cloud
     from .report import SUMMARY_FIGURE, skipped_figures
 
@@ -205,6 +207,8 @@ def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork
         report["overrides"] = [str(o) for o in overrides]
     if input_sha256 is not None:  # --resume reruns an input whose content changed (is_complete)
         report["input_sha256"] = input_sha256
+    if file_sha256:  # … or one of the recipe's files changed (calibration, model, mesh)
+        report["parameter_files_sha256"] = file_sha256
     writer = {"csv": write_csv, "ply": write_ply_cloud, "npz": write_npz_cloud,
               "x3p": lambda c, path: write_x3p_cloud(path, c, grid)}[cloud_format]
     with atomic_dir(folder) as tmp:
@@ -300,6 +304,7 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
         progress = Progress(sink, token)
         cloud = read_cloud(path, **recipe.input)  # the recipe's `input:` reader options
         digest = input_digest(path)  # the content these results are of (--resume compares it)
+        files = parameter_file_digests(recipe)  # and of the files the recipe names
         progress.update(0.05, "read")
         stage = "running the steps"
         result = run_pipeline(cloud, recipe, progress=progress.sub(0.05, 0.9), surface=surface,
@@ -307,7 +312,7 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
         stage = "writing the outputs"
         report = write_outputs(out_dir / stem, shown, recipe, result, figures=figures,
                                fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides,
-                               paths=paths, input_sha256=digest)
+                               paths=paths, input_sha256=digest, file_sha256=files)
         progress.update(1.0, "written")
         return InputOutcome(shown, True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"], warnings=step_warnings(result))
@@ -596,6 +601,38 @@ def input_digest(path) -> str:
         return hashlib.file_digest(f, "sha256").hexdigest()
 
 
+def parameter_file_digests(recipe: Recipe) -> dict[str, str | None]:
+    """SHA-256 of every file the recipe names — a mesh surface's ``path``, the steps' file parameters
+    (a calibration, a volumetric or dynamic model, a register mesh), ``inputs:`` — keyed by where the
+    recipe names it (``step 2 'z_scale': calibration``), so that ``--resume`` runs an input again when
+    one of them changed under the same name (a review: a re-calibrated artefact's file kept the old
+    amplification, 3 % off, with exit 0). None for a file that cannot be read (the run says why)."""
+    from .step import file_parameters
+
+    base = recipe.base_dir
+
+    def at(value) -> Path:
+        p = Path(value)
+        return p if p.is_absolute() or base is None else base / p
+
+    named = {}
+    spec = recipe.surface_spec or {}
+    if spec.get("type") == "mesh" and isinstance(spec.get("path"), str):
+        named["surface: path"] = at(spec["path"])
+    for i, rs in enumerate(recipe.steps, 1):
+        for k, v in file_parameters(rs.params).items():
+            named[f"step {i} '{rs.id}': {k}"] = at(v)
+    for k, v in recipe.inputs.items():
+        named[f"inputs: {k}"] = Path(v)
+    out = {}
+    for what, p in named.items():
+        try:
+            out[what] = input_digest(p)
+        except OSError:
+            out[what] = None
+    return out
+
+
 #: --figures, from fewest to most figures drawn
 FIGURE_MODES = ("none", "summary", "all")
 
@@ -638,6 +675,10 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
         if data.get("input_sha256") != input_digest(path):
             return None
     except OSError:
+        return None
+    # … and the same calibrations, models and meshes (a report from before they were recorded: run
+    # again when the recipe names any)
+    if data.get("parameter_files_sha256", {}) != parameter_file_digests(recipe):
         return None
     if cloud_format == "auto":  # what "auto" chose (x3p for a grid, else csv), when it was asked
         done = data.get("cloud_file", "cloud.csv")

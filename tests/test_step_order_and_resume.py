@@ -381,3 +381,38 @@ def test_a_simulation_on_other_positions_is_carried_along_its_slope_and_must_cov
     far = PointCloud.from_xyz(xm * 3, ym * 3, f(xm * 3, ym * 3))
     with pytest.raises(InputError, match=r"sim\.csv: \d+ measured point\(s\) lie up to .* mm from any simulated point"):
         against_simulation(far, tmp_path / "sim.csv")
+
+
+def test_resume_runs_again_when_a_file_the_recipe_names_changed(run_cli, tmp_path):
+    """A re-calibrated artefact's file under the same name: --resume kept the old amplification (3 %
+    off, exit 0 — a review); now the recipe's files' digests are in report.json and compared, as the
+    input's are. An unchanged file still lets the input be skipped."""
+    import numpy as np
+
+    from .test_z_scale import HEIGHTS_UM, artefact
+
+    artefact(tmp_path)  # steps.csv beside the recipe
+    part = tmp_path / "part.csv"
+    x, y = np.meshgrid(np.linspace(-5, 5, 30), np.linspace(-5, 5, 30))
+    np.savetxt(part, np.column_stack([x.ravel(), y.ravel(), 1e-3 * np.sin(x.ravel())]), delimiter=",",
+               header="x,y,z", comments="")
+    r = write(tmp_path / "zs.yaml", "pointspro: 1\nsteps:\n  - z_scale: {calibration: steps.csv, heights: "
+              f"{HEIGHTS_UM.tolist()}}}\n")
+    base = ("--batch", r, part, "--out", tmp_path / "o", "--figures", "none", "--quiet")
+
+    def last():
+        rep = json.loads((tmp_path / "o" / "part" / "report.json").read_text(encoding="utf-8"))
+        status = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["inputs"][0]["status"]
+        return status, rep["steps"][0]["report"]["amplification"], rep["parameter_files_sha256"]
+
+    assert run_cli(*base)[0] == 0
+    status, amp, files = last()
+    assert status == "ok" and abs(amp - 0.9754) < 1e-3 and list(files) == ["step 1 'z_scale': calibration"]
+    assert run_cli(*base, "--resume")[0] == 0
+    assert last()[0] == "skipped"
+    cal = np.loadtxt(tmp_path / "steps.csv", delimiter=",", skiprows=1)
+    cal[:, 1] *= 1.03  # the artefact measured again: 3 % more amplification
+    np.savetxt(tmp_path / "steps.csv", cal, delimiter=",", header="x,z,scan", comments="", fmt="%.10g")
+    assert run_cli(*base, "--resume")[0] == 0
+    status, amp2, files2 = last()
+    assert status == "ok" and abs(amp2 / amp - 1.03) < 1e-3 and files2 != files
