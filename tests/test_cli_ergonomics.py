@@ -48,7 +48,7 @@ def test_info_describes_a_scattered_cloud(run_cli, tmp_path):
     assert "x [mm], y [mm], z [mm], index" in out
     assert "comma-delimited" in out
     assert "0 … 19 mm" in out  # x and y extents
-    assert "mean nearest-neighbour spacing 1 mm" in out
+    assert "mean nearest-neighbour spacing 1 mm (in x, y)" in out
     assert "RMS 20 nm, PV 40 nm after piston and tilt removal" in out
 
     code, out, err = run_cli("info", p, "--json")
@@ -60,6 +60,19 @@ def test_info_describes_a_scattered_cloud(run_cli, tmp_path):
     assert d["z_plane_removed"]["rms_mm"] == pytest.approx(2e-5, rel=1e-6)
     assert d["z_plane_removed"]["pv_mm"] == pytest.approx(4e-5, rel=1e-6)
     assert {"name": "z", "unit": "mm"} in d["channels"]
+
+
+def test_info_spacing_is_lateral(run_cli):
+    """The sampling in x, y, as the steps see it: ISO 5436's sample 2 (16 points, 1 µm apart in x, y,
+    heights over metres) read 40.6 mm in 3-D (a review)."""
+    from .conftest import ROOT
+
+    code, out, err = run_cli("info", ROOT / "tests" / "data" / "realdata" / "ISO5436-sample2.x3p", "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    ex = d["extent_mm"]
+    assert d["spacing_mm"] <= max(ex["x"][1] - ex["x"][0], ex["y"][1] - ex["y"][0])
+    assert d["spacing_mm"] < 0.01 * (ex["z"][1] - ex["z"][0])
 
 
 def test_info_says_when_coordinates_are_too_large_for_a_spacing(run_cli, tmp_path):
