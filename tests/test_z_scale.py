@@ -56,6 +56,9 @@ def test_amplification_and_linearity_recovered(tmp_path):
 def test_bad_calibrations(tmp_path):
     from pydantic import ValidationError
 
+    with pytest.raises(ValidationError, match="heights go with a calibration file"):
+        ZScaleStep.Params(amplification=1.02, heights=[2.0, 5.0])
+    assert ZScaleStep.Params(amplification=1.02).heights == []
     with pytest.raises(ValidationError, match="exactly one of calibration and amplification"):
         ZScaleStep.Params()
     with pytest.raises(ValidationError, match="at least two calibrated heights"):

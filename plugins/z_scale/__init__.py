@@ -30,6 +30,10 @@ class ZScaleParams(Params):
     def _one_source(self):
         if (self.calibration is None) == (self.amplification is None):
             raise ValueError("give exactly one of calibration and amplification")
+        if self.amplification is not None and self.heights:
+            # they would be ignored silently (a review): the heights belong to a calibration file
+            raise ValueError("heights go with a calibration file; a given amplification takes none — "
+                             "leave heights out")
         if self.calibration is not None and len(self.heights) < 2:
             raise ValueError("a calibration needs at least two calibrated heights (one per edge; a single "
                              "groove: its depth twice)")
