@@ -597,7 +597,7 @@ def _reporter(results: dict, args, progress=None):
                 # the table's RMS column: noise bias removed, ± U95 (docs/uncertainty.md)
                 from .statement import with_uncertainty
 
-                extra += (f" as measured; RMS {with_uncertainty(u['value'], u['U95'], 'µm', u.get('k') or 2.0)}"
+                extra += (f" as measured; RMS {with_uncertainty(u['value'], u['U95'], 'µm', u.get('k') or 2.0, u.get('interval95'))}"
                           " with the noise bias removed")
             if not args.quiet:
                 say(f"{oc.input}: ok → {oc.out_dir} ({s.get('points_in')} → {s.get('points_out')} "

@@ -314,7 +314,7 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
     for name, e in block.items():
         if _is_figure(e) and name in ("rms_um", "pv_um", "pvr_um"):
             out.append(f"<p><b>{html.escape(name)}</b>: "
-                       f"{html.escape(with_uncertainty(e.get('value'), e.get('U95'), 'µm', e.get('k') or 2.0))}</p>")
+                       f"{html.escape(with_uncertainty(e.get('value'), e.get('U95'), 'µm', e.get('k') or 2.0, e.get('interval95')))}</p>")
     if meta:
         out.append(table_html({k: v for m in meta.values() if isinstance(m, dict) for k, v in m.items()}
                               if len(meta) == 1 and isinstance(next(iter(meta.values())), dict) else meta))

@@ -40,11 +40,40 @@ def _decimals(u: float) -> int:
     return max(0, 1 - int(math.floor(math.log10(u))))
 
 
-def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k: float = 2.0) -> str:
+def _asymmetric(value: float, U: float, interval, d: int) -> bool:
+    """Whether the 95 % interval ``interval`` differs from value ± U by more than half the last digit
+    shown (``d`` decimals): a figure near zero (an RMS or PV at the noise: [0, 2U] about a value of 0)
+    or a skewed Monte Carlo distribution."""
+    if not (isinstance(interval, (list, tuple)) and len(interval) == 2):
+        return False
+    lo, hi = interval
+    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (lo, hi)):
+        return False
+    half = 0.5 * 10.0 ** -d
+    return abs(lo - (value - U)) > half or abs(hi - (value + U)) > half
+
+
+def value_and_uncertainty(value: float, U: float, interval=None, d: int | None = None) -> str:
+    """"0.5475 ± 0.0041", or "0.0000 (95 % 0.0000 … 0.0066)" where the 95 % interval is not value ± U
+    (a review: an RMS at the noise read "0.0 ± 3.3 nm" for the interval 0 … 6.6 nm — its upper end,
+    what a drawing's limit is compared with, is twice that), in the units of its arguments; ``d``
+    decimals (default: U to two significant digits, GUM §7.2.6)."""
+    d = _decimals(U) if d is None else d
+    if _asymmetric(value, U, interval, d):
+        lo, hi = interval
+        return f"{value:.{d}f} (95 % {lo:.{d}f} … {hi:.{d}f})"
+    return f"{value:.{d}f} ± {U:.{d}f}"
+
+
+def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k: float = 2.0,
+                     interval=None) -> str:
     """"547.5 ± 4.1 nm (k = 2)" for 0.5475 ± 0.0041 µm: a length in µm is shown in the unit its
-    value's size asks for; other units as given. "—" for no value."""
+    value's size asks for; other units as given. "—" for no value. ``interval``: the 95 % interval
+    (in the unit of ``value``); where it is not value ± U the statement gives it instead — "0.0 nm
+    (95 % interval 0.0 … 6.6 nm)" — since value ± U would understate its upper end."""
     if value is None or not math.isfinite(value):
         return "—"
+    scale = 1.0
     if unit == "µm":  # the unit of the larger of the two: "0.46 ± 1.00 µm", not "463 ± 1002 nm"
         scale, unit = _unit_for(max(abs(value), abs(U)) if U is not None and math.isfinite(U) else value
                                 if value else (U or 0.0))
@@ -56,6 +85,11 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
     if U is None or not math.isfinite(U):
         return f"{value:.4g} {unit}"
     d = _decimals(U)
+    if isinstance(interval, (list, tuple)) and len(interval) == 2 and all(
+            isinstance(v, (int, float)) for v in interval):
+        interval = (interval[0] / scale, interval[1] / scale)
+        if _asymmetric(value, U, interval, d):
+            return f"{value:.{d}f} {unit} (95 % interval {interval[0]:.{d}f} … {interval[1]:.{d}f} {unit})"
     return f"{value:.{d}f} ± {U:.{d}f} {unit} (k = {k:.3g})"
 
 
@@ -75,7 +109,8 @@ def figure_rows(summary: dict) -> dict[str, str]:
         e = unc.get(key)
         plain = summary.get(key)
         if isinstance(e, dict) and e.get("value") is not None:
-            text = with_uncertainty(e["value"], e.get("U95"), unit, e.get("k") or 2.0)  # k None: u = 0
+            text = with_uncertainty(e["value"], e.get("U95"), unit, e.get("k") or 2.0,  # k None: u = 0
+                                    e.get("interval95"))
             if plain is not None and e.get("bias"):
                 text += f" (as measured {with_uncertainty(plain, None, unit)}, noise bias removed)"
             rows[name] = text

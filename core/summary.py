@@ -20,6 +20,7 @@ def entry(input_path: str, status: str, outcome=None, report: dict | None = None
             # the shop's answer (core/assessment.py): the verdict against the drawing, RMS's U95
             "verdict": (s.get("tolerance") or {}).get("verdict"),
             "rms_U95_um": _rms_unc(s).get("U95"), "rms_corrected_um": _rms_unc(s).get("value"),
+            "rms_interval95_um": _rms_unc(s).get("interval95"),
             # a failed input keeps its traceback (a bug to report, or where a user error arose)
             "traceback": getattr(outcome, "traceback", None) if status == "failed" else None}
 
@@ -51,17 +52,17 @@ def table(entries: list[dict]) -> str:
     # with an uncertainty the RMS is the noise-bias-corrected value ± U95 (the per-input line gives
     # the value as measured too): the header says which
     corrected = any(e.get("rms_U95_um") is not None for e in entries)
-    rms_head = "RMS µm (corrected ± U95)" if corrected else "RMS µm"
+    rms_head = "RMS µm (corrected ± U95, or its 95 % interval)" if corrected else "RMS µm"
     rows = [("input", "status", "points", rms_head, "PV µm", "s") + (("verdict",) if verdicts else ())]
     for e in entries:
         pts = "—" if e["points_in"] is None else f"{e['points_in']}→{e['points_out']}"
         rms = f(e["rms_um"], ".4g")
         if e.get("rms_U95_um") is not None and e.get("rms_corrected_um") is not None:
             # noise bias removed; U95 to two significant digits, the value to the same place (GUM)
-            from .statement import _decimals
+            from .statement import _decimals, value_and_uncertainty
 
             d = min(_decimals(e["rms_U95_um"]), 9)
-            rms = f"{e['rms_corrected_um']:.{d}f} ± {e['rms_U95_um']:.{d}f}"
+            rms = value_and_uncertainty(e["rms_corrected_um"], e["rms_U95_um"], e.get("rms_interval95_um"), d)
         rows.append((e["input"], e["status"], pts, rms, f(e["pv_um"], ".4g"),
                      f(e["seconds"], ".2f")) + ((e.get("verdict") or "—",) if verdicts else ()))
     widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]

@@ -71,9 +71,32 @@ def test_the_batch_table_says_its_rms_is_corrected_when_it_is_and_the_uncertaint
     assert "RMS µm  " in table([plain]).splitlines()[0] + "  "
     corrected = plain | {"rms_U95_um": 0.00286, "rms_corrected_um": 0.07298}
     head, _, row = table([corrected]).splitlines()
-    assert "RMS µm (corrected ± U95)" in head and "0.0730 ± 0.0029" in row
+    assert "RMS µm (corrected ± U95" in head and "0.0730 ± 0.0029" in row
+    # an interval that is value ± U95 to the digit shown: the ± form
+    row = table([corrected | {"rms_interval95_um": [0.07012, 0.07584]}]).splitlines()[2]
+    assert "0.0730 ± 0.0029" in row
     assert [unit_of_key(k) for k in ("rms_um", "slope_rms_urad", "alpha_deg", "Z4_nm", "n")] == \
         ["µm", "µrad", "°", "nm", ""]
+
+
+def test_a_figure_at_the_noise_states_its_interval_not_value_plus_minus_u():
+    """A review: a flat of pure noise read "RMS 0.0 ± 3.3 nm" for the 95 % interval 0 … 6.6 nm — its
+    upper end, what a limit is compared with, twice the stated one — and a PV "54 ± 141 nm" (a
+    negative PV implied). Where the interval is not value ± U95 to the digit shown, it is given."""
+    from pointspro.core.statement import figure_rows, with_uncertainty
+    from pointspro.core.summary import table
+
+    assert with_uncertainty(0.0, 0.00332, "µm", 1.47, [0.0, 0.00664]) == "0.0 nm (95 % interval 0.0 … 6.6 nm)"
+    assert with_uncertainty(0.054, 0.141, "µm", 2.0, [0.0, 0.31]) == "54 nm (95 % interval 0 … 310 nm)"
+    # symmetric to the digit shown: unchanged
+    assert with_uncertainty(0.5475, 0.0041, "µm", 2.0, [0.54341, 0.55159]) == "547.5 ± 4.1 nm (k = 2)"
+    assert with_uncertainty(0.5475, 0.0041, "µm", 2.0) == "547.5 ± 4.1 nm (k = 2)"
+    rows = figure_rows({"rms_um": 0.0199, "pv_um": 0.132, "uncertainty": {
+        "rms_um": {"value": 0.0, "U95": 0.00332, "k": 1.47, "interval95": [0.0, 0.00664], "bias": 0.0199}}})
+    assert rows["RMS"].startswith("0.0 nm (95 % interval 0.0 … 6.6 nm)")
+    e = {"input": "a.csv", "status": "ok", "points_in": 9, "points_out": 9, "rms_um": 0.0199, "pv_um": 0.13,
+         "seconds": 1.0, "rms_U95_um": 0.00332, "rms_corrected_um": 0.0, "rms_interval95_um": [0.0, 0.00664]}
+    assert "0.0000 (95 % 0.0000 … 0.0066)" in table([e]).splitlines()[2]
 
 
 def test_the_uncertainty_table_rounds_every_column_to_u95_s_place():
