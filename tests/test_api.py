@@ -247,3 +247,26 @@ def test_importing_the_package_stays_light():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, encoding="utf-8")
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]"
+
+
+def test_a_cloud_with_nan_rows_is_refused_naming_the_first():
+    """A review: 3 NaN rows in an in-memory cloud made the uncertainty fail with an internal error
+    (ZeroDivisionError), left summary.rms_um None without a word, and said "400 residuals are
+    NaN/inf"; the file readers drop such rows and count them, the API now says what to do."""
+    import numpy as np
+
+    import pointspro.core as pp
+    from pointspro.core.errors import InputError
+
+    rng = np.random.default_rng(2)
+    x, y = np.meshgrid(np.linspace(-10, 10, 20), np.linspace(-10, 10, 20))
+    z = 1e-5 * rng.standard_normal(x.size)
+    z[[3, 50, 51]] = [np.nan, np.inf, np.nan]
+    cloud = pp.PointCloud.from_numpy(np.column_stack([x.ravel(), y.ravel(), z]))
+    recipe = {"pointspro": 1, "steps": [{"zernike": {"terms": 4, "remove": ["piston", "tilt"]}}],
+              "uncertainty": {"noise": "10 nm", "samples": 50}}
+    with pytest.raises(InputError, match=r"3 of 400 points have a NaN or infinite x, y or z \(the first: row 3\)"):
+        pp.run(recipe, cloud)
+    ok = cloud.select(np.isfinite(cloud.xyz).all(axis=1))
+    r = pp.run(recipe, ok)
+    assert r.summary["rms_um"] is not None and r.cloud.n == 397
