@@ -153,3 +153,17 @@ def test_a_figure_with_no_k_still_reads():
     summary = {"rms_um": 0.5, "pv_um": None, "pvr_um": None, "slope_rms_urad": None,
                "uncertainty": {"rms_um": {"value": 0.46, "U95": 0.0, "k": None, "bias": 0.04}}}
     assert figure_rows(summary)["RMS"].startswith("460")
+
+
+def test_a_verdict_line_never_reads_as_a_contradiction():
+    """A review: "irregularity B 0.172 µm > 0.172 µm" (value and limit each rounded to 3 digits); the
+    limit is shown as written, the value with the digits it takes to stand on its side of it."""
+    from pointspro.core.tolerance.decision import item_text
+
+    item = {"name": "irregularity B", "unit": "um", "value": 0.1723069343673833, "limit": 0.17225,
+            "verdict": "does not conform"}
+    assert item_text(item) == "irregularity B 0.1723 µm > 0.17225 µm"
+    assert item_text(item | {"limit": 0.17235, "verdict": "conforms"}) == "irregularity B 0.172 µm ≤ 0.17235 µm"
+    assert item_text(item | {"unit": "nm", "value": 172.30693, "limit": 172.25}) == \
+        "irregularity B 172.3 nm > 172.25 nm"
+    assert item_text(item | {"value": 0.62, "limit": 0.5}) == "irregularity B 0.62 µm > 0.5 µm"

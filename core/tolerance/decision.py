@@ -68,6 +68,23 @@ def _g(v: float, digits: int = 3) -> str:
     return f"{v:.{digits}g}"
 
 
+def _limit(v: float) -> str:
+    """A drawing's limit as it was written (up to 6 significant digits: 0.17225 µm, 172.25 nm), not
+    rounded to 3 — "0.172 µm > 0.172 µm" read as a contradiction (a review)."""
+    return f"{v:.6g}"
+
+
+def _value_beside(v: float, limit: float) -> str:
+    """A value with 3 significant digits, or as many more as it takes to stand on its own side of
+    ``limit`` ("0.1723 µm > 0.17225 µm", not "0.172 µm > 0.17225 µm")."""
+    lim = float(_limit(limit))
+    for digits in range(3, 18):
+        shown = float(_g(v, digits))
+        if (shown > lim) == (v > limit) and (shown < lim) == (v < limit):
+            return _g(v, digits)
+    return repr(v)
+
+
 def item_text(item: dict) -> str:
     """"irregularity B 0.620 ± 0.050 fr > 0.5 fr": U95 with two significant digits and the value to
     the same decimal place (GUM §7.2.6, as core.statement.with_uncertainty); the 95 % interval too
@@ -76,7 +93,7 @@ def item_text(item: dict) -> str:
 
     unit = UNIT_LABELS.get(item["unit"], item["unit"])
     if item.get("value") is None:
-        return f"{item['name']} not computed (limit {_g(item['limit'])} {unit})"
+        return f"{item['name']} not computed (limit {_limit(item['limit'])} {unit})"
     U = item.get("U95")
     if U is not None and math.isfinite(U):
         d = _decimals(U)
@@ -87,9 +104,9 @@ def item_text(item: dict) -> str:
             if (lo, hi) != (f"{item['value'] - U:.{d}f}", f"{item['value'] + U:.{d}f}"):
                 val += f" (95 % interval {lo} … {hi})"
     else:
-        val = _g(item["value"])
+        val = _value_beside(item["value"], item["limit"])
     rel = {CONFORMS: "≤", NOT: ">"}.get(item["verdict"], "vs")
-    return f"{item['name']} {val} {unit} {rel} {_g(item['limit'])} {unit}"
+    return f"{item['name']} {val} {unit} {rel} {_limit(item['limit'])} {unit}"
 
 
 def summary_text(verdict: str, items: list[dict]) -> str:
