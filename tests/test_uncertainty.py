@@ -292,3 +292,43 @@ def test_a_given_noise_larger_than_the_residual_itself_is_warned_of():
     assert any("exceeds the spread of the final residual" in w for w in meta.get("warnings", []))
     ok = run_pipeline(noisy, case.recipe("{samples: 50, seed: 2, noise: 50 nm}"))
     assert not any("exceeds" in w for w in ok.summary()["uncertainty"]["_meta"].get("warnings", []))
+
+
+def _sampling(pattern: str):
+    import numpy as np
+
+    if pattern == "raster":
+        x, y = np.meshgrid(np.linspace(-10, 10, 40), np.linspace(-10, 10, 40))
+        return x.ravel(), y.ravel()
+    if pattern == "random":
+        p = np.random.default_rng(99).uniform(-10, 10, (1600, 2))
+        return p[:, 0], p[:, 1]
+    if pattern == "spiral":
+        t = np.linspace(0, 1, 900)
+        r, a = 10 * np.sqrt(t), 90 * np.pi * np.sqrt(t)
+        return r * np.cos(a), r * np.sin(a)
+    rs = np.linspace(0.2, 10, 20)  # a 12-line star
+    p = np.vstack([np.column_stack([np.r_[-rs[::-1], rs] * np.cos(a), np.r_[-rs[::-1], rs] * np.sin(a)])
+                   for a in np.pi * np.arange(12) / 12])
+    return p[:, 0], p[:, 1]
+
+
+@pytest.mark.parametrize("pattern", ["raster", "random", "spiral", "star"])
+def test_noise_auto_states_the_scatter_its_sigma_has_on_this_sampling(pattern):
+    """σ's relative uncertainty from the data's own neighbourhoods (core/uncertainty/noise.py): the
+    former 1.2/√N understated it 1.3–1.6× (a review measured 1.5–1.9/√N over seeds: the leave-one-out
+    errors share their neighbours' noise, most on a raster). Over 100 noise draws on each sampling the
+    scatter of σ̂/σ is within 30 % of what the estimate states (the two measured from 100 and 160 draws:
+    ±7 % and ±6 %)."""
+    import numpy as np
+
+    from pointspro.core.uncertainty.noise import estimate_sigma, sigma_with_uncertainty
+
+    x, y = _sampling(pattern)
+    sigma = 20e-6
+    est = np.array([estimate_sigma(x, y, np.random.default_rng(7000 + s).normal(0, sigma, x.size)) / sigma
+                    for s in range(100)])
+    _, u_rel = sigma_with_uncertainty(x, y, np.random.default_rng(1).normal(0, sigma, x.size))
+    assert abs(np.mean(est) - 1.0) < 0.03  # unbiased
+    assert 0.7 < np.std(est, ddof=1) / u_rel < 1.3, (np.std(est, ddof=1), u_rel)
+    assert u_rel > 1.3 / np.sqrt(x.size)  # above the independent values' 1.17/√N

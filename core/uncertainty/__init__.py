@@ -88,7 +88,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
     (figure → quadratic, extreme, smooth or linear) to say how each is bias-corrected."""
     from . import estimate as est
     from . import montecarlo as mc
-    from .noise import estimate_sigma, method_text, relative_uncertainty
+    from .noise import estimate_sigma, method_text, sigma_with_uncertainty
 
     spec: UncertaintySpec = recipe.uncertainty
     if spec is None:
@@ -113,8 +113,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
                              "and no nominal; nothing in the summary)")
     if spec.noise is None:
         v, of = mc.residual_values(nominal, plan.surface)
-        sigma = estimate_sigma(nominal.x, nominal.y, v)
-        u_rel = relative_uncertainty(nominal.n)
+        sigma, u_rel = sigma_with_uncertainty(nominal.x, nominal.y, v)
         noise_from = f"auto: {method_text()} ({of}); relative standard uncertainty {100 * u_rel:.2g} %"
     else:
         sigma, u_rel = spec.noise, 0.0
