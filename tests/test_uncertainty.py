@@ -67,6 +67,12 @@ def test_a_good_block_round_trips_with_its_units():
     assert d["noise"] == "40 nm" and d["sources"]["temperature"] == {"u": "0.2 K", "cte": "2.6 ppm/K"}
     again = parse(r.to_yaml())
     assert again.uncertainty.to_dict() == d
+    # a glass ceramic's negative coefficient (Zerodur, ULE) is a coefficient, not a negative uncertainty
+    neg = parse(HEAD + "uncertainty:\n  noise: 40 nm\n  sources:\n    temperature: {u: 0.5 K, cte: -0.03 ppm/K}\n")
+    t = neg.uncertainty.sources[0]
+    assert t.relative == pytest.approx(0.5 * 0.03e-6) and neg.uncertainty.to_dict()["sources"]["temperature"]["cte"] == "-0.03 ppm/K"
+    with pytest.raises(RecipeError, match="key 'sources.temperature.u': a standard uncertainty is a finite number ≥ 0"):
+        parse(HEAD + "uncertainty:\n  noise: 40 nm\n  sources:\n    temperature: {u: -0.5 K, cte: 2.6 ppm/K}\n")
 
 
 # -- the noise estimate ---------------------------------------------------------------------------------

@@ -56,8 +56,8 @@ class Source:
         """The standard uncertainty of the scale factor (1) of a scale source; None for probe_radius."""
         if self.name in ("z_scale", "length_scale"):
             return self.u
-        if self.name == "temperature":
-            return self.u * self.cte
+        if self.name == "temperature":  # u(α·ΔT) = |α|·u(ΔT): α may be negative (Zerodur, ULE)
+            return self.u * abs(self.cte)
         return None
 
     def to_dict(self):
@@ -107,7 +107,7 @@ def _where(node, key, at: str, where: str) -> str:
     return f"{where}, line {ln}" if ln else at
 
 
-def _quantity(value, units: dict, key: str, loc: str, what: str) -> tuple[float, str]:
+def _quantity(value, units: dict, key: str, loc: str, what: str, signed: bool = False) -> tuple[float, str]:
     accepted = ", ".join(units)
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise RecipeError(f"{loc}: uncertainty: key '{key}': {value!r} is not {what} — write it with its "
@@ -124,7 +124,9 @@ def _quantity(value, units: dict, key: str, loc: str, what: str) -> tuple[float,
         raise RecipeError(f"{loc}: uncertainty: key '{key}': unit {unit!r} is not one of {accepted} "
                           f"({what})")
     v = float(m.group(1)) * units[unit]
-    if not math.isfinite(v) or v < 0:
+    if signed and not math.isfinite(v):
+        raise RecipeError(f"{loc}: uncertainty: key '{key}': {what} is a finite number (got {value!r})")
+    if not signed and (not math.isfinite(v) or v < 0):
         raise RecipeError(f"{loc}: uncertainty: key '{key}': a standard uncertainty is a finite number "
                           f"≥ 0 (got {value!r})")
     return v, f"{m.group(1)} {unit}"
@@ -194,8 +196,9 @@ def parse_uncertainty(data, at: str, where: str, steps=None) -> UncertaintySpec:
                                   "(the temperature's standard uncertainty and the part's expansion coefficient)")
             u, text = _quantity(value["u"], TEMPERATURE_UNITS, key + ".u", _where(value, "u", sl, where),
                                 "a temperature")
+            # signed: a glass ceramic's coefficient may be below zero (Zerodur, ULE: ±0.02 ppm/K)
             cte, cte_text = _quantity(value["cte"], CTE_UNITS, key + ".cte", _where(value, "cte", sl, where),
-                                      "an expansion coefficient")
+                                      "an expansion coefficient", signed=True)
             sources.append(Source(name, u, text, cte, cte_text))
     spec = UncertaintySpec(samples, seed, sigma, noise_text, tuple(sources), workers, lines)
     if steps is not None:
