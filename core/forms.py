@@ -314,7 +314,26 @@ def initial_value(field: FormField):
 # --- lists and mappings as the rows of a table ---------------------------------------------------
 
 def entry_text(v) -> str:
-    return format_number(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return format_number(v)
+    if isinstance(v, (bool, list, tuple)) or v is None:  # as a recipe writes them: true, [1, 2]
+        from .yamlio import yaml_word
+
+        return yaml_word(v)
+    return str(v)
+
+
+def _yaml_entry(text: str):
+    """A mapping's free-form entry read as a recipe reads a value (YAML 1.2): "3.3e-4" a number,
+    "even_asphere" a word, "[1e-5, 2e-7]" a list, "true" a yes — the window's `programmed_surface`
+    table kept "3.3e-4" as text, which the surface then refused ("a number, not text")."""
+    from .errors import RecipeError
+    from .yamlio import load_yaml
+
+    try:
+        return load_yaml(text, "the entry")
+    except RecipeError as e:
+        raise ValueError(str(e).split(": ", 1)[-1]) from None
 
 
 def parse_entry(text: str, kind: str, choices: list | None = None):
@@ -381,7 +400,8 @@ def pairs_value(field: FormField, rows: list[list[str]]) -> dict:
             key = parse_entry(k, "name_or_int")
             if key in out:
                 raise ValueError(f"key {k} given twice")
-            out[key] = parse_entry(v, field.value_kind or "text")
+            kind = field.value_kind or "text"
+            out[key] = _yaml_entry(v) if kind == "text" else parse_entry(v, kind)
         except ValueError as e:
             raise ValueError(f"{field.key}, row {r}: {e}") from None
     return out

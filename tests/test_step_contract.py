@@ -135,3 +135,23 @@ def test_third_party_step_is_a_step_like_any_other():
 
     reg = Registry(extra={"shift_z": Shift})
     assert "shift_z" in reg.ids() and reg.load("shift_z") is Shift
+
+
+def test_a_mapping_entry_is_read_as_a_recipe_reads_it():
+    """The window's table of a free-form mapping (correction's `programmed_surface`) kept "3.3e-4" as
+    text, which the surface refused ("a number, not text"): each entry is read as YAML 1.2, as the
+    recipe's value would be, and written back so that it reads the same."""
+    from pointspro.core import forms
+    from pointspro.plugins.correction import CorrectionStep
+
+    field = next(f for f in forms.form_fields(CorrectionStep.Params) if f.key == "programmed_surface")
+    rows = [["type", "even_asphere"], ["c", "3.3e-4"], ["k", "-1"], ["A", "{4: 1e-10, 6: -2e-15}"]]
+    value = forms.pairs_value(field, rows)
+    assert value == {"type": "even_asphere", "c": 3.3e-4, "k": -1, "A": {4: 1e-10, 6: -2e-15}}
+    params = CorrectionStep.Params(programmed_surface=value)
+    assert params.programmed_surface["c"] == 3.3e-4
+    assert forms.pairs_value(field, forms.pairs_rows(value)) == value
+    import pytest
+
+    with pytest.raises(ValueError, match="programmed_surface"):
+        forms.pairs_value(field, [["c", "[1, 2"]])
