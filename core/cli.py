@@ -743,14 +743,14 @@ def _check_simulate_out(out: Path, model: Path) -> None:
 
 def cmd_simulate(args) -> int:
     from .cloud import PointCloud
-    from .errors import RecipeError
+    from .errors import InputError, RecipeError
     from .io import write_cloud
     from .simulate.model import load_model, simulate
 
     model = load_model(args.model)
     try:
         sim = simulate(model, Path(args.model).parent)
-    except (ValueError, KeyError) as e:
+    except (ValueError, KeyError, InputError) as e:
         raise RecipeError(f"{args.model}: {e}") from None
     extra = {"fiducial": sim["fiducial"]} if "fiducial" in sim else {}
     cloud = PointCloud.from_xyz(sim["x"], sim["y"], sim["z"], t=sim["t"], c=sim["c"], xd=sim["xd"], **extra)

@@ -239,3 +239,16 @@ def test_a_coordinate_without_its_unit_beside_others_in_another_unit_is_refused(
     else:
         c = read_cloud(f)
         assert c.n == 30
+
+
+def test_a_model_whose_effect_overflows_is_refused_not_written(tmp_path, run_cli):
+    """`volumetric: {cxx: 1.0e+308}` wrote 20,000 heights of inf with exit 0 and numpy's overflow
+    warning on stderr (a review): refused in one line naming the model, the effect and its value."""
+    m = tmp_path / "m.yaml"
+    m.write_text("pointspro_model: 1\nsurface: {type: even_asphere, R: 200.0, k: -0.5, aperture: 50.0}\n"
+                 "scan: {type: spiral, radius: 20.0, rpm: 60.0, pitch: 0.4, fs: 400.0}\n"
+                 "effects: [volumetric: {cxx: 1.0e+308}]\n", encoding="utf-8")
+    code, _, err = run_cli("simulate", m, "--out", tmp_path / "x.csv")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Warning" not in err, err
+    assert f"{m}: effect 1 'volumetric': its parameters give heights beyond any number (cxx 1e+308)" in err
+    assert not (tmp_path / "x.csv").exists()

@@ -193,3 +193,51 @@ def test_a_wide_bump_is_located_apart_from_the_ring_its_piston_leaves():
     regs = regions(x, y, g - g.mean(), 2e-6)
     top = regs[0]
     assert top["mean_um"] > 0.02 and np.hypot(top["x"], top["y"] - 10) < 1.0 and top["radius"] < 10
+
+
+@pytest.mark.parametrize("crop", ["radius", "time"])
+def test_a_measurement_covering_less_than_the_model_s_scan_keeps_the_model_s_parameters(tmp_path, crop):
+    """Straightness is normalised by the scan's rim radius and thermal drift by its duration: they were
+    taken from the points evaluated, so a measurement covering 3/4 of the model's radius or half its
+    time read the model's own straightness as a z_scale and its drift at half its size, and
+    model.updated.yaml halved the drift (a review). Now the model's own scan normalises them: the
+    model's own simulation, cropped, explains to nothing, and an effect missing from the model is
+    found at its true size — by --model and by --simulated."""
+    # s3 and drift on a raster: effects the scan tells apart (s2 ∝ r² ties with probe_radius on a
+    # near-sphere; on a spiral, whose radius runs with time, drift ties with straightness and squareness
+    # — the documented look-alikes)
+    effects = BASE + [{"straightness": {"s3": 1.0e-5}}, {"thermal_drift": {"d1": 2.0e-5}}]
+    scan = {"type": "raster", "radius": 14.0, "spacing": 0.1, "lines": 29, "speed": 10.0}
+    truth = model(ASPHERE, scan, effects, seed=81)
+    s = simulate(truth)
+    keep = np.hypot(s["x"], s["y"]) < 10.5 if crop == "radius" else s["t"] < 0.5 * s["t"].max()
+    cut = {k: np.asarray(v)[keep] for k, v in s.items()}
+    write_meas(tmp_path / "meas.csv", cut, t=cut["t"], c=cut["c"])
+    (tmp_path / "truth.yaml").write_text(truth.to_yaml(), encoding="utf-8")
+    rep = explain(tmp_path / "meas.csv", tmp_path / "o", tmp_path / "truth.yaml", bootstrap=0)
+    assert rep["verdict"] == "nothing_missing", [(f["effect"], f["params"]) for f in rep["found"]]
+    missing = "straightness" if crop == "radius" else "thermal_drift"
+    partial = model(ASPHERE, scan, [e for e in effects if missing not in e], seed=81)
+    (tmp_path / "partial.yaml").write_text(partial.to_yaml(), encoding="utf-8")
+    rep = explain(tmp_path / "meas.csv", tmp_path / "o2", tmp_path / "partial.yaml", bootstrap=0)
+    # what the found effect does at the measured edge (r = 10.5 mm, or half the scan's time) in the
+    # model's terms: the true size there — about half of it before (the points' own r.max or t span)
+    edge = 10.5 / np.hypot(s["x"], s["y"]).max() if crop == "radius" else 0.5
+
+    def at(params, u):
+        if missing == "straightness":
+            return sum(params.get(f"s{k}", 0.0) * u ** k for k in (2, 3, 4))
+        return params.get("d1", 0.0) * u + params.get("d2", 0.0) * u ** 2
+
+    def at_edge(params):  # its rise over the outer half of the measured range (piston-free)
+        return at(params, edge) - at(params, edge / 2)
+
+    true = at_edge({"s3": 1.0e-5} if missing == "straightness" else {"d1": 2.0e-5})
+    found = {f["effect"]: f["params"] for f in rep["found"]}
+    assert missing in found and at_edge(found[missing]) == pytest.approx(true, rel=0.05), found
+    # the same through a simulated cloud of the partial model's whole scan (--simulated)
+    p = simulate(partial, noise=False)
+    write_csv(PointCloud.from_xyz(p["x"], p["y"], p["z"], t=p["t"], c=p["c"]), tmp_path / "sim.csv")
+    rep = explain(tmp_path / "meas.csv", tmp_path / "o3", simulated=tmp_path / "sim.csv", bootstrap=0)
+    found = {f["effect"]: f["params"] for f in rep["found"]}
+    assert missing in found and at_edge(found[missing]) == pytest.approx(true, rel=0.05), found

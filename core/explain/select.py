@@ -1070,7 +1070,7 @@ def _bootstrap(ctx, fitted, resid, names, B, seed, max_effects) -> dict:
     k = max(order.size // 50_000, 1)
     keep = np.sort(order[::k])
     sub = ScanContext(ctx.x[keep], ctx.y[keep], ctx.f[keep], ctx.fx[keep], ctx.fy[keep], ctx.t[keep],
-                      ctx.c[keep])
+                      ctx.c[keep], ctx.r_norm, ctx.t0, ctx.t_span)
     r_sorted = resid[order][::k]
     n = r_sorted.size
     L = max(n // 50, 1)

@@ -233,14 +233,13 @@ def against_model(meas, model, base: Path, measured="the measurement", warnings:
     (check_aperture). Time and spindle angle come from the measurement, or else — said in
     ``warnings``, never silently — from the nearest point of the model's scan path."""
     from ..simulate.model import simulate
+    from ..simulate.scan import scan_points
 
     warnings = [] if warnings is None else warnings
     check_aperture(meas, model, measured, warnings)
     t, c = clock_of(meas, measured)
     if t is None or c is None:
         from scipy.spatial import cKDTree
-
-        from ..simulate.scan import scan_points
 
         sp = scan_points(model.scan)
         d, j = cKDTree(np.column_stack([sp["x"], sp["y"]])).query(meas.xyz[:, :2])
@@ -258,7 +257,8 @@ def against_model(meas, model, base: Path, measured="the measurement", warnings:
     at = {"x": meas.x, "y": meas.y, "t": t, "c": c}
     sim = simulate(model, base, at=at, noise=False)
     surf = model.build_surface(base)
-    ctx = ScanContext.from_surface(surf, meas.x, meas.y, t, c)
+    own = scan_points(model.scan)  # the parameters found mean what they mean in the model
+    ctx = ScanContext.from_surface(surf, meas.x, meas.y, t, c).with_norms_of(own["x"], own["y"], own["t"])
     return ctx, sim["z"], "model evaluated at the measured positions"
 
 
@@ -307,7 +307,7 @@ def against_simulation(meas, simulated: Path, warnings: list[str] | None = None)
     match += (f"; slopes from a degree-{how['degree']} polynomial through the simulation ({how['rest_rms_um'] * 1e3:.3g} "
               f"nm RMS left, its noise {how['noise_um'] * 1e3:.3g} nm"
               + ("; the rest by a smoothing spline)" if how["spline"] else ")"))
-    ctx = ScanContext(meas.x, meas.y, z_sim, fx, fy, t_sim[j], c_sim[j])
+    ctx = ScanContext(meas.x, meas.y, z_sim, fx, fy, t_sim[j], c_sim[j]).with_norms_of(simc.x, simc.y, t_sim)
     return ctx, z_sim, match
 
 

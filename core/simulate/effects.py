@@ -47,6 +47,23 @@ class ScanContext:
     fy: np.ndarray
     t: np.ndarray
     c: np.ndarray
+    #: what the effects normalised by the scan are normalised by — straightness's rim radius R and
+    #: thermal drift's start and duration — taken from the model's own scan when it is evaluated at
+    #: other points (explain: a measurement that covers less radius or time than the model's scan read
+    #: the model's own straightness as a z_scale and its drift at half its size — a review); None:
+    #: the points' own (r.max(), t.min(), t.ptp())
+    r_norm: float | None = None
+    t0: float | None = None
+    t_span: float | None = None
+
+    def with_norms_of(self, x, y, t) -> "ScanContext":
+        """This context normalised by the scan (x, y, t) — the model's own — instead of its points."""
+        r = np.hypot(np.asarray(x, float), np.asarray(y, float))
+        t = np.asarray(t, float)
+        self.r_norm = float(r.max()) if r.size else None
+        self.t0 = float(t.min()) if t.size else None
+        self.t_span = float(np.ptp(t)) if t.size else None
+        return self
 
     @property
     def r(self):
@@ -244,7 +261,7 @@ class Straightness(Effect):
 
     def columns(self, c):
         r = c.r
-        R = float(r.max()) or 1.0
+        R = (c.r_norm if c.r_norm else float(r.max())) or 1.0
         return np.column_stack([(r / R) ** k for k in (2, 3, 4)])
 
 
@@ -252,8 +269,8 @@ class ThermalDrift(Effect):
     name, params, units = "thermal_drift", ("d1", "d2"), ("mm", "mm")
 
     def columns(self, c):
-        T = float(np.ptp(c.t)) or 1.0
-        tau = (c.t - c.t.min()) / T
+        T = (c.t_span if c.t_span else float(np.ptp(c.t))) or 1.0
+        tau = (c.t - (c.t0 if c.t0 is not None else c.t.min())) / T
         return np.column_stack([tau, tau * tau])
 
 

@@ -149,10 +149,21 @@ def check_scan(model: ModelSpec, path) -> None:
 
 
 def effects_dz(ctx: ScanContext, effects: list[dict]) -> np.ndarray:
+    """The effects' height changes (mm) at the scan's points. An effect whose parameters make them
+    overflow (`volumetric: {cxx: 1.0e+308}` wrote a file of inf heights with exit 0 — a review) is
+    refused naming it."""
     dz = np.zeros_like(ctx.x)
-    for e in effects:
+    for i, e in enumerate(effects, 1):
         (name, params), = e.items()
-        dz = dz + LIBRARY[name].apply(ctx, params or {})
+        with np.errstate(over="ignore", invalid="ignore"):
+            d = LIBRARY[name].apply(ctx, params or {})
+        if not np.all(np.isfinite(d)):
+            from ..errors import InputError
+
+            raise InputError(f"effect {i} '{name}': its parameters give heights beyond any number "
+                             f"({', '.join(f'{k} {v!r}' for k, v in (params or {}).items())}): check their "
+                             "size and unit (lengths in mm)")
+        dz = dz + d
     return dz
 
 
@@ -162,6 +173,9 @@ def simulate(model: ModelSpec, base_dir=None, at: dict | None = None, noise: boo
     pts = scan_points(model.scan) if at is None else at
     surf = model.build_surface(base_dir)
     ctx = ScanContext.from_surface(surf, pts["x"], pts["y"], pts["t"], pts["c"])
+    if at is not None:  # the effects mean at these points what they mean on the model's own scan
+        own = scan_points(model.scan)
+        ctx.with_norms_of(own["x"], own["y"], own["t"])
     z = ctx.f + effects_dz(ctx, model.effects)
     if noise and model.probe.noise > 0:
         z = z + np.random.default_rng(model.seed).normal(0, model.probe.noise, z.size)
