@@ -762,6 +762,10 @@ def cmd_simulate(args) -> int:
         raise RecipeError(f"--out {args.out}: is the model's nominal mesh ({mesh}); choose another file name")
     write_cloud(cloud, args.out)
     print(f"{args.out}: {cloud.n} simulated points")
+    from .simulate.model import implausible_effects
+
+    for w in implausible_effects(model, Path(args.model).parent):
+        print(f"pointspro: {args.model}: warning: {w}", file=sys.stderr)
     return EXIT_OK
 
 

@@ -252,3 +252,20 @@ def test_a_model_whose_effect_overflows_is_refused_not_written(tmp_path, run_cli
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Warning" not in err, err
     assert f"{m}: effect 1 'volumetric': its parameters give heights beyond any number (cxx 1e+308)" in err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_an_effect_in_the_wrong_unit_is_warned_of(tmp_path, run_cli):
+    """`vibration: {amplitude: 8}` — 8 mm, meant as 8 nm — simulated with exit 0 and no word (a review):
+    now a warning names the effect and how much it moves the heights against the part's sag; a model of
+    nm-sized effects says nothing."""
+    head = ("pointspro_model: 1\nsurface: {type: even_asphere, R: 200.0, k: -0.5, aperture: 50.0}\n"
+            "scan: {type: spiral, radius: 20.0, rpm: 60.0, pitch: 0.4, fs: 400.0}\n")
+    m = tmp_path / "m.yaml"
+    m.write_text(head + "effects: [pose: {dz: 0.5}, vibration: {frequency_hz: 61, amplitude: 8}]\n", encoding="utf-8")
+    code, out, err = run_cli("simulate", m, "--out", tmp_path / "x.csv")
+    assert code == 0 and (tmp_path / "x.csv").is_file()
+    assert f"{m}: warning: effect 2 'vibration' changes the heights by 5.66 mm RMS" in err, err
+    assert "pose" not in err  # a part may sit far off
+    m.write_text(head + "effects: [vibration: {frequency_hz: 61, amplitude: 8.0e-6}]\n", encoding="utf-8")
+    code, out, err = run_cli("simulate", m, "--out", tmp_path / "y.csv")
+    assert code == 0 and "warning" not in err, err

@@ -103,6 +103,10 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
                          f"and needs {MIN_POINTS} points at least to tell an effect from the noise")
     model = None
     warnings: list[str] = []  # printed on stderr by `pointspro explain`, kept in explain.json
+    dropped = int(meas.meta.get("invalid_dropped") or 0)
+    if dropped:  # said, as the batch's report says it (a review: 5 NaN rows dropped without a word)
+        warnings.append(f"{measured}: {dropped} row(s) with a NaN or infinite x, y or z dropped on reading "
+                        f"({meas.n} points compared)")
     if model_path is not None:
         model = load_model(model_path)
         check_scan(model, model_path)  # the model simulates (explain evaluates it at the measured points only)

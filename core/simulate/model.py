@@ -167,6 +167,32 @@ def effects_dz(ctx: ScanContext, effects: list[dict]) -> np.ndarray:
     return dz
 
 
+def implausible_effects(model: ModelSpec, base_dir=None) -> list[str]:
+    """Warnings for effects (the pose aside: a part may sit far off) that change the heights by more
+    than a tenth of the part's own sag variation over the scan, and by over 1 µm RMS — a length
+    written in the wrong unit (`amplitude: 8` for 8 nm is 8 mm; a review: simulated with exit 0 and no
+    word), or `z_scale: {scale: -1}`, which flattens the part."""
+    from ..units import format_length
+
+    pts = scan_points(model.scan)
+    ctx = ScanContext.from_surface(model.build_surface(base_dir), pts["x"], pts["y"], pts["t"], pts["c"])
+    sag = float(np.ptp(ctx.f)) if ctx.f.size else 0.0
+    out = []
+    for i, e in enumerate(model.effects, 1):
+        (name, params), = e.items()
+        if name == "pose":
+            continue
+        with np.errstate(over="ignore", invalid="ignore"):
+            d = LIBRARY[name].apply(ctx, params or {})
+        big = float(np.max(np.abs(d))) if d.size else 0.0  # scaled: d² of 1e300 would overflow
+        rms = big * float(np.sqrt(np.mean((d / big) ** 2))) if big > 0 and np.isfinite(big) else big
+        if np.isfinite(rms) and rms > max(0.1 * sag, 1e-3):
+            out.append(f"effect {i} '{name}' changes the heights by {format_length(rms)} RMS, more than a tenth "
+                       f"of the part's sag over the scan ({format_length(sag)} PV): check its size and unit "
+                       "(lengths in mm, times in s)")
+    return out
+
+
 def simulate(model: ModelSpec, base_dir=None, at: dict | None = None, noise: bool = True) -> dict:
     """Columns x, y, z, t, c, xd of the simulated measurement; ``at`` (x, y, t, c) to evaluate the
     model at given scan coordinates instead of its own scan (explain does, to match a measurement)."""
