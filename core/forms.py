@@ -320,7 +320,18 @@ def entry_text(v) -> str:
         from .yamlio import yaml_word
 
         return yaml_word(v)
-    return str(v)
+    text = str(v)
+    if isinstance(v, str):  # a word YAML would read as something else ("null", "1e3", "lens #2.stl",
+        # "[draft] lens.stl", "a: b"): quoted, so that the mapping tables read it back as itself
+        try:
+            same = _yaml_entry(text) == text
+        except ValueError:
+            same = False
+        if not same:
+            import json
+
+            return json.dumps(text, ensure_ascii=False)  # a JSON string is a YAML double-quoted scalar
+    return text
 
 
 def _yaml_entry(text: str):
@@ -330,6 +341,8 @@ def _yaml_entry(text: str):
     from .errors import RecipeError
     from .yamlio import load_yaml
 
+    if not text.strip():
+        raise ValueError("empty entry")
     try:
         return load_yaml(text, "the entry")
     except RecipeError as e:
@@ -383,7 +396,10 @@ def table_value(field: FormField, rows: list[list[str]]) -> list:
 
 
 def pairs_rows(value: dict | None) -> list[list[str]]:
-    return [[entry_text(k), entry_text(v)] for k, v in (value or {}).items()]
+    def key_text(k):  # keys are read as names or whole numbers (parse_entry "name_or_int"), unquoted
+        return format_number(k) if isinstance(k, (int, float)) and not isinstance(k, bool) else str(k)
+
+    return [[key_text(k), entry_text(v)] for k, v in (value or {}).items()]
 
 
 def pairs_value(field: FormField, rows: list[list[str]]) -> dict:
