@@ -255,3 +255,21 @@ def test_rows_dropped_on_reading_are_said(tmp_path):
     assert any("3 row(s) with a NaN or infinite x, y or z dropped on reading" in w for w in rep["warnings"]), \
         rep["warnings"]
     assert rep["verdict"] == "nothing_missing"
+
+
+def test_a_measurement_on_another_clock_keeps_the_drift_it_shows(tmp_path):
+    """A CMM log's clock time (t + 1000 s) lies outside the model's scan: counted from the model's
+    start, τ ≈ 7 moved the drift's offset into d1 (−1.2e-3 for 1e-4 — a review); the measurement's own
+    start is taken then, and said."""
+    scan = {"type": "raster", "radius": 14.0, "spacing": 0.1, "lines": 29, "speed": 10.0}
+    truth = model(ASPHERE, scan, BASE + [{"thermal_drift": {"d1": 1.0e-4, "d2": 1.0e-4}}], seed=83)
+    partial = model(ASPHERE, scan, BASE, seed=83)
+    (tmp_path / "partial.yaml").write_text(partial.to_yaml(), encoding="utf-8")
+    s = simulate(truth)
+    for shift in (0.0, 1000.0):
+        write_meas(tmp_path / "meas.csv", s, t=s["t"] + shift, c=s["c"])
+        rep = explain(tmp_path / "meas.csv", tmp_path / f"o{shift:g}", tmp_path / "partial.yaml", bootstrap=0)
+        found = {f["effect"]: f["params"] for f in rep["found"]}
+        assert found["thermal_drift"]["d1"] == pytest.approx(1.0e-4, rel=0.05), (shift, found)
+        said = any("outside the model's scan" in w for w in rep["warnings"])
+        assert said == (shift > 0), rep["warnings"]

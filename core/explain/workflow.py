@@ -263,6 +263,10 @@ def against_model(meas, model, base: Path, measured="the measurement", warnings:
     surf = model.build_surface(base)
     own = scan_points(model.scan)  # the parameters found mean what they mean in the model
     ctx = ScanContext.from_surface(surf, meas.x, meas.y, t, c).with_norms_of(own["x"], own["y"], own["t"])
+    if ctx.own_clock:
+        warnings.append(f"the measured time t runs {float(np.min(t)):.6g} … {float(np.max(t)):.6g} s, outside the "
+                        f"model's scan (0 … {float(np.ptp(own['t'])):.6g} s): thermal drift is counted from the "
+                        "measurement's own start")
     return ctx, sim["z"], "model evaluated at the measured positions"
 
 

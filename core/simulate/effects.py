@@ -56,13 +56,25 @@ class ScanContext:
     t0: float | None = None
     t_span: float | None = None
 
+    #: set by with_norms_of when the points' time lies outside the scan's (another clock origin: a
+    #: CMM log's clock time): thermal drift's τ then counts from the points' own start
+    own_clock: bool = False
+
     def with_norms_of(self, x, y, t) -> "ScanContext":
-        """This context normalised by the scan (x, y, t) — the model's own — instead of its points."""
+        """This context normalised by the scan (x, y, t) — the model's own — instead of its points.
+        Time: the scan's start and duration where the points' times lie within the scan's (a part of
+        it measured); where they do not, the points count from their own start over the scan's
+        duration (a review: a clock offset of 1000 s moved a drift's offset into d1, −1.2e-3 for 1e-4)."""
         r = np.hypot(np.asarray(x, float), np.asarray(y, float))
         t = np.asarray(t, float)
         self.r_norm = float(r.max()) if r.size else None
-        self.t0 = float(t.min()) if t.size else None
         self.t_span = float(np.ptp(t)) if t.size else None
+        self.t0 = float(t.min()) if t.size else None
+        if self.t0 is not None and self.t.size:
+            tol = 0.01 * (self.t_span or 1.0)
+            inside = self.t.min() >= self.t0 - tol and self.t.max() <= self.t0 + (self.t_span or 0.0) + tol
+            if not inside:
+                self.t0, self.own_clock = float(self.t.min()), True
         return self
 
     @property
