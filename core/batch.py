@@ -638,7 +638,7 @@ FIGURE_MODES = ("none", "summary", "all")
 
 
 def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
-                cloud_format: str = "auto", figures: str = "all") -> dict | None:
+                cloud_format: str = "auto", figures: str = "all", file_digests: dict | None = None) -> dict | None:
     """The report of a complete earlier output of this input with this recipe, else None.
 
     Output folders appear only when complete (atomic rename); the report must also name the same
@@ -646,7 +646,8 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
     is run again — before, its old numbers were reported as done), the same recipe (every
     parameter, ``--set`` overrides applied) and the same cloud file (``--cloud-format``), so a
     changed recipe or format is run again; the files its steps wrote are all still there, and the
-    figures asked (``--figures``) were drawn then."""
+    figures asked (``--figures``) were drawn then; and the files the recipe names have the digests
+    recorded (``file_digests``: ``parameter_file_digests(recipe)``, computed once by a batch)."""
     import json
 
     folder = Path(out_dir) / stem
@@ -677,8 +678,12 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
     except OSError:
         return None
     # … and the same calibrations, models and meshes (a report from before they were recorded: run
-    # again when the recipe names any)
-    if data.get("parameter_files_sha256", {}) != parameter_file_digests(recipe):
+    # again when the recipe names any). A file this machine cannot read (a cluster's workers' own
+    # path, without --ship) is not compared: its digest is unknown here, not changed (a review: every
+    # input ran again on each --resume)
+    now = parameter_file_digests(recipe) if file_digests is None else file_digests
+    then = data.get("parameter_files_sha256") or {}
+    if any(d is not None and then.get(what) != d for what, d in now.items()):
         return None
     if cloud_format == "auto":  # what "auto" chose (x3p for a grid, else csv), when it was asked
         done = data.get("cloud_file", "cloud.csv")

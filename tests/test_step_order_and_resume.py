@@ -416,3 +416,13 @@ def test_resume_runs_again_when_a_file_the_recipe_names_changed(run_cli, tmp_pat
     assert run_cli(*base, "--resume")[0] == 0
     status, amp2, files2 = last()
     assert status == "ok" and abs(amp2 / amp - 1.03) < 1e-3 and files2 != files
+    # a file this machine cannot read (a cluster's workers' own path): unknown here, not changed — the
+    # input is not run again on every --resume (a review)
+    from pointspro.core.batch import is_complete, load_batch_recipe, parameter_file_digests
+
+    rec = load_batch_recipe(r, ())
+    assert is_complete(tmp_path / "o", "part", part, rec, "auto", "none") is not None
+    assert is_complete(tmp_path / "o", "part", part, rec, "auto", "none",
+                       {what: None for what in parameter_file_digests(rec)}) is not None
+    assert is_complete(tmp_path / "o", "part", part, rec, "auto", "none",
+                       {what: "0" * 64 for what in parameter_file_digests(rec)}) is None
