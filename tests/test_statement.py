@@ -167,3 +167,5 @@ def test_a_verdict_line_never_reads_as_a_contradiction():
     assert item_text(item | {"unit": "nm", "value": 172.30693, "limit": 172.25}) == \
         "irregularity B 172.3 nm > 172.25 nm"
     assert item_text(item | {"value": 0.62, "limit": 0.5}) == "irregularity B 0.62 µm > 0.5 µm"
+    assert item_text(item | {"value": 0.1234567, "limit": 0.1234566}) == \
+        "irregularity B 0.1235 µm > 0.1234566 µm"

@@ -69,9 +69,15 @@ def _g(v: float, digits: int = 3) -> str:
 
 
 def _limit(v: float) -> str:
-    """A drawing's limit as it was written (up to 6 significant digits: 0.17225 µm, 172.25 nm), not
-    rounded to 3 — "0.172 µm > 0.172 µm" read as a contradiction (a review)."""
-    return f"{v:.6g}"
+    """A drawing's limit as it was written (0.17225 µm, 172.25 nm, 0.1234566 µm), not rounded to 3
+    digits — "0.172 µm > 0.172 µm" read as a contradiction (a review): 6 significant digits, or the
+    shortest text that reads back to it where that is no longer (up to 10 digits: a limit converted
+    from fringes keeps its 10)."""
+    short = f"{v:.6g}"
+    if float(short) == v:
+        return short
+    exact = repr(float(v))
+    return exact if len(exact.lstrip("-").replace(".", "").lstrip("0")) <= 10 else f"{v:.10g}"
 
 
 def _value_beside(v: float, limit: float) -> str:

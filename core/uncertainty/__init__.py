@@ -88,7 +88,7 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
     (figure → quadratic, extreme, smooth or linear) to say how each is bias-corrected."""
     from . import estimate as est
     from . import montecarlo as mc
-    from .noise import estimate_sigma, method_text, sigma_with_uncertainty
+    from .noise import MIN_POINTS, estimate_sigma, method_text, sigma_with_uncertainty
 
     spec: UncertaintySpec = recipe.uncertainty
     if spec is None:
@@ -126,7 +126,9 @@ def propagate(recipe, result, *, extra_figures=None, progress: Progress | None =
             warnings.append(f"the given noise σ {format_length(sigma)} exceeds the spread of {of} "
                             f"({format_length(spread)}), which holds that noise: check its unit — the "
                             "figures are then mostly noise bias")
-        seen = estimate_sigma(nominal.x, nominal.y, v) if v.size > 8 else 0.0
+        # the data's own σ for the check below, where there are points enough to estimate it (a
+        # review: a given noise with 9–29 points failed on estimate_sigma's own minimum)
+        seen = estimate_sigma(nominal.x, nominal.y, v) if v.size >= MIN_POINTS else 0.0
         if seen > 0 and sigma < 0.1 * seen:
             # a review: "1e-9 nm" gave U95 7e-13 µm and "conforms", no bias removed, with ~0.3 µm of
             # noise in the data (as estimated for noise: auto, which reads form at the neighbours'

@@ -40,7 +40,7 @@ def histogram_figure(res):
         ax.set_ylabel("samples")
         # stated as report.html and the window state it (core/statement.py: GUM §7.2.6 rounding)
         unit = _unit(name)
-        ax.set_title(f"{name}: {with_uncertainty(e['value'], e['U95'], unit, e.get('k') or 2.0)}",
+        ax.set_title(f"{name}: {with_uncertainty(e['value'], e['U95'], unit, e.get('k') or 2.0, e.get('interval95'))}",
                      fontsize=9)
         if k == 0:
             ax.legend(fontsize=7, loc="upper right")
