@@ -345,7 +345,9 @@ def _texts(ann, value, path=()):
     if origin is typing.Annotated:
         yield from _texts(args[0], value, path)
     elif origin is typing.Union or origin is types.UnionType:
-        if isinstance(value, str) and any(a in (float, int) for a in args):
+        # text where the type admits text is text (zernike's `remove: [tilt, "4"]`: an unknown name,
+        # which the step says, not "a number, not text")
+        if isinstance(value, str) and any(a in (float, int) for a in args) and str not in args:
             yield path, value
         elif not isinstance(value, str):
             for a in args:
