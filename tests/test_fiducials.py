@@ -204,3 +204,32 @@ def test_a_nearly_flat_layout_is_judged_by_its_in_plane_scales():
     assert frame_check(fit.D) is not None and frame_check(fit.D, ref) is None
     big = fit_affine(ref * 1e-3, meas, 1e-3, 0.2e-3)
     assert "metres" in frame_check(big.D, ref * 1e-3)
+
+
+def test_two_swapped_ball_ids_are_refused_naming_them(tmp_path):
+    """A review: the ids of the two nearest balls swapped in the reference passed the frame check
+    (Ev 5.7 mm, χ²/dof 1e8) and wrote a model 60 µm off on the workpiece, exit 0. A ball farther than
+    0.5 mm from the transform fitted to all is refused, named; the correct reference still runs."""
+    import numpy as np
+    import pytest
+
+    from pointspro.core import PointCloud
+    from pointspro.core.calibration.fiducial_sim import case_000
+    from pointspro.core.errors import InputError
+    from pointspro.core.step import Context
+    from pointspro.plugins.fiducials import FiducialsStep
+
+    c = case_000(1)
+    cloud = PointCloud.from_xyz(*c.points.T, fiducial=c.ids)
+    params = FiducialsStep.Params(reference="reference.csv", monte_carlo_runs=0)
+    (tmp_path / "reference.csv").write_text(c.reference_csv(), encoding="utf-8")
+    assert FiducialsStep().run(cloud, params, Context(base_dir=tmp_path)).report["ev_rms_um"] < 5
+    d = np.linalg.norm(c.ref_given[:, None, :] - c.ref_given[None, :, :], axis=2) + np.eye(len(c.ref_given)) * 1e9
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    swapped = c.ref_given.copy()
+    swapped[[i, j]] = swapped[[j, i]]
+    rows = "".join(f"{k + 1},{x!r},{y!r},{z!r}\n" for k, (x, y, z) in enumerate(swapped.tolist()))
+    (tmp_path / "reference.csv").write_text("fiducial,x,y,z\n" + rows, encoding="utf-8")
+    with pytest.raises(InputError, match=rf"fiducial\(s\) ({i + 1}, {j + 1}|{j + 1}, {i + 1}) lie .* off the "
+                                         r"12-parameter transform .* \(two ids swapped\?\)"):
+        FiducialsStep().run(cloud, params, Context(base_dir=tmp_path))

@@ -200,3 +200,25 @@ def test_points_off_the_probe_line_are_taken_on_plus_x_with_a_warning(tmp_path):
     quiet = KinematicStep().run(PointCloud.from_xyz(x, y, z, c=c),
                                 KinematicStep.Params(map="map.json", probe_x="radius"), Context(base_dir=tmp_path))
     assert quiet.report["warnings"] == []
+
+
+def test_a_map_with_a_nan_or_axes_not_increasing_is_refused_naming_the_key():
+    """A review: a NaN in e_mm wrote NaN heights with exit 0; a descending r_mm read as "the scan
+    crosses the centre"; a repeated c_deg gave the interpolator's internal error."""
+    import json
+
+    import pytest
+
+    from pointspro.core.errors import InputError
+    from pointspro.core.kinematics.errormap import KinematicMap
+
+    good = {"pointspro_kinematic_map": 1, "r_mm": [-10.0, 0.0, 10.0], "c_deg": [0.0, 90.0, 180.0, 270.0],
+            "e_mm": [[0.0] * 4, [1e-6] * 4, [2e-6] * 4]}
+    assert KinematicMap.from_json(json.dumps(good), "m.json").e.shape == (3, 4)
+    bad = [({"e_mm": [[0.0] * 4, [float("nan")] * 4, [2e-6] * 4]}, "key 'e_mm' holds values that are not finite"),
+           ({"r_mm": [10.0, 0.0, -10.0]}, "key 'r_mm' is not strictly increasing"),
+           ({"c_deg": [0.0, 90.0, 90.0, 270.0]}, "key 'c_deg' is not strictly increasing"),
+           ({"c_deg": [0.0, 90.0, 180.0, 400.0]}, "spans more than one turn")]
+    for change, words in bad:
+        with pytest.raises(InputError, match=rf"m\.json: .*{words}"):
+            KinematicMap.from_json(json.dumps(good | change), "m.json")

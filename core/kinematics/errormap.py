@@ -65,6 +65,17 @@ class KinematicMap:
             raise InputError(f"{source}: not a PointsPro kinematic map ({json_problem(e)})") from None
         if m.e.shape != (m.r.size, m.c_deg.size):
             raise InputError(f"{source}: the map's table does not match its axes")
+        # a review: a NaN in e_mm wrote NaN heights with exit 0; descending or repeated axes gave a
+        # misleading range message or an internal error from the interpolator
+        for key, a in (("r_mm", m.r), ("c_deg", m.c_deg), ("e_mm", m.e)):
+            if a.size == 0 or not np.all(np.isfinite(a)):
+                raise InputError(f"{source}: key '{key}' holds values that are not finite numbers"
+                                 if a.size else f"{source}: key '{key}' is empty")
+        for key, a in (("r_mm", m.r), ("c_deg", m.c_deg)):
+            if a.size > 1 and not np.all(np.diff(a) > 0):
+                raise InputError(f"{source}: key '{key}' is not strictly increasing")
+        if m.c_deg.size and (m.c_deg[0] < 0 or m.c_deg[-1] >= m.c_deg[0] + 360.0):
+            raise InputError(f"{source}: key 'c_deg' spans more than one turn (0 ≤ c < 360°)")
         return m
 
 
