@@ -179,3 +179,25 @@ def test_dynamic_reports_the_model_lag_at_the_scan_frequency_and_warns_of_a_ring
     (tmp_path / "old.json").write_text(json.dumps(old), encoding="utf-8")
     rep = DynamicStep().run(cloud, DynamicStep.Params(model="old.json"), Context(base_dir=tmp_path)).report
     assert any("longer than the scan" in w for w in rep["warnings"])
+
+
+def test_a_reference_sampled_slower_than_the_record_is_warned_of(tmp_path):
+    """A review: a 250 Hz reference sensor held over 4 rows of a 1000 Hz record identified a loop with
+    a 4× wrong phase lag (order 3, a pole at z = −0.69) and said nothing; now a warning names it."""
+    import numpy as np
+
+    from pointspro.core import PointCloud
+    from pointspro.core.dynamics.identify import write_example_calibration
+    from pointspro.core.step import Context
+    from pointspro.plugins.dynamic_id import DynamicIdStep
+
+    p = write_example_calibration(tmp_path)
+    cloud = PointCloud.from_xyz([0.0], [0.0], [0.0])
+    rep = DynamicIdStep().run(cloud, DynamicIdStep.Params(calibration=p), Context(base_dir=tmp_path)).report
+    assert not any("repeats its value" in w for w in rep["warnings"]), rep["warnings"]
+    d = np.loadtxt(p, delimiter=",", skiprows=1)
+    d[:, 2] = np.repeat(d[::4, 2], 4)[: len(d)]
+    np.savetxt(tmp_path / "held.csv", d, delimiter=",", header="t,xd,ref", comments="")
+    rep = DynamicIdStep().run(cloud, DynamicIdStep.Params(calibration="held.csv"), Context(base_dir=tmp_path)).report
+    assert any("the reference 'ref' repeats its value in runs of ~4 samples while 'xd' moves" in w
+               for w in rep["warnings"]), rep["warnings"]

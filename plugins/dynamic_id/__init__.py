@@ -31,6 +31,24 @@ class DynamicIdParams(Params):
     max_order: int = param(5, ge=1, le=8, help="largest order tried when the order is chosen")
 
 
+def held_reference(xd, ref) -> tuple[int, float] | None:
+    """(typical run length, share of the steps where xd moves and ref does not) when the reference
+    holds its value over runs of samples while the command moves — a slower sensor logged at the
+    record's rate (a review: a 250 Hz sensor held in a 1000 Hz log gave a 4× wrong phase lag, no word);
+    None otherwise."""
+    xd, ref = np.asarray(xd, float), np.asarray(ref, float)
+    moving = np.diff(xd) != 0
+    if moving.sum() < 5:
+        return None
+    same = np.diff(ref) == 0
+    share = float(np.mean(same[moving]))
+    if share < 0.5:
+        return None
+    change = np.flatnonzero(np.r_[True, ~same])  # where a new value starts
+    runs = np.diff(np.r_[change, ref.size])
+    return int(np.median(runs)), share
+
+
 def fit_figure(model, t, xd, ref):
     """Reference against the model's Gm·xd around the largest step, and the frequency response."""
     from pointspro.core.figures import _figure
@@ -84,6 +102,13 @@ class DynamicIdStep(Step):
         if model.modes() and max(m["frequency_hz"] for m in model.modes()) > 0.8 * model.fs / 2:
             report["warnings"].append("a resonance lies near the Nyquist frequency: modes above it "
                                       "appear aliased; sample faster to resolve them")
+        held = held_reference(cols[params.xd], cols[params.ref])
+        if held:
+            report["warnings"].append(
+                f"the reference '{params.ref}' repeats its value in runs of ~{held[0]} samples while "
+                f"'{params.xd}' moves ({held[1]:.0%} of its moving steps): a sensor sampled slower than the "
+                f"record (about fs/{held[0]}) delays and distorts the identified loop — give the record at "
+                "the sensor's own rate")
         arts = {"dynamic_model.json": model.to_json(),
                 "dynamic_fit.png": png_artifact(fit_figure, model, cols[params.t], cols[params.xd],
                                                 cols[params.ref])}
