@@ -406,8 +406,13 @@ def load_batch_recipe(path, overrides=()) -> Recipe:
     path = Path(path)
     load_recipe(path)  # the file as written first: its own errors name its lines, as without --set
     data = load_yaml(path.read_text(encoding="utf-8"), str(path))
+    seen = {}
     for text in overrides:
-        apply_override(data, text)
+        target = apply_override(data, text)
+        if target is not None and target in seen:
+            # a review: the last of two silently won (`--set 5.diameter=10 --set aperture.diameter=20`)
+            raise RecipeError(f"--set {text}: sets what --set {seen[target]} set already; give each key once")
+        seen.setdefault(target, text)
     try:
         recipe = parse_recipe(data, str(path), base=path)
         check_step_order(recipe.steps, str(path))
@@ -450,8 +455,10 @@ def _entry_id(entry):
     return None
 
 
-def apply_override(data, text: str) -> None:
-    """Apply one ``--set`` to the recipe's YAML data in place (see ``load_batch_recipe``).
+def apply_override(data, text: str):
+    """Apply one ``--set`` to the recipe's YAML data in place (see ``load_batch_recipe``); returns what
+    it set — ("surface", KEY), ("input", KEY) or ("step", position, KEY) — or None where the recipe
+    is malformed there (parse_recipe says how).
 
     STEP is a 1-based position in ``steps:`` (``2.window``), a step id that occurs once
     (``knn_denoise.window``), or ``surface`` / ``input`` for those blocks' keys. KEY ``enabled``
@@ -466,7 +473,7 @@ def apply_override(data, text: str) -> None:
         if block is not None and not isinstance(block, dict):
             return  # parse_recipe names the block's own error
         data[step] = _copy(block or {}, **{key: value})
-        return
+        return (step, key)
     steps = data.get("steps")
     steps = steps if isinstance(steps, list) else []
     ids = [_entry_id(e) for e in steps]
@@ -504,6 +511,7 @@ def apply_override(data, text: str) -> None:
         params = entry.get(sid)
         new = _copy(entry, **{sid: _copy(params if isinstance(params, dict) else {}, **{key: value})})
     data["steps"][i - 1] = new
+    return ("step", i, key)
 
 
 # --- the steps' log records, with the input's name, across processes --------------------------------

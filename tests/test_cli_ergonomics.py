@@ -447,3 +447,17 @@ def test_a_probe_radius_in_the_model_is_refused_as_not_simulated(run_cli, tmp_pa
     assert code == 2 and "line 4" in err and "probe_radius: {radius: 0.5}" in err, err
     assert "Value error" not in err  # the validator's own words
     assert not (tmp_path / "s.csv").exists()
+
+
+def test_the_same_key_set_twice_is_refused(run_cli, tmp_path):
+    """A review: of `--set 5.diameter=1000 --set aperture.diameter=1200` the last won silently; the same
+    key named twice — by position or by id — is refused naming both."""
+    base = ("--batch", EXAMPLE / "recipe.yaml", EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--quiet",
+            "--figures", "none")
+    code, _, err = run_cli(*base, "--set", "5.diameter=1000", "--set", "aperture.diameter=1200")
+    assert code == 2 and "--set aperture.diameter=1200: sets what --set 5.diameter=1000 set already" in err, err
+    code, _, err = run_cli(*base, "--set", "surface.k=-1", "--set", "surface.k=-0.98")
+    assert code == 2 and "sets what --set surface.k=-1 set already" in err, err
+    assert not (tmp_path / "o").exists()
+    code, _, err = run_cli(*base, "--set", "surface.k=-0.98", "--set", "knn_denoise.window=12")
+    assert code == 0, err
