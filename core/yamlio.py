@@ -305,21 +305,28 @@ def _bool_path(ann, value):
     return None
 
 
-def _holds_bool(value) -> bool:
-    """Whether true or false is anywhere in ``value`` (its lists, tuples, mappings' keys and values),
-    level by level at C speed: a list of 10⁵ index pairs is looked through in milliseconds."""
+def _holds(value, wanted: type, keys: bool) -> bool:
+    """Whether a ``wanted`` value is anywhere in ``value`` (its lists, tuples, mappings' values, and
+    their keys with ``keys``), level by level at C speed: a list of 10⁵ index pairs is looked through
+    in milliseconds."""
     level = [value]
     while level:
         items = level[0] if len(level) == 1 and isinstance(level[0], (list, tuple)) else list(
             itertools.chain.from_iterable(
-                itertools.chain(c.keys(), c.values()) if isinstance(c, dict) else c for c in level))
+                (itertools.chain(c.keys(), c.values()) if keys else c.values()) if isinstance(c, dict) else c
+                for c in level))
         kinds = set(map(type, items))
-        if bool in kinds:
+        if any(issubclass(k, wanted) for k in kinds):
             return True
-        if not any(issubclass(t, (list, tuple, dict)) for t in kinds):
+        if not any(issubclass(k, (list, tuple, dict)) for k in kinds):
             return False
         level = [x for x in items if isinstance(x, (list, tuple, dict))]
     return False
+
+
+def _holds_bool(value) -> bool:
+    """Whether true or false is anywhere in ``value``, mappings' keys included."""
+    return _holds(value, bool, keys=True)
 
 
 #: the words of the refusal of a number written as text (a step's parameter, a surface's key)
@@ -396,19 +403,8 @@ def number_as_text(annotation, value, name: str | None = None):
 
 
 def _holds_text(value) -> bool:
-    """Whether a string is anywhere in ``value`` (its lists, tuples and mappings' values), level by
-    level at C speed, as _holds_bool."""
-    level = [value]
-    while level:
-        items = level[0] if len(level) == 1 and isinstance(level[0], (list, tuple)) else list(
-            itertools.chain.from_iterable(c.values() if isinstance(c, dict) else c for c in level))
-        kinds = set(map(type, items))
-        if any(issubclass(k, str) for k in kinds):
-            return True
-        if not any(issubclass(k, (list, tuple, dict)) for k in kinds):
-            return False
-        level = [x for x in items if isinstance(x, (list, tuple, dict))]
-    return False
+    """Whether a string is anywhere in ``value`` (its lists, tuples and mappings' values)."""
+    return _holds(value, str, keys=False)
 
 
 def bool_as_number(annotation, value, name: str | None = None):
