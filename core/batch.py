@@ -615,23 +615,11 @@ def parameter_file_digests(recipe: Recipe) -> dict[str, str | None]:
     recipe names it (``step 2 'z_scale': calibration``), so that ``--resume`` runs an input again when
     one of them changed under the same name (a review: a re-calibrated artefact's file kept the old
     amplification, 3 % off, with exit 0). None for a file that cannot be read (the run says why)."""
-    from .step import file_parameters
+    from .recipe import named_files
 
-    base = recipe.base_dir
-
-    def at(value) -> Path:
-        p = Path(value)
-        return p if p.is_absolute() or base is None else base / p
-
-    named = {}
-    spec = recipe.surface_spec or {}
-    if spec.get("type") == "mesh" and isinstance(spec.get("path"), str):
-        named["surface: path"] = at(spec["path"])
-    for i, rs in enumerate(recipe.steps, 1):
-        for k, v in file_parameters(rs.params).items():
-            named[f"step {i} '{rs.id}': {k}"] = at(v)
-    for k, v in recipe.inputs.items():
-        named[f"inputs: {k}"] = Path(v)
+    labels = {"surface": lambda f: "surface: path", "inputs": lambda f: f"inputs: {f.key}",
+              "step": lambda f: f"step {f.step} '{f.step_id}': {f.key}"}
+    named = {labels[f.section](f): f.path for f in named_files(recipe)}
     out = {}
     for what, p in named.items():
         try:

@@ -496,42 +496,36 @@ def _check_recipe_files(recipe, allowed: list[Path], must_exist: bool = True) ->
     review: a missing `dynamic.model` or `kinematic.map` was found only at run time, on every
     input, behind "the scan has no t channel"; `volumetric: {model: ""}` read as the folder ".")."""
     from .errors import RecipeError
-    from .step import file_parameters, outside_allowed
+    from .recipe import named_files
+    from .step import outside_allowed
 
     where = str(recipe.path)
-    base = recipe.base_dir
-    named = []  # (where in the recipe, path)
-    spec = recipe.surface_spec or {}
-    if spec.get("type") == "mesh" and isinstance(spec.get("path"), str):
-        named.append(("surface: key 'path'", spec["path"]))
-    step_files = []
-    for i, rs in enumerate(recipe.steps, 1):
-        loc = f"line {rs.line}: " if rs.line else ""
-        files = file_parameters(rs.params)
-        step_files += [(f"{loc}step {i} '{rs.id}': parameter '{k}'", v) for k, v in files.items()]
-        for k, f in type(rs.params).model_fields.items():  # set, but to nothing
+    for i, rs in enumerate(recipe.steps, 1):  # a file parameter set, but to nothing
+        for k, f in type(rs.params).model_fields.items():
             extra = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
             value = getattr(rs.params, k, None)
             if extra.get("file") and isinstance(value, str) and not value.strip():
+                loc = f"line {rs.line}: " if rs.line else ""
                 raise RecipeError(f"{where}, {loc}step {i} '{rs.id}': parameter '{k}' is empty; "
                                   "give a file name (relative to the recipe) or leave the key out")
-    named += step_files
-    resolved = [(f"inputs: key '{k}'", str(v)) for k, v in recipe.inputs.items()]  # already joined
 
-    def say(what, why):
+    def say(f, why):
+        if f.section == "step":
+            loc = f"line {f.line}: " if f.line else ""
+            what = f"{loc}step {f.step} '{f.step_id}': parameter '{f.key}'"
+        else:
+            what = f"{f.section}: key '{f.key}'"
         return f"{where}, {what}: {why}" if what.startswith("line") else f"{where}: {what}: {why}"
 
-    for what, value in [*named, *resolved]:
-        p = Path(value)
-        p = p if p.is_absolute() or base is None or (what, value) in resolved else base / p
-        why = outside_allowed(p, allowed)
+    for f in named_files(recipe):
+        why = outside_allowed(f.path, allowed)
         if why:
-            raise RecipeError(say(what, why))
-        if must_exist and (what, value) in step_files:
-            if not p.exists():
-                raise RecipeError(say(what, f"{p}: file not found"))
-            if p.is_dir():
-                raise RecipeError(say(what, f"{p}: a folder, not a file"))
+            raise RecipeError(say(f, why))
+        if must_exist and f.section == "step":
+            if not f.path.exists():
+                raise RecipeError(say(f, f"{f.path}: file not found"))
+            if f.path.is_dir():
+                raise RecipeError(say(f, f"{f.path}: a folder, not a file"))
 
 
 def _cores() -> int:

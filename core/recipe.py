@@ -186,6 +186,42 @@ class Recipe:
         return self.with_steps(steps)
 
 
+@dataclass(frozen=True)
+class NamedFile:
+    """A file a recipe names: a mesh surface's ``path`` (section "surface"), a step's file parameter
+    ("step": its position, id and recipe line) or an ``inputs:`` entry ("inputs"). ``path`` is
+    resolved against the recipe's folder (``inputs:`` are resolved when the recipe is read)."""
+
+    section: str
+    key: str
+    path: Path
+    step: int = 0
+    step_id: str = ""
+    line: int | None = None
+
+
+def named_files(recipe: Recipe) -> list[NamedFile]:
+    """Every file the recipe names, in recipe order — the one enumeration behind the CLI's
+    allowed-folder check (cli._check_recipe_files) and --resume's digests
+    (batch.parameter_file_digests)."""
+    from .step import file_parameters
+
+    base = recipe.base_dir
+
+    def at(value) -> Path:
+        p = Path(value)
+        return p if p.is_absolute() or base is None else base / p
+
+    out = []
+    spec = recipe.surface_spec or {}
+    if spec.get("type") == "mesh" and isinstance(spec.get("path"), str):
+        out.append(NamedFile("surface", "path", at(spec["path"])))
+    for i, rs in enumerate(recipe.steps, 1):
+        out += [NamedFile("step", k, at(v), i, rs.id, rs.line) for k, v in file_parameters(rs.params).items()]
+    out += [NamedFile("inputs", k, Path(v)) for k, v in recipe.inputs.items()]
+    return out
+
+
 def make_step(step_id: str, params: dict | None = None, registry: Registry | None = None,
               position: int = 1, where: str = "recipe") -> RecipeStep:
     """One validated step, as the YAML entry ``- step_id: params`` at 1-based ``position`` would be

@@ -288,3 +288,28 @@ def test_workers_apply_the_allowed_folders_they_are_sent(layout):
                      [str(layout / "data"), str(layout / "elsewhere")])
     assert not oc.ok and "is outside" not in oc.error  # allowed: now read, and refused by content
     _no_leak(oc.error)
+
+
+def test_named_files_is_the_one_list_of_a_recipes_files(tmp_path):
+    """The allowed-folder check and --resume's digests read one enumeration (core/recipe.named_files):
+    the mesh surface, each step's file parameters with position, id and line, then ``inputs:`` —
+    relative names resolved against the recipe's folder, absolute ones kept."""
+    from pointspro.core.batch import parameter_file_digests
+    from pointspro.core.recipe import load_recipe, named_files
+
+    write(tmp_path / "cal.csv", "x,z,scan\n0,0,0\n")
+    write(tmp_path / "fid.csv", "fiducial,x,y,z\n1,0,0,0\n")
+    (tmp_path / "sub").mkdir()
+    recipe = load_recipe(write(tmp_path / "sub" / "r.yaml",
+                               "pointspro: 1\nsurface: {type: mesh, path: part.stl}\n"
+                               f"inputs: {{fiducials: {tmp_path / 'fid.csv'}}}\nsteps:\n"
+                               "  - aperture: {diameter: 10}\n"
+                               "  - z_scale: {calibration: ../cal.csv, heights: [1, 2]}\n"))
+    files = named_files(recipe)
+    assert [(f.section, f.key, f.step, f.step_id) for f in files] == [
+        ("surface", "path", 0, ""), ("step", "calibration", 2, "z_scale"), ("inputs", "fiducials", 0, "")]
+    assert files[0].path == tmp_path / "sub" / "part.stl" and files[1].path == tmp_path / "sub" / ".." / "cal.csv"
+    assert files[1].line == 6 and files[2].path == tmp_path / "fid.csv"
+    digests = parameter_file_digests(recipe)  # the same files, by the labels report.json keeps
+    assert list(digests) == ["surface: path", "step 2 'z_scale': calibration", "inputs: fiducials"]
+    assert digests["surface: path"] is None and digests["step 2 'z_scale': calibration"] is not None
