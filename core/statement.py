@@ -53,16 +53,19 @@ def _asymmetric(value: float, U: float, interval, d: int) -> bool:
     return abs(lo - (value - U)) > half or abs(hi - (value + U)) > half
 
 
-def value_and_uncertainty(value: float, U: float, interval=None, d: int | None = None) -> str:
+def value_and_uncertainty(value: float, U: float, interval=None, d: int | None = None,
+                          unit: str = "", k: float | None = None) -> str:
     """"0.5475 ± 0.0041", or "0.0000 (95 % 0.0000 … 0.0066)" where the 95 % interval is not value ± U
     (a review: an RMS at the noise read "0.0 ± 3.3 nm" for the interval 0 … 6.6 nm — its upper end,
     what a drawing's limit is compared with, is twice that), in the units of its arguments; ``d``
-    decimals (default: U to two significant digits, GUM §7.2.6)."""
+    decimals (default: U to two significant digits, GUM §7.2.6). With ``unit`` (and the coverage
+    factor ``k``) the sentence form: "547.5 ± 4.1 nm (k = 2)", "0.0 nm (95 % interval 0.0 … 6.6 nm)"."""
     d = _decimals(U) if d is None else d
+    u = f" {unit}" if unit else ""
     if _asymmetric(value, U, interval, d):
         lo, hi = interval
-        return f"{value:.{d}f} (95 % {lo:.{d}f} … {hi:.{d}f})"
-    return f"{value:.{d}f} ± {U:.{d}f}"
+        return f"{value:.{d}f}{u} ({'95 % interval' if unit else '95 %'} {lo:.{d}f} … {hi:.{d}f}{u})"
+    return f"{value:.{d}f} ± {U:.{d}f}{u}" + (f" (k = {k:.3g})" if k is not None else "")
 
 
 def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k: float = 2.0,
@@ -84,13 +87,10 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
         value, U = value / scale, (None if U is None else U / scale)
     if U is None or not math.isfinite(U):
         return f"{value:.4g} {unit}"
-    d = _decimals(U)
     if isinstance(interval, (list, tuple)) and len(interval) == 2 and all(
             isinstance(v, (int, float)) for v in interval):
         interval = (interval[0] / scale, interval[1] / scale)
-        if _asymmetric(value, U, interval, d):
-            return f"{value:.{d}f} {unit} (95 % interval {interval[0]:.{d}f} … {interval[1]:.{d}f} {unit})"
-    return f"{value:.{d}f} ± {U:.{d}f} {unit} (k = {k:.3g})"
+    return value_and_uncertainty(value, U, interval, unit=unit, k=k)
 
 
 #: a summary figure the points cannot give (PVr needs more than 72 points, slope RMS 50 and an area)
