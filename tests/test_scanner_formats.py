@@ -257,3 +257,28 @@ def test_las_in_longitude_and_latitude_is_refused(tmp_path):
     _las_wkt(tmp_path / "g.las", wkt)
     with pytest.raises(InputError, match=r"g\.las: x, y are geographic coordinates .*'WGS 84'.*reproject"):
         read_cloud(tmp_path / "g.las")
+
+
+@pytest.mark.parametrize("keys", [[(1024, 2), (2048, 4326), (4099, 9001)], [(1024, 2), (2048, 4326)],
+                                  [(2048, 4269)]])
+def test_las_geokeys_of_a_geographic_crs_are_refused(tmp_path, keys):
+    """GeoKeys are LAS 1.0–1.3's usual way to state a CRS (a review: GTModelTypeGeoKey 2 with EPSG:4326
+    read longitude 8.5° as 8500 mm, and the vertical key's "m" stood in for x, y as if stated)."""
+    _las(tmp_path / "g.las", geokeys=keys)
+    with pytest.raises(InputError, match=r"g\.las: x, y are geographic coordinates .*EPSG:\d+.*reproject"):
+        read_cloud(tmp_path / "g.las")
+
+
+def test_las_projected_crs_code_without_its_unit(tmp_path):
+    """ProjectedCSTypeGeoKey without ProjLinearUnitsGeoKey: a UTM zone is in metres; EPSG:2263 (New York
+    Long Island, US survey feet) was read as metres, 3.28× off — refused, naming the code."""
+    src = _las(tmp_path / "utm.las", geokeys=[(1024, 1), (3072, 32632)])
+    c = read_cloud(tmp_path / "utm.las")
+    assert np.array_equal(c.x, np.asarray(src.x) * 1e3)
+    assert c.meta["instrument_unit"].startswith("m (") and "EPSG:32632" in c.meta["instrument_unit"]
+    assert "assumed" not in c.meta["instrument_unit"]
+    _las(tmp_path / "ny.las", geokeys=[(1024, 1), (3072, 2263)])
+    with pytest.raises(InputError, match=r"ny\.las: .*EPSG:2263 but not its linear unit"):
+        read_cloud(tmp_path / "ny.las")
+    src = _las(tmp_path / "ny_ft.las", geokeys=[(1024, 1), (3072, 2263), (3076, 9003)])  # the unit given
+    assert np.allclose(read_cloud(tmp_path / "ny_ft.las").x, np.asarray(src.x) * 1200 / 3937 * 1e3, rtol=1e-15)

@@ -105,18 +105,45 @@ def _add(cols: dict, name: str, a: np.ndarray) -> None:
     cols[name] = a.astype(np.float64) if a.dtype.kind in "fb" else a.astype(np.int64)
 
 
+#: GeoTIFF keys (GeoTIFF 1.0 §6.3; LAS 1.0–1.4's GeoKeyDirectoryTag VLR)
+_GT_MODEL, _GEOGRAPHIC_TYPE, _PROJECTED_CS, _PROJ_LINEAR_UNITS, _VERTICAL_UNITS = 1024, 2048, 3072, 3076, 4099
+_USER_DEFINED = 32767
+
+
+def _metre_crs(code: int) -> bool:
+    """Projected CRSs known to be in metres by their EPSG code, for a file that names one without
+    its ProjLinearUnitsGeoKey: WGS 84 / UTM (326xx, 327xx), NAD83 / UTM (269xx), ETRS89 / UTM and
+    ETRS89-extended (258xx), Web Mercator (3857), CH1903+ (2056), British National Grid (27700),
+    DHDN / Gauss-Krüger (31466–31469), SWEREF99 TM (3006), Amersfoort / RD New (28992), ETRS89 / LAEA
+    and LCC Europe (3035, 3034), GDA94 / GDA2020 MGA (283xx, 78xx). Others (the US State Planes:
+    metres or US feet by zone and realisation) are not guessed."""
+    return (32601 <= code <= 32660 or 32701 <= code <= 32760 or 26901 <= code <= 26923
+            or 25828 <= code <= 25838 or code in (3857, 2056, 27700, 3006, 28992, 3035, 3034)
+            or 31466 <= code <= 31469 or 28348 <= code <= 28358 or 7846 <= code <= 7859)
+
+
 def _units(header) -> tuple[tuple[str, float, str], tuple[str, float, str], bool]:
     """((horizontal unit, metres, note), (vertical unit, metres, note), whether the file states
-    them); a note says how a unit was read when that is not plain."""
+    them); a note says how a unit was read when that is not plain.
+
+    GeoKeys: GTModelTypeGeoKey 2 (geographic), or a GeographicTypeGeoKey without a projected CRS,
+    is refused like a geographic WKT (a review: longitude 8.5° read as 8500 mm, "m" as if stated);
+    a ProjectedCSTypeGeoKey without ProjLinearUnitsGeoKey takes the EPSG code's unit where it is
+    known to be metres (``_metre_crs``) and is refused otherwise (EPSG:2263, in US survey feet, read
+    as metres: 3.28× off); the vertical unit never stands in for x, y when a horizontal CRS is named."""
     horizontal = vertical = None
+    keys_seen: dict[int, int] = {}
     for vlr in [*getattr(header, "vlrs", []), *(getattr(header, "evlrs", None) or [])]:
         keys = getattr(vlr, "geo_keys", None)
         if keys is not None:
             for k in keys:
-                if k.tiff_tag_location == 0 and k.value_offset in _GEOKEY_UNITS:
-                    if k.id == 3076:
+                if k.tiff_tag_location != 0:
+                    continue
+                keys_seen.setdefault(int(k.id), int(k.value_offset))
+                if k.value_offset in _GEOKEY_UNITS:
+                    if k.id == _PROJ_LINEAR_UNITS:
                         horizontal = _GEOKEY_UNITS[k.value_offset]
-                    elif k.id == 4099:
+                    elif k.id == _VERTICAL_UNITS:
                         vertical = _GEOKEY_UNITS[k.value_offset]
         wkt = getattr(vlr, "string", None)
         if isinstance(wkt, bytes):
@@ -125,10 +152,31 @@ def _units(header) -> tuple[tuple[str, float, str], tuple[str, float, str], bool
             h, v = _wkt_units(wkt)
             horizontal = h
             vertical = vertical or v
+    if horizontal is None and keys_seen:
+        horizontal = _geokey_horizontal(keys_seen)
     if horizontal is None and vertical is None:
         return ("m", 1.0, ""), ("m", 1.0, ""), False
     horizontal = horizontal or vertical
     return horizontal, vertical or horizontal, True
+
+
+def _geokey_horizontal(keys: dict[int, int]) -> tuple[str, float, str] | None:
+    """x, y's unit from the GeoKeys that name a CRS but not its linear unit (None: they name none)."""
+    model, projected = keys.get(_GT_MODEL), keys.get(_PROJECTED_CS)
+    if model == 2 or (_GEOGRAPHIC_TYPE in keys and projected is None and model != 1):
+        crs = keys.get(_GEOGRAPHIC_TYPE)
+        named = f"EPSG:{crs}" if crs not in (None, _USER_DEFINED) else "GTModelTypeGeoKey 2"
+        raise InputError(f"x, y are geographic coordinates (longitude, latitude in degrees; GeoKeys: {named}): "
+                         "PointsPro measures in lengths — reproject the cloud to a projected or local CRS "
+                         "in metres or feet")
+    if projected is None or projected == _USER_DEFINED:
+        return None
+    if _metre_crs(projected):
+        return "m", 1.0, f"EPSG:{projected}'s unit"
+    raise InputError(f"the file names the projected CRS EPSG:{projected} but not its linear unit "
+                     "(ProjLinearUnitsGeoKey), and PointsPro does not look units up in the EPSG "
+                     "database — metres or feet would be a guess: add the key (e.g. PDAL's "
+                     "writers.las a_srs, or las2las) or reproject to a local frame in metres")
 
 
 # --- WKT -------------------------------------------------------------------------------------------
