@@ -238,3 +238,20 @@ def test_parameter_tables_are_not_matrices(tmp_path):
     p.write_text(",".join(f"c{k}" for k in range(12)) + "\n" + _rows(3, 12, ","), encoding="utf-8")
     cols = read_table(p, ("c0", "c11"))
     assert len(cols) == 12 and len(cols["c0"]) == 3
+
+
+@pytest.mark.parametrize("sep", [" ", ","])
+def test_points_under_a_preamble_with_width_and_height_lines_are_points(tmp_path, sep):
+    """A part's drawing size in a preamble ("Width: 100 mm", "Height: 25 mm") looked like a matrix
+    header: the x y z columns below it became a 3 × 6 height matrix of 33 mm pixels (a review). A
+    line naming the axes right above the data makes them points."""
+    rows = [(0, 0, 0.001), (10, 0, 0.002), (20, 0, 0.003), (0, 10, 0.004), (10, 10, 0.005), (20, 10, 0.006)]
+    text = ("Part: bracket 7\nWidth: 100 mm\nHeight: 25 mm\n" + sep.join("xyz") + "\n"
+            + "".join(sep.join(map(str, r)) + "\n" for r in rows))
+    (tmp_path / "p.txt").write_text(text, encoding="utf-8")
+    c = read_cloud(tmp_path / "p.txt")
+    assert len(c) == 6 and np.array_equal(c.xyz, np.array(rows, dtype=float))
+    # a Gwyddion export, whose header ends in "# Value units", is still a matrix
+    (tmp_path / "g.txt").write_text("# Channel: h\n# Width: 3 mm\n# Height: 2 mm\n# Value units: m\n"
+                                    "1 2 3\n4 5 6\n", encoding="utf-8")
+    assert read_cloud(tmp_path / "g.txt").meta.get("grid") is not None

@@ -302,9 +302,10 @@ def _read_text_by_content(path: Path, head: bytes, suffix: str, opts: ReaderOpti
         return read_surface_topography(path, opts, head=head)
     if suffix not in TEXT_SUFFIXES and st_magic_names(head):  # a text header, binary further on
         return read_surface_topography(path, opts, head=head)
-    if matrix.has_matrix_header(text_head):
+    from .text import MatrixInText, names_axes_above_data, read_text
+
+    if matrix.has_matrix_header(text_head) and not names_axes_above_data(text_head, matrix.is_number_row):
         return matrix.read_matrix(path, opts)
-    from .text import MatrixInText, read_text
 
     try:
         got = read_text(path, invalid=opts.invalid, profile_angle_deg=opts.profile_angle_deg)

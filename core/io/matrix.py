@@ -292,6 +292,11 @@ def matrix_header_keys(text_head: str) -> set[str]:
     return keys
 
 
+def is_number_row(line: str) -> bool:
+    """Where a matrix header ends: the first line that starts like a number (matrix_header_keys)."""
+    return bool(_NUMBER_ROW.match(line))
+
+
 def has_matrix_header(text_head: str) -> bool:
     """A header naming a matrix's size and unit (two keys at least) before the first numbers."""
     return len(matrix_header_keys(text_head)) >= 2

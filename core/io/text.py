@@ -127,6 +127,27 @@ def _names_axes(toks: list[str], decimal_comma: bool = False) -> bool:
     return {"x", "z"} <= {_AXIS_ALIASES.get(n, n) for n, _, _ in map(_header_name, toks)}
 
 
+def names_axes_above_data(text_head: str, is_data_row) -> bool:
+    """Whether the last non-blank line above the first data row (``is_data_row``) names the axes
+    (``x y z``, ``# X[mm],Y[mm],Z[mm]``): columns of points, even under a preamble whose ``Width:``
+    and ``Height:`` lines look like a height matrix's header (a review: a part's drawing size in the
+    preamble made an x y z file a 3 × 6 matrix)."""
+    above = None
+    for line in text_head.splitlines()[:200]:
+        s = line.strip()
+        if not s:
+            continue
+        if is_data_row(s):
+            break
+        above = s
+    else:
+        return False
+    if above is None:
+        return False
+    above = above.lstrip("#%/ \t")
+    return any(_names_axes(_header_tokens(above, d)) for d in _SEPARATORS)
+
+
 def _is_number(tok: str, decimal_comma: bool) -> bool:
     """Whether ``tok`` is a number, also written in double quotes (``"1.5"``: numpy's and pandas'
     readers take the quotes off)."""
