@@ -89,14 +89,15 @@ def test_profiles_and_psd_csv_round_trip(tmp_path):
         t = np.deg2rad(a)
         assert np.array_equal(back.x[mine], 0.35 + s[ok] * np.cos(t))
     _write_psd(tmp_path / "psd.csv", g)
-    assert (tmp_path / "psd.csv").read_text(encoding="utf-8").startswith(
-        "f [1/mm],psd_x [mm^3],psd_y [mm^3]\n")
-    cols = read_table(tmp_path / "psd.csv", ("f", "psd_x", "psd_y"))
+    text = (tmp_path / "psd.csv").read_text(encoding="utf-8")
+    assert text.startswith("f_x [1/mm],psd_x [mm^3],f_y [1/mm],psd_y [mm^3]\n")
+    cols = np.genfromtxt(tmp_path / "psd.csv", delimiter=",", skip_header=1).T  # empty fields: NaN
     fx, px = psd_1d(g, "x")
     fy, py = psd_1d(g, "y")
-    n = min(len(fx), len(fy))
-    assert np.array_equal(cols["f"], fx[:n]) and np.array_equal(cols["psd_x"], px[:n])
-    assert np.array_equal(cols["psd_y"], py[:n])
+    assert len(fx) != len(fy)  # a non-square map: each direction against its own frequencies
+    for f, p, cf, cp in ((fx, px, cols[0], cols[1]), (fy, py, cols[2], cols[3])):
+        assert np.array_equal(cf[:len(f)], f) and np.array_equal(cp[:len(p)], p)
+        assert np.isnan(cf[len(f):]).all() and np.isnan(cp[len(p):]).all()
 
 
 def test_length_units_on_input_are_converted_to_mm(tmp_path):

@@ -211,3 +211,22 @@ def test_the_map_follows_holes_and_keeps_the_gaps_of_a_sparse_pattern(case):
     if case == "strip":
         inner &= (X <= 5 - s.h) | (X >= 15 + s.h)
     assert inner.sum() > 100 and v[inner].all()
+
+
+@pytest.mark.parametrize("axis", ["x", "y"])
+def test_psd_csv_pairs_each_direction_with_its_own_frequencies(tmp_path, axis):
+    """A 40 × 20 mm map (81 × 41 nodes) with a 5 mm ripple along one axis: psd.csv's peak in that
+    direction is at 0.2 /mm. psd_y was written against f_x (a review: the peak read 0.0995 /mm, and
+    the rows stopped at the shorter direction's length, dropping psd_x's upper half)."""
+    from pointspro.plugins.bspline_map import _write_psd
+
+    xs, ys = np.arange(-40, 41) * D, np.arange(-20, 21) * D
+    X, Y = np.meshgrid(xs, ys)
+    z = A * np.sin(2 * np.pi * (X if axis == "x" else Y) / 5.0)
+    _write_psd(tmp_path / "psd.csv", MapGrid(xs, ys, z, D))
+    fx, px, fy, py = np.genfromtxt(tmp_path / "psd.csv", delimiter=",", skip_header=1).T
+    f, p = (fx, px) if axis == "x" else (fy, py)
+    ok = np.isfinite(f)
+    assert abs(f[ok][np.argmax(p[ok])] - 0.2) < 0.5 * (f[1] - f[0])
+    assert np.nanmax(fx) == pytest.approx(40 / (81 * D)) and np.nanmax(fy) == pytest.approx(20 / (41 * D))
+    assert np.count_nonzero(np.isfinite(fx)) == 41 and np.count_nonzero(np.isfinite(fy)) == 21

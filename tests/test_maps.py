@@ -128,7 +128,7 @@ def test_map_files_round_trip(tmp_path):
     assert np.allclose(at0["y_mm"], 0.0) and np.allclose(at0["x_mm"], at0["s_mm"])
     assert np.allclose(at0["z_mm"][ok], smooth_form(at0["x_mm"][ok], at0["y_mm"][ok]), atol=0.05 * np.std(z))
     psd = np.genfromtxt(tmp_path / "psd.csv", delimiter=",", names=True)
-    assert psd["f_1mm"][0] == 0 and np.all(psd["psd_x_mm3"] >= 0)
+    assert psd["f_x_1mm"][0] == 0 and psd["f_y_1mm"][0] == 0 and np.all(psd["psd_x_mm3"][np.isfinite(psd["psd_x_mm3"])] >= 0)
     for png in ("map.png", "profiles.png", "psd.png"):
         assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -6,7 +6,7 @@ measured region (core.maps.grid). Seed paper 000 builds its form maps the same w
 
 Artifacts: ``map.csv`` (x, y, z in mm per valid node), ``map.x3p`` (ISO 25178-72), ``map.asc``
 (ASCII matrix for polishing machines), ``profiles.csv``, ``psd.csv`` (every CSV states its units in
-its header: ``x [mm]``, ``angle [deg]``, ``f [1/mm]``, ``psd_x [mm^3]``), and the figures
+its header: ``x [mm]``, ``angle [deg]``, ``f_x [1/mm]``, ``psd_x [mm^3]``), and the figures
 ``map.png``, ``profiles.png``, ``psd.png``.
 With ``mesh: ply|stl|obj``, ``map_mesh.<fmt>``: the map grid triangulated over its valid nodes for
 CAD/FEA (core.io.mesh.grid_mesh: two triangles per cell whose four nodes are valid; mm), z = the
@@ -209,7 +209,7 @@ def _map_mesh(grid, channel, params, ctx):
 
 #: the headers of profiles.csv and psd.csv: names and units (docs/formats.md, Files PointsPro writes)
 PROFILES_HEADER = "angle [deg],s [mm],x [mm],y [mm],z [mm]\n"
-PSD_HEADER = "f [1/mm],psd_x [mm^3],psd_y [mm^3]\n"
+PSD_HEADER = "f_x [1/mm],psd_x [mm^3],f_y [1/mm],psd_y [mm^3]\n"
 
 
 def _write_profiles(path, grid, angles, center) -> None:
@@ -229,17 +229,21 @@ def _write_profiles(path, grid, angles, center) -> None:
 
 
 def _write_psd(path, grid) -> None:
-    """f (1/mm), PSD along x and along y (mm^3 = mm² per 1/mm), one-sided, Hann window; the header
-    states the units (PSD_HEADER)."""
+    """The PSD along x against its own frequencies f_x, and along y against f_y (1/mm; mm^3 = mm² per
+    1/mm), one-sided, Hann window; the header states the units (PSD_HEADER). Each direction has its
+    own frequencies (1/(n·Δ) steps up to Nyquist): a non-square map's psd_y was written against f_x
+    (a review: a 5 mm ripple along y peaked at 0.0995 /mm instead of 0.2, and the rows stopped at
+    the shorter direction's length). The shorter pair's columns are left empty below its end."""
     from pointspro.core.metrics.profiles import psd_1d
 
-    fx, px = psd_1d(grid, "x")
-    fy, py = psd_1d(grid, "y")
-    n = min(len(fx), len(fy))
+    fx, px = (a.tolist() for a in psd_1d(grid, "x"))  # Python floats: repr is the shortest exact text
+    fy, py = (a.tolist() for a in psd_1d(grid, "y"))
     with open(path, "w", encoding="utf-8", newline="\n") as f:
         f.write(PSD_HEADER)
-        for a, b, c in zip(fx[:n].tolist(), px[:n].tolist(), py[:n].tolist()):
-            f.write(f"{a!r},{b!r},{c!r}\n")
+        for i in range(max(len(fx), len(fy))):
+            a = f"{fx[i]!r},{px[i]!r}" if i < len(fx) else ","
+            b = f"{fy[i]!r},{py[i]!r}" if i < len(fy) else ","
+            f.write(f"{a},{b}\n")
 
 
 def _resolution_note(spline) -> str | None:
