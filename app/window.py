@@ -443,13 +443,16 @@ class MainWindow(QtWidgets.QMainWindow):
         if res is None:
             self.log("export report: run the pipeline first")
             return
-        from pointspro.core.batch import write_outputs
+        from pointspro.core.batch import check_replaceable, write_outputs
+        from pointspro.core.errors import PointsProError
 
         target = Path(folder)
-        # the report replaces the folder as a whole (all or nothing): never a folder of other files
-        if target.is_dir() and any(target.iterdir()) and not (target / "report.json").exists():
-            self.log(f"export report: {target} holds other files — choose a new or empty folder "
-                     "(an earlier report's folder is replaced)")
+        # the report replaces the folder as a whole (all or nothing): never a folder of other files,
+        # the input, or a file put beside an earlier report (core.batch.check_replaceable)
+        try:
+            check_replaceable(target, [s.input_path] if s.input_path else [], s.input_path or "the cloud")
+        except PointsProError as e:
+            self.log(f"export report: {e} (an earlier report's folder is replaced)")
             return
         recipe = s.recipe  # typed and immutable: safe in the exporter's thread
         inp = str(s.input_path)

@@ -231,7 +231,7 @@ class Result:
         suffix, else "cloud") as the batch does: cloud.csv, the steps' files, form_error.png,
         report.json, report.html; all or nothing (a temporary folder renamed when complete).
         ``figures``: "all", "summary" or "none". Returns the folder."""
-        from .batch import check_output_folder, write_outputs
+        from .batch import check_output_folder, check_replaceable, write_outputs
         from .report import FIGURE_MODES
 
         if figures not in FIGURE_MODES:
@@ -243,6 +243,8 @@ class Result:
         if not stem or Path(stem).name != stem:
             raise PointsProError(f"stem {stem!r} must be a plain folder name")
         folder = out / stem
+        own = [Path(self.input)] if self.input != "(in memory)" else []
+        check_replaceable(folder, own, self.input)  # never the input, a user's folder or their notes
         write_outputs(folder, self.input, self.recipe, self._run, figures=figures,
                       input_sha256=self.input_sha256)
         return folder

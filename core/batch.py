@@ -118,17 +118,30 @@ def check_output_targets(out: Path, inputs: list[Path], stems: list[str]) -> Non
         if stem in BATCH_FILES:
             raise RecipeError(f"{p}: its output folder would be the batch's own {out / stem}; rename "
                               "the input")
-        why = why_not_replace(out / stem, "report.json", inputs)
-        if why is not None and why[0] == "input":
-            raise RecipeError(f"{why[1]}: lies in {out / stem}, the output folder of {p}, which the batch "
-                              "replaces as a whole; copy the input elsewhere or choose another --out")
-        if why is not None and why[0] == "file":
-            raise RecipeError(f"{out / stem}: exists and is not a folder; the batch would put the output "
-                              f"of {p} there — move it or choose another --out")
-        if why is not None:
-            raise RecipeError(f"{out / stem}: exists and is not a PointsPro output folder (no report.json); "
-                              f"the batch would replace it with the output of {p} — move it or choose "
-                              "another --out")
+        check_replaceable(out / stem, inputs, p)
+
+
+def check_replaceable(folder: Path, inputs, of) -> None:
+    """Refuse (RecipeError) writing the output of ``of`` into ``folder``, which write_outputs replaces
+    as a whole, when that would destroy what is not an earlier output of ours: an input inside it, a
+    file, a folder of other files, or an earlier output's folder holding a file it did not write
+    (a user's notes). Shared by the batch, ``Result.write`` (which deleted such a folder, and the
+    input inside it, with no word — a review) and the window's Export report."""
+    why = why_not_replace(folder, "report.json", inputs)
+    if why is None:
+        return
+    if why[0] == "input":
+        raise RecipeError(f"{why[1]}: lies in {folder}, the output folder of {of}, which is replaced as a "
+                          "whole; copy the input elsewhere or choose another output folder")
+    if why[0] == "file":
+        raise RecipeError(f"{folder}: exists and is not a folder; the output of {of} would go there — "
+                          "move it or choose another output folder")
+    if why[0] == "extra":
+        raise RecipeError(f"{folder / why[1].name}: is not one of the files of the earlier output in "
+                          f"{folder}, which is replaced as a whole with the output of {of} — move it or "
+                          "choose another output folder")
+    raise RecipeError(f"{folder}: exists and is not a PointsPro output folder (no report.json); it would "
+                      f"be replaced with the output of {of} — move it or choose another output folder")
 
 
 def write_artifact(folder: Path, name: str, art) -> None:

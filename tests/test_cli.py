@@ -212,6 +212,42 @@ def test_rerun_replaces_a_complete_folder_atomically(run_cli, tmp_path):
     assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["good", "summary.json"]
 
 
+def test_a_file_added_to_an_earlier_output_is_not_deleted_by_a_rerun(run_cli, tmp_path):
+    """An earlier output's folder is replaced as a whole: a user's notes put beside the results were
+    deleted with it, exit 0 (a review). report.json lists the files it wrote; anything else is named."""
+    good, _, recipe = _two_inputs(tmp_path)
+    assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
+    write(tmp_path / "o" / "good" / "notes.txt", "precious")
+    code, _, err = run_cli("--batch", recipe, good, "--out", tmp_path / "o")
+    assert code == 2 and "notes.txt: is not one of the files of the earlier output" in err
+    assert (tmp_path / "o" / "good" / "notes.txt").read_text(encoding="utf-8") == "precious"
+    (tmp_path / "o" / "good" / "notes.txt").unlink()
+    assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
+
+
+def test_api_write_never_destroys_a_users_folder_or_the_input(tmp_path):
+    """Result.write replaced out/<stem> without the batch's checks: a folder of the user's files was
+    deleted, and so was the input lying in it (a review)."""
+    import pointspro.core as pp
+    from pointspro.core.errors import RecipeError
+
+    good, _, recipe = _two_inputs(tmp_path)
+    res = pp.run(recipe, good)
+    (tmp_path / "o" / "good").mkdir(parents=True)
+    write(tmp_path / "o" / "good" / "mine.txt", "precious")
+    with pytest.raises(RecipeError, match="is not a PointsPro output folder"):
+        res.write(tmp_path / "o")
+    assert (tmp_path / "o" / "good" / "mine.txt").is_file()
+    inside = tmp_path / "p" / "good" / "good.csv"
+    inside.parent.mkdir(parents=True)
+    inside.write_bytes(good.read_bytes())
+    with pytest.raises(RecipeError, match="lies in"):
+        pp.run(recipe, inside).write(tmp_path / "p")
+    assert inside.read_bytes() == good.read_bytes()
+    assert (res.write(tmp_path / "q") / "report.json").is_file()  # a new folder, and again over its own
+    assert (res.write(tmp_path / "q") / "report.json").is_file()
+
+
 def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch):
     from pointspro.core import batch
     from pointspro.core.recipe import parse_recipe

@@ -54,7 +54,9 @@ def why_not_replace(target: Path, marker: str, inputs=()) -> tuple[str, Path | N
     """Why ``atomic_dir`` must not replace the folder ``target`` as a whole (it swaps the old one out
     and deletes it): ("input", p) when it is or holds the input ``p``; ("file", None) when it is a
     file or a link; ("foreign", None) when it is a folder with something in it but no ``marker``
-    (report.json, explain.json: not an earlier output of ours). None when it may be replaced. The
+    (report.json, explain.json: not an earlier output of ours); ("extra", name) when it is an earlier
+    output that holds an entry its marker's ``files`` list does not name. None when it may be
+    replaced. The
     callers (the batch's folders, explain's --out) word the refusal."""
     t = Path(target).resolve()
     for p in inputs:
@@ -66,7 +68,28 @@ def why_not_replace(target: Path, marker: str, inputs=()) -> tuple[str, Path | N
         return "file", None
     if target.is_dir() and not (target / marker).is_file() and any(target.iterdir()):
         return "foreign", None
+    if target.is_dir():
+        extra = _not_written_by_it(target, marker)
+        if extra:
+            return "extra", Path(extra)
     return None
+
+
+def _not_written_by_it(folder: Path, marker: str) -> str | None:
+    """The first entry of ``folder`` that its marker (an earlier output's report.json, which lists
+    the ``files`` it wrote) does not list — a user's notes put beside the results were deleted with
+    the folder when the batch ran again (a review). None when all are listed, or when the marker
+    lists nothing (an output from before it did)."""
+    import json
+
+    try:
+        files = json.loads((folder / marker).read_text(encoding="utf-8")).get("files")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(files, list):
+        return None
+    listed = {str(f) for f in files} | {marker}
+    return next((p.name for p in sorted(folder.iterdir()) if p.name not in listed), None)
 
 
 @contextlib.contextmanager

@@ -405,8 +405,13 @@ def test_exports(qtbot, tmp_path):
     mine.mkdir()
     (mine / "notes.txt").write_text("keep", encoding="utf-8")
     win.export_report(mine)
-    assert not win.exporter.busy and "holds other files" in win.log_widget.toPlainText()
+    assert not win.exporter.busy and "is not a PointsPro output folder" in win.log_widget.toPlainText()
     assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+    # nor an earlier report's folder to which the user added a file (it was deleted with the folder)
+    (tmp_path / "rep" / "notes.txt").write_text("keep", encoding="utf-8")
+    win.export_report(tmp_path / "rep")
+    assert not win.exporter.busy and "notes.txt: is not one of the files" in win.log_widget.toPlainText()
+    assert (tmp_path / "rep" / "notes.txt").read_text(encoding="utf-8") == "keep"
 
 
 def test_explain_panel_names_the_missing_effects(qtbot, tmp_path, run_cli):
