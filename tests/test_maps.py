@@ -8,7 +8,7 @@ import pytest
 from pointspro.core import PointCloud
 from pointspro.core.errors import StepError
 from pointspro.core.maps import fit_bspline, grid_map
-from pointspro.core.maps.grid import read_x3p_map
+from pointspro.core.maps.grid import MapGrid, read_x3p_map
 from pointspro.core.metrics import zernike as zk
 from pointspro.core.step import Context
 from pointspro.plugins.bspline_map import BSplineMapStep
@@ -394,3 +394,20 @@ def test_the_map_says_when_the_scan_gaps_set_its_knots():
         assert ("resolution_note" in rep) is noted, rep.get("resolution_note")
         if noted:
             assert "widest gaps between the scan's lines" in rep["resolution_note"]
+
+
+@pytest.mark.parametrize("revision", ["2000", "2017"])
+def test_x3p_record_names_pointspro_and_claims_no_calibration(tmp_path, revision):
+    """Record2 named x3pio as the instrument and wrote the moment of writing as CalibrationDate — in
+    ISO 25178-72 the instrument's last calibration (a review). Now PointsPro and its version, a
+    software probing system; the 2017 revision has no CalibrationDate (the 2000 schema requires one)."""
+    import zipfile
+
+    from pointspro.core import __version__
+
+    g = MapGrid(np.arange(5.0) * 0.5, np.arange(4.0) * 0.5, np.zeros((4, 5)), 0.5)
+    g.write_x3p(tmp_path / "m.x3p", revision=revision)
+    xml = zipfile.ZipFile(tmp_path / "m.x3p").read("main.xml").decode("utf-8")
+    assert "<Manufacturer>PointsPro</Manufacturer>" in xml and f"<Version>{__version__}</Version>" in xml
+    assert "x3pio" not in xml.split("<Record3>")[0]
+    assert ("<CalibrationDate>" in xml) == (revision == "2000")

@@ -113,6 +113,8 @@ def write_x3p_cloud(path, cloud, grid: dict | None = None, revision: str = "2000
     point; the placement puts pixel (0, 0) at the grid's origin (mm → m)."""
     import x3pio
 
+    from ..maps.grid import x3p_record
+
     if grid is None:
         grid, why = grid_of(cloud)
         if grid is None:
@@ -130,4 +132,4 @@ def write_x3p_cloud(path, cloud, grid: dict | None = None, revision: str = "2000
     rev = {"2000": x3pio.Revision.ISO5436_2000, "2017": x3pio.Revision.ISO25178_72_2017_DAM1}[revision]
     x3pio.write(str(path), img.reshape(ny, nx), x_scale=dx * 1e-3, y_scale=dy * 1e-3,
                 placement=x3pio.Placement.translation(x0 * 1e-3, y0 * 1e-3, 0.0),
-                coordinate_system=x3pio.CoordinateSystem.VIEW, revision=rev)
+                coordinate_system=x3pio.CoordinateSystem.VIEW, revision=rev, metadata=x3p_record())

@@ -92,7 +92,21 @@ class MapGrid:
                "2017": x3pio.Revision.ISO25178_72_2017_DAM1}[revision]
         placement = x3pio.Placement.translation(self.xs[0] * 1e-3, self.ys[0] * 1e-3, 0.0)
         x3pio.write(str(path), self.z * 1e-3, x_scale=self.spacing * 1e-3, y_scale=self.spacing * 1e-3,
-                    placement=placement, coordinate_system=x3pio.CoordinateSystem.VIEW, revision=rev)
+                    placement=placement, coordinate_system=x3pio.CoordinateSystem.VIEW, revision=rev,
+                    metadata=x3p_record())
+
+
+def x3p_record():
+    """Record2 of a file PointsPro computed: PointsPro (and its version) as the software that made it
+    — x3pio named itself — with a software probing system and no calibration date: ISO 25178-72's
+    CalibrationDate is the instrument's last calibration, which computed data has none of (a review:
+    every file claimed a calibration at the moment it was written). The 2000 revision's schema
+    requires the element, so x3pio writes the creation date there; the 2017 revision leaves it out."""
+    import x3pio
+
+    from pointspro.core import __version__
+
+    return x3pio.Metadata.for_software("PointsPro", __version__)
 
 
 def read_x3p_map(path: Path) -> MapGrid:
