@@ -168,12 +168,21 @@ def _sniff_delimiter(line: str) -> tuple[str | None, bool]:
         delim = "\t"
     elif ";" in line:
         delim = ";"
-    elif "," in line and not re.search(r"\d,\d+\s+-?\d", line):
+    elif "," in line and not re.search(r"\d,\d+\s+-?\d", line) and not _comma_only_last(line):
         delim = ","
     else:
         delim = None
     decimal_comma = delim != "," and "," in line
     return delim, decimal_comma
+
+
+def _comma_only_last(line: str) -> bool:
+    """"0 0 1,25": columns at whitespace with a decimal comma in the last only (integer x, y) — split
+    at the comma it is no row of numbers ("0 0 1" | "25"), at whitespace it is (a review: "no
+    numeric data rows" for a European export)."""
+    ws = line.split()
+    return (len(ws) > 1 and not all(_is_number(t, False) for t in _split(line, ",") if t != "")
+            and all(_is_number(t, True) for t in ws))
 
 
 def _header_name(tok: str) -> tuple[str, bool, str | None]:
@@ -378,7 +387,7 @@ def _decode(raw: bytes) -> tuple[str, str]:
 def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True) -> _Layout:
     """The first data line, the delimiter, the column count and the header (if any)."""
     first_data, candidates = _first_data_line(path, head, lines, quote)
-    delim, decimal_comma = _sniff_delimiter(lines[first_data])
+    delim, decimal_comma = _sniff_delimiter(_code(lines[first_data]))
     comma_line = first_data if decimal_comma else None
     if delim in (";", "\t") and not decimal_comma:
         # "1;2;3" then "4,5;5;6": a decimal comma in any data row of the head decides, not the first
@@ -386,7 +395,7 @@ def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True)
         comma_line = next((i for i in range(first_data + 1, len(head))
                            if "," in head[i] and _comma_row(head[i], delim)), None)
         decimal_comma = comma_line is not None
-    first_toks = _split(lines[first_data], delim)
+    first_toks = _split(_code(lines[first_data]), delim)
     trailing_empty = bool(first_toks) and first_toks[-1] == ""
     ncols = len(first_toks) - (1 if trailing_empty else 0)
     lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty, comma_line=comma_line)
@@ -450,6 +459,7 @@ def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = T
         line = line.rstrip("\r")
         if _is_comment(line):
             continue
+        line = _code(line)  # "1 2 3 # first point": the rows' parser ends a line at its comment too
         delim, dc = _sniff_delimiter(line)
         toks = _split(line, delim)
         if all(_is_number(t, dc) for t in toks if t != "") and any(t != "" for t in toks):
@@ -474,7 +484,7 @@ def _find_header(path, lines: "_LazyLines", i: int, lay: _Layout, quote: bool = 
     """The header is the last non-numeric line before the data when it has as many fields: split at
     the data's separator, else at the one other separator (tab, ';', ',', whitespace) that gives as
     many fields naming the axes — "y x z" over tab-separated rows, "y;x;z" over "1,2,3"."""
-    hline = lines[i]
+    hline = _code(lines[i])  # "x y z  # probe centres": the names before the comment
     htoks = _header_tokens(hline, lay.delim)
     numeric = [_is_number(t, lay.decimal_comma) for t in htoks]
     if len(htoks) == lay.ncols and all(numeric):  # numbers, split otherwise than the rows after
