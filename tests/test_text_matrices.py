@@ -255,3 +255,15 @@ def test_points_under_a_preamble_with_width_and_height_lines_are_points(tmp_path
     (tmp_path / "g.txt").write_text("# Channel: h\n# Width: 3 mm\n# Height: 2 mm\n# Value units: m\n"
                                     "1 2 3\n4 5 6\n", encoding="utf-8")
     assert read_cloud(tmp_path / "g.txt").meta.get("grid") is not None
+
+
+@pytest.mark.parametrize("rows", ["1,5 1,5 3\n-2 -3 -6\n", "1,5e-09 2,5e-09 3e-09\n4e-09 5e-09 6e-09\n",
+                                  "1,2,3\n4,5,6\n", "1;2;3\n4;5;6\n"])
+def test_a_matrix_with_decimal_commas_or_comma_separators_is_named(tmp_path, rows):
+    """Gwyddion with 'decimal dot' off, or a matrix separated by ',' / ';': "ragged matrix" or "Could
+    not find any topography data" (a review) — one line naming the first such row and what to do."""
+    (tmp_path / "m.txt").write_text("# Channel: h\n# Width: 3 µm\n# Height: 2 µm\n# Value units: m\n" + rows,
+                                    encoding="utf-8")
+    with pytest.raises(InputError, match=r"m\.txt, line 5: values separated by ',' or ';', or written with "
+                                         r"a decimal comma .*decimal dot"):
+        read_cloud(tmp_path / "m.txt")

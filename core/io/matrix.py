@@ -312,6 +312,10 @@ def _check_rows(path: Path):
                 continue
             if not _NUMBER_ROW.match(s) and rows == 0:
                 continue  # header line
+            if "," in s or ";" in s:  # SurfaceTopography's matrix reader splits at whitespace only
+                raise InputError(f"{path}, line {ln}: values separated by ',' or ';', or written with a "
+                                 "decimal comma — a height matrix is read with decimal points between "
+                                 "spaces or tabs (Gwyddion: export with 'decimal dot')")
             toks = _SEP.split(s)
             if not _ROW.match(s):
                 bad = next((f"column {j}: {t[:40]!r} is not a number" for j, t in enumerate(toks, 1)
