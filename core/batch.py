@@ -485,6 +485,8 @@ def apply_override(data, text: str):
         block = data.get(step)
         if block is not None and not isinstance(block, dict):
             return  # parse_recipe names the block's own error
+        if "." in key and key.split(".")[0] in (block or {}):
+            raise RecipeError(f"--set {text}: {step}: key '{key}'" + _nested_hint(step, key, block))
         data[step] = _copy(block or {}, **{key: value})
         return (step, key)
     steps = data.get("steps")
@@ -514,7 +516,7 @@ def apply_override(data, text: str):
         fields = reg.load(sid).Params.model_fields
         if key not in fields:
             raise RecipeError(f"--set {text}: step {i} '{sid}' has no parameter '{key}' (its "
-                              f"parameters: {', '.join(fields) or 'none'})")
+                              f"parameters: {', '.join(fields) or 'none'})" + _nested_hint(step, key, fields))
     if isinstance(entry, str):
         entry = _copy({}, **{sid: {}})
         entry.line = getattr(steps[i - 1], "line", None)
@@ -525,6 +527,16 @@ def apply_override(data, text: str):
         new = _copy(entry, **{sid: _copy(params if isinstance(params, dict) else {}, **{key: value})})
     data["steps"][i - 1] = new
     return ("step", i, key)
+
+
+def _nested_hint(step: str, key: str, names) -> str:
+    """For ``--set step.initial.dx=…``: KEY is one name, a mapping is set whole (a review: "has no
+    parameter 'initial.dx'" beside a list naming `initial`)."""
+    head = key.split(".")[0]
+    if "." not in key or head not in names:
+        return ""
+    return (f"; KEY is one name — set the mapping whole: --set '{step}.{head}={{{key.split('.', 1)[1]}: …}}' "
+            "(what it leaves out takes its default)")
 
 
 # --- the steps' log records, with the input's name, across processes --------------------------------

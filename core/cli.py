@@ -22,7 +22,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .errors import Cancelled, PointsProError
+from .errors import Cancelled, PointsProError, RecipeError
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -66,7 +66,8 @@ exit codes:
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2 (argparse's own convention too)
-        self.exit(EXIT_USAGE, f"pointspro: {message} (see pointspro --help)\n")
+        # a sub-command names its own help (`pointspro explain --help`), which lists its options
+        self.exit(EXIT_USAGE, f"pointspro: {message} (see {self.prog or 'pointspro'} --help)\n")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -278,8 +279,16 @@ def _batch(args, recipe_path: Path, pool) -> int:
     from .batch import check_output_folder, check_output_targets, load_batch_recipe, output_stems
     from .summary import entry, table, write_summary
 
-    recipe = load_batch_recipe(recipe_path, tuple(args.overrides))  # --set applied, then validated
     inputs = [Path(f) for f in args.files[1:]]
+    try:
+        recipe = load_batch_recipe(recipe_path, tuple(args.overrides))  # --set applied, then validated
+    except RecipeError as e:
+        later = next((p for p in inputs if p.suffix.lower() in (".yaml", ".yml")), None)
+        if later is None or recipe_path.suffix.lower() in (".yaml", ".yml"):
+            raise
+        # a review: inputs written first read "asphere_cmm.csv: a recipe is a mapping …"
+        raise RecipeError(f"{e} — --batch takes the recipe first (pointspro --batch RECIPE INPUT… --out "
+                          f"DIR); {later} looks like the recipe") from None
     allowed = _allowed_dirs(recipe_path, inputs, args.allow_path)
     # before any file the recipe names is read; on a cluster without --ship the workers may see
     # paths this machine does not, so only there is a missing one left to the worker to say
@@ -675,8 +684,8 @@ def _batch_exit_code(entries: list[dict], interrupted: bool) -> int:
     if n == 1:
         return EXIT_USAGE
     if len(failed) == n:
-        print(f"pointspro: all {n} inputs failed; nothing was written (see the lines above "
-              "and summary.json)", file=sys.stderr)
+        print(f"pointspro: all {n} inputs failed; no input's outputs were written (see the lines "
+              "above and summary.json)", file=sys.stderr)
     else:
         print(f"pointspro: {len(failed)} of {n} inputs failed; the others are complete",
               file=sys.stderr)

@@ -18,6 +18,7 @@ A step entry may carry ``schema_version: N`` (written by the GUI when it saves) 
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ from pydantic import ValidationError
 from .errors import RecipeError
 from .registry import Registry
 from .surfaces import parse_surface_spec
-from .yamlio import LineDict, dump_yaml, load_yaml, yaml_word
+from .yamlio import LineDict, dump_yaml, load_yaml, read_utf8, yaml_word
 
 RECIPE_VERSION = 1
 TOP_KEYS = ("pointspro", "surface", "input", "inputs", "steps", "uncertainty", "tolerance")
@@ -57,9 +58,16 @@ def format_validation_error(e: ValidationError, prefix: str = "") -> str:
             # named ('pose.dz'); the message names the item and the value itself
             names += err["ctx"]["keys"]
             msg, shown = err["ctx"]["detail"], ""
+        if err["type"] in ("float_parsing", "int_parsing") and isinstance(got, str) and _NUMBER_AND_UNIT.match(got):
+            # "window: 15 mm" (the uncertainty block takes "0.5 um"; a step's parameters do not)
+            shown += "; write a plain number, in the unit the key's help states (lengths in mm)"
         loc = ".".join(names)
         parts.append(f"key '{loc}': {msg}{shown}" if loc else f"{msg}{shown}")
     return prefix + "; ".join(parts)
+
+
+#: a number followed by a word: a unit written into a value ("15 mm", "0.5um")
+_NUMBER_AND_UNIT = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*[^\W\d_]+\s*$")
 
 
 def error_keys(err: dict) -> list:
@@ -242,14 +250,7 @@ def load_recipe(path, registry: Registry | None = None) -> Recipe:
     if not path.is_file():
         raise RecipeError(f"{path}: " + ("is a folder, not a recipe file" if path.is_dir()
                                          else "recipe file not found"))
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as e:  # the line, not the byte offset
-        line = path.read_bytes()[:e.start].count(b"\n") + 1
-        raise RecipeError(f"{path}, line {line}: not UTF-8 text (byte 0x{e.object[e.start]:02x}); save the "
-                          "recipe as UTF-8") from None
-    except OSError as e:
-        raise RecipeError(f"{path}: cannot read the recipe ({e})") from None
+    text = read_utf8(path, "recipe", RecipeError)
     recipe = parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
     # a recipe file is what a batch runs: its order is checked as it is read (a session's project
     # may hold a recipe mid-edit; run_pipeline checks before running any)
@@ -416,6 +417,12 @@ def _parse_step(entry, i: int, steps_at: str, where: str, registry: Registry) ->
         raise RecipeError(f"{loc}: step {i} '{step_id}': parameters must be a mapping, got {raw!r}")
     cls = registry.load(step_id)
     raw = dict(raw)
+    if "enabled" in raw and "enabled" not in cls.Params.model_fields:
+        # a review: `- knn_denoise: {window: 15, enabled: false}` read "unknown key" for the documented switch
+        ln = key_line(entry[step_id] if isinstance(entry, dict) else None, ["enabled"]) or line
+        raise RecipeError(f"{f'{where}, line {ln}' if ln else loc}: step {i} '{step_id}': key 'enabled' "
+                          f"belongs beside the step, not among its parameters: `- {step_id}: {{…}}` with "
+                          "`enabled: false` on the next line, indented under it")
     version = raw.pop("schema_version", cls.Params.schema_version)
     try:
         raw = cls.Params.migrate(raw, int(version))

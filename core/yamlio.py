@@ -163,6 +163,20 @@ def load_yaml(text: str, where: str, error: type[PointsProError] = RecipeError) 
         raise error(f"{where}: not valid YAML (nested too deeply)") from None
 
 
+def read_utf8(path: Path, what: str, error: type[PointsProError] = InputError) -> str:
+    """The text of a YAML file PointsPro reads (a recipe, a project, a measurement model); ``error``
+    naming the line of a byte that is not UTF-8 (not its offset) and what to do, or why it cannot be
+    read."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        line = Path(path).read_bytes()[:e.start].count(b"\n") + 1
+        raise error(f"{path}, line {line}: not UTF-8 text (byte 0x{e.object[e.start]:02x}); save the "
+                    f"{what} as UTF-8") from None
+    except OSError as e:
+        raise error(f"{path}: cannot read the {what} ({e.strerror or e})") from None
+
+
 def read_yaml_mapping(path, what: str, version_key: str, version: int = 1,
                       error: type[PointsProError] = InputError) -> LineDict:
     """A YAML file whose top level is a mapping with ``version_key: version`` (e.g. a project's
@@ -172,10 +186,7 @@ def read_yaml_mapping(path, what: str, version_key: str, version: int = 1,
     path = Path(path)
     if not path.is_file():
         raise error(f"{path}: " + (f"is a folder, not a {what} file" if path.is_dir() else f"{what} file not found"))
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise error(f"{path}: cannot read the {what} ({e})") from None
+    text = read_utf8(path, what, error)
     data = load_yaml(text, str(path), error)
     if not isinstance(data, dict) or version_key not in data:
         raise error(f"{path}: not a PointsPro {what} (no '{version_key}: {version}')")

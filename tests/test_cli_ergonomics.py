@@ -153,10 +153,14 @@ def test_set_overrides_by_id_position_and_surface(run_cli, tmp_path):
     ("aperture.diameter=-5", "key 'diameter'"),
     ("aperture=5", "write STEP.KEY=VALUE"),
     ("aperture.diameter=[1, 2", "not valid YAML"),
+    # a review's unclear messages: a nested key, a unit written into a length
+    ("surface.A.4=1e-12", "KEY is one name — set the mapping whole: --set 'surface.A={4: …}'"),
+    ("aperture.diameter=80 mm", "write a plain number, in the unit the key's help states (lengths in mm)"),
 ])
 def test_set_errors_one_line_exit_2(run_cli, tmp_path, override, says):
     (m0,) = _small_inputs(tmp_path, 1)
-    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - manual_edit: {remove: [1]}\n"
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsurface: {type: even_asphere, c: 1.0e-3, A: {4: 1.0e-12}}\n"
+                   "steps:\n  - manual_edit: {remove: [1]}\n"
                    "  - aperture: {diameter: 80}\n  - manual_edit: {remove: [2]}\n")
     code, out, err = run_cli("--batch", recipe, m0, "--out", tmp_path / "o", "--set", override)
     assert code == 2, err
@@ -461,3 +465,27 @@ def test_the_same_key_set_twice_is_refused(run_cli, tmp_path):
     assert not (tmp_path / "o").exists()
     code, _, err = run_cli(*base, "--set", "surface.k=-0.98", "--set", "knn_denoise.window=12")
     assert code == 0, err
+
+
+def test_unclear_messages_a_review_found(run_cli, tmp_path):
+    """Inputs written before the recipe; `enabled` among a step's parameters; a measurement model that
+    is not UTF-8; a sub-command's usage error pointing to the top-level help; "nothing was written"
+    beside a summary.json that was."""
+    (m0,) = _small_inputs(tmp_path, 1)
+    code, _, err = run_cli("--batch", RECIPE, m0, "--out", tmp_path / "o", "--set", "misalignment.initial.dx=1")
+    assert code == 2 and "KEY is one name — set the mapping whole: --set 'misalignment.initial={dx: …}'" in err
+    code, _, err = run_cli("--batch", m0, RECIPE, "--out", tmp_path / "o")
+    assert code == 2 and "--batch takes the recipe first" in err and f"{RECIPE} looks like the recipe" in err
+    r = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - aperture: {diameter: 80, enabled: false}\n")
+    code, _, err = run_cli("--batch", r, m0, "--out", tmp_path / "o")
+    assert code == 2 and "line 3: step 1 'aperture': key 'enabled' belongs beside the step" in err
+    (tmp_path / "m.yaml").write_bytes("pointspro_model: 1\n# caf\u00e9\n".encode("latin-1"))
+    code, _, err = run_cli("simulate", tmp_path / "m.yaml", "--out", tmp_path / "s.csv")
+    assert code == 2 and "m.yaml, line 2: not UTF-8 text (byte 0xe9); save the measurement model as UTF-8" in err
+    code, _, err = run_cli("explain", "--measured", m0)
+    assert code == 2 and "(see pointspro explain --help)" in err
+    bad = write(tmp_path / "bad.csv", "not numbers\n")
+    bad2 = write(tmp_path / "bad2.csv", "neither\n")
+    code, _, err = run_cli("--batch", RECIPE, bad, bad2, "--out", tmp_path / "f", "--quiet")
+    assert code == 1 and "all 2 inputs failed; no input's outputs were written" in err
+    assert (tmp_path / "f" / "summary.json").is_file()

@@ -158,7 +158,7 @@ def test_measurement_model_read_by_yaml_1_2(tmp_path):
 def test_read_yaml_mapping_names_the_file(tmp_path):
     p = tmp_path / "x.yaml"
     p.write_bytes(b"a: \xff\n")
-    with pytest.raises(InputError, match=r"x.yaml: cannot read the thing"):
+    with pytest.raises(InputError, match=r"x.yaml, line 1: not UTF-8 text \(byte 0xff\); save the thing as UTF-8"):
         read_yaml_mapping(p, "thing", "pointspro_thing")
     p.write_text("pointspro_thing: 1.0\n", encoding="utf-8")
     with pytest.raises(RecipeError, match=r"x.yaml, line 1: thing format 1.0 is not supported"):
