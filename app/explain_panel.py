@@ -87,10 +87,15 @@ class ExplainPanel(QtWidgets.QWidget):
         model = Path(other) if self.kind.currentIndex() == 0 else None
         sim = Path(other) if model is None else None
         measured, boot = s.input_path, self.bootstrap.value()
+        kept = s.input_less_edits()  # the measurement less the points deleted (a snapshot: thread-safe)
+        if kept is not None and kept.n < s.input_cloud.n:
+            self.log.emit(f"explain: comparing the {kept.n:,} points kept ({s.input_cloud.n - kept.n:,} "
+                          "deleted in the window or by the recipe's manual edits)")
         self.folder = out
         self.run.setEnabled(False)
         self.view.setHtml("<p>comparing…</p>")
-        return self.worker.start(lambda _p: explain(measured, out, model, sim, bootstrap=boot))
+        return self.worker.start(lambda _p: explain(measured, out, model, sim, bootstrap=boot,
+                                                    measured_cloud=kept))
 
     def _done(self, report):
         self.report = report

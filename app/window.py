@@ -7,6 +7,7 @@ views (a mask over the shown cloud); Delete records it as a `manual_edit` step.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -46,6 +47,12 @@ def autosave_path() -> Path:
     return Path(base) / "autosave.pointspro.yaml"
 
 
+def unsaved_session_path() -> Path:
+    """Where a session that did not close normally waits, beside the autosave (the same folder: the
+    project's relative input path still holds), until it is restored or discarded."""
+    return autosave_path().with_name("unsaved-session.pointspro.yaml")
+
+
 def _dialogs() -> bool:
     return not os.environ.get("POINTSPRO_NO_DIALOGS")
 
@@ -59,6 +66,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session = Session()
         self._sel = None  # the selection: a mask over the views' cloud (self._shown)
         self.last_report = None
+        self._report_recipe = None
         self._shown = None  # the cloud the views draw (session.view) and the mask of its points shown
         self._keep = None
         ini = os.environ.get("POINTSPRO_SETTINGS")  # tests keep their recent-files list apart
@@ -187,6 +195,11 @@ class MainWindow(QtWidgets.QMainWindow):
             self.setWindowTitle(f"PointsPro — {s.input_path.name}")
         if what != "opened" or s.steps:
             self._autosave_timer.start()
+        if what == "opened":
+            # the last run was of the measurement open before: shown stale, never exported as this
+            # one's (a review: Export report wrote the old file's RMS under the new file's name)
+            self.last_report = None
+            self.report.set_stale("another measurement was opened")
         if what == "deleted":
             self.report.set_stale("points were deleted")
         elif what in ("steps", "recipe", "restored", "undo", "redo") and not self.runner.busy:
@@ -318,6 +331,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self.session.accept(res)  # back in the GUI thread: the model changes and the views follow
         self.last_report = res
+        self._report_recipe = getattr(self, "_run_recipe", self.session.recipe)  # what last_report's numbers are of
         self.report.set_result(res)
         self.pipeline.show_used()  # the "auto" fields: the values the steps computed
         s = res.summary()
@@ -352,11 +366,15 @@ class MainWindow(QtWidgets.QMainWindow):
             ok = self.act(lambda: self.session.load_recipe(p) or True)
         else:
             t0 = time.perf_counter()
-            ok = self.act(lambda: self.session.open(p) or True)
+            dropped = []
+            ok = self.act(lambda: dropped.append(self.session.open(p)) or True)
             if ok:
                 c = self.session.input_cloud
                 self.log(f"read {p}: {c.n:,} points, channels {sorted(c.channels)} "
                          f"({time.perf_counter() - t0:.2f} s)")
+                if dropped and dropped[0]:
+                    self.log(f"  the {dropped[0]} deletion step(s) made in the window on the file open before "
+                             "were dropped: they name that file's rows")
         if ok:
             recent = self.settings.value("recent", []) or []
             recent = [str(p)] + [r for r in recent if r != str(p)]
@@ -371,12 +389,16 @@ class MainWindow(QtWidgets.QMainWindow):
             pass
 
     def export_cloud(self, path) -> None:
-        self.act(lambda: self.session.export_cloud(path))
-        self.log(f"exported the cloud to {path}")
+        if self.act(lambda: self.session.export_cloud(path) or True):  # a failure is logged, not "exported"
+            self.log(f"exported the cloud to {path}")
 
     def export_map(self, path) -> None:
         """The map as shown (.png), or the gridded form-error map of the last run's bspline_map step
-        (.x3p, .csv, .asc)."""
+        (.x3p, .csv, .asc); a failure (a missing folder, a folder named as the file) is one message
+        (a review: an OSError left the menu's slot with nothing said)."""
+        self.act(lambda: self._export_map(path))
+
+    def _export_map(self, path) -> None:
         path = Path(path)
         if path.suffix.lower() == ".png":
             self.map.save_png(path)
@@ -398,7 +420,10 @@ class MainWindow(QtWidgets.QMainWindow):
     def export_mesh(self, path) -> None:
         """The last run's bspline_map map as a triangle mesh for CAD/FEA (.ply binary float64, .stl,
         .obj; mm): the step's map_mesh artifact when it wrote one, else its error map triangulated
-        (core.io.mesh.map_mesh_of)."""
+        (core.io.mesh.map_mesh_of); a failure is one message."""
+        self.act(lambda: self._export_mesh(path))
+
+    def _export_mesh(self, path) -> None:
         from pointspro.core.io.mesh import WRITE_MESH_SUFFIXES, map_mesh_of
 
         path = Path(path)
@@ -454,8 +479,13 @@ class MainWindow(QtWidgets.QMainWindow):
         except PointsProError as e:
             self.log(f"export report: {e} (an earlier report's folder is replaced)")
             return
-        recipe = s.recipe  # typed and immutable: safe in the exporter's thread
+        # the recipe the shown numbers were computed with, not the one edited since (a review: two
+        # manual_edit steps listed beside the numbers of one) — typed and immutable: thread-safe
+        recipe = self._report_recipe
         inp = str(s.input_path)
+        if recipe is not s.recipe:
+            self.log("export report: the recipe changed since the last run; the report is of the last "
+                     "run and its recipe — Run all first to export the changes")
 
         def write(_p):
             write_outputs(Path(folder), inp, recipe, res)
@@ -485,21 +515,29 @@ class MainWindow(QtWidgets.QMainWindow):
         self._autosave_thread.start()
 
     def _offer_restore(self) -> None:
-        p = autosave_path()
-        if not p.is_file():
+        """A session the window did not close normally is moved aside (unsaved_session_path) before
+        this session autosaves over it, and offered until the user restores or discards it (a review:
+        files opened before Restore was clicked autosaved over the crashed session 1.5 s later)."""
+        p, kept = autosave_path(), unsaved_session_path()
+        if p.is_file():
+            with contextlib.suppress(OSError):
+                os.replace(p, kept)
+        if not kept.is_file():
             return
-        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(p.stat().st_mtime))
+        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(kept.stat().st_mtime))
         self.banner_text.setText(f"An unsaved session from {when} was found (the window did not close "
                                  "normally). Restore it?")
         self.banner.show()
 
     def restore_autosave(self) -> None:
         self.banner.hide()
-        self.open_any(str(autosave_path()))
+        kept = unsaved_session_path()
+        self.open_any(str(kept))
+        kept.unlink(missing_ok=True)  # restored: this session's autosave holds it from now on
 
     def discard_autosave(self) -> None:
         self.banner.hide()
-        autosave_path().unlink(missing_ok=True)
+        unsaved_session_path().unlink(missing_ok=True)
 
     def showEvent(self, ev):
         super().showEvent(ev)

@@ -91,11 +91,13 @@ MIN_POINTS = 100
 
 
 def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simulated: Path | None = None,
-            bootstrap: int = 10) -> dict:
+            bootstrap: int = 10, measured_cloud=None) -> dict:
+    """``measured_cloud``: the measured points when they are not the file as read — the window's
+    measurement less the points deleted there (``measured`` then names it)."""
     from ..io import read_cloud
     from ..simulate.model import check_scan, load_model
 
-    meas = read_cloud(measured)
+    meas = read_cloud(measured) if measured_cloud is None else measured_cloud
     if meas.n < MIN_POINTS:
         from ..errors import InputError
 

@@ -126,15 +126,27 @@ class Session:
             self.events.redo()
 
     # -- data -----------------------------------------------------------------------------------------
-    def open(self, path) -> None:
-        """Read a measurement; on error nothing changes and the InputError says why."""
+    def open(self, path) -> int:
+        """Read a measurement; on error nothing changes and the InputError says why. Returns how many
+        of the window's deletions were dropped: they name rows of the measurement open before, and
+        another file's same rows are other points (a review: a second part lost 96 points at the
+        first part's row numbers, without a word). The recipe's own manual_edit steps (another
+        note) stay; opening the same file again keeps the deletions."""
         from ..io import read_cloud
 
         cloud = read_cloud(Path(path), **self.recipe.input)  # the recipe's reader options
+        other = self.input_path is not None and Path(path).resolve() != self.input_path.resolve()
+        window_edits = [s for s in self.recipe.steps if s.id == "manual_edit"
+                        and getattr(s.params, "note", None) == WINDOW_NOTE]
+        if other and window_edits:
+            self.recipe = self.recipe.with_steps([s for s in self.recipe.steps
+                                                  if not any(s is w for w in window_edits)])
         self.input_path, self.input_cloud = Path(path), cloud
-        self._set_view(cloud, None)
+        # the same file again: shown less the deletions its recipe keeps, as Restore all shows it
+        self._set_view(self.input_less_edits() if window_edits and not other else cloud, None)
         self.history.clear()
         self.events.opened(self.input_path)
+        return len(window_edits) if other else 0
 
     def set_recipe(self, data: Recipe | dict, where: str = "recipe") -> None:
         """Replace the recipe (a Recipe, or a mapping validated whole first: on error nothing
@@ -276,15 +288,23 @@ class Session:
             s.id == "manual_edit" and getattr(s.params, "note", None) == WINDOW_NOTE)])
         self.history.push(self._snapshot())
         self.recipe = recipe
-        view = self.input_cloud
-        if view is not None:  # the input less the rows the recipe's own edits still remove
-            from ..step import Context
-
-            for st in recipe.steps:
-                if st.id == "manual_edit" and st.enabled:
-                    view = self.registry.load("manual_edit")().run(view, st.params, Context()).cloud
-        self._set_view(view, None)
+        self._set_view(self.input_less_edits(), None)  # less the rows the recipe's own edits remove
         self.events.restored()
+
+    def input_less_edits(self):
+        """The measurement as read, less the rows the recipe's enabled manual_edit steps remove (the
+        window's deletions and the recipe's own): the points as measured that the user keeps — what
+        explain compares (a review: it read the file again, spikes deleted in the window and all).
+        None when nothing is open."""
+        view = self.input_cloud
+        if view is None:
+            return None
+        from ..step import Context
+
+        for st in self.recipe.steps:
+            if st.id == "manual_edit" and st.enabled:
+                view = self.registry.load("manual_edit")().run(view, st.params, Context()).cloud
+        return view
 
     # -- projects -----------------------------------------------------------------------------------
     def project_text(self, project_path: Path) -> str:

@@ -525,3 +525,103 @@ def test_a_run_whose_recipe_changed_meanwhile_is_not_shown(qtbot):
     win.pipeline.run_all.click()
     qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
     assert "residual" in win.session.shown.channels and win.report.stale.isHidden()
+
+
+def test_opening_another_file_drops_the_last_result_and_the_window_deletions(qtbot, tmp_path):
+    """A review: after opening file B the window kept A's result — Export report wrote A's RMS under
+    B's name — and A's deletions removed B's points at A's row numbers, without a word."""
+    win = _example_window(qtbot, steps=7)
+    win.session.run()
+    win._ran(win.session.last_result)
+    assert win.last_report is not None
+    win.session.delete(np.arange(win.session.shown.n) < 30)
+    assert any(st.get("manual_edit", {}).get("note") == "deleted in the window" for st in win.session.steps)
+    win.open_any(str(_scattered(tmp_path)))
+    assert win.last_report is None and not win.report.stale.isHidden()
+    assert "another measurement was opened" in win.report.stale.text()
+    assert not any(st.get("manual_edit", {}).get("note") == "deleted in the window" for st in win.session.steps)
+    assert "deletion step(s) made in the window on the file open before were dropped" in win.log_widget.toPlainText()
+    assert win.session.shown.n == 2000
+    win.export_report(tmp_path / "rep")
+    assert not (tmp_path / "rep").exists() and "run the pipeline first" in win.log_widget.toPlainText()
+    # the same file again keeps its deletions
+    win.session.delete(np.arange(win.session.shown.n) < 5)
+    win.open_any(str(tmp_path / "c.csv"))
+    assert win.session.shown.n == win.session.input_less_edits().n <= 2000 - 5  # the recipe's own edit too
+    assert any(st.get("manual_edit", {}).get("note") == "deleted in the window" for st in win.session.steps)
+
+
+def test_export_report_after_an_edit_is_the_last_runs_recipe_and_numbers(qtbot, tmp_path):
+    """A review: deleting points after a run and exporting paired the new recipe (two manual_edit
+    steps) with the numbers of the run (one)."""
+    import json
+
+    win = _example_window(qtbot, steps=7)
+    win.session.run()
+    win._ran(win.session.last_result)
+    n_run = win.last_report.cloud.n
+    edits_run = sum("manual_edit" in st for st in win.session.steps)
+    win.session.delete(np.arange(win.session.shown.n) < 40)
+    win.export_report(tmp_path / "rep")
+    qtbot.waitUntil(lambda: not win.exporter.busy, timeout=60_000)
+    rep = json.loads((tmp_path / "rep" / "report.json").read_text(encoding="utf-8"))
+    assert sum("manual_edit" in st for st in rep["recipe"]["steps"]) == edits_run
+    assert rep["summary"]["points_out"] == n_run
+    assert "the recipe changed since the last run" in win.log_widget.toPlainText()
+
+
+def test_export_failures_are_said_not_reported_as_done(qtbot, tmp_path):
+    """A review: Export cloud logged "exported" after its error; Export map (.png) and Export mesh let
+    an OSError out of the menu's slot with nothing said."""
+    win = _example_window(qtbot, steps=7)
+    win.session.run()
+    win._ran(win.session.last_result)
+    missing = tmp_path / "no" / "such"
+    win.export_cloud(missing / "c.csv")
+    log = win.log_widget.toPlainText()
+    assert "error" in log and "exported the cloud" not in log
+    win.export_map(missing / "m.png")  # no exception leaves the slot
+    win.export_mesh(missing / "m.ply")
+    log = win.log_widget.toPlainText()
+    assert log.count("error") >= 3 and "exported the map" not in log
+
+
+def test_a_crashed_session_is_kept_until_restored_or_discarded(qtbot, tmp_path):
+    """A review: files opened before Restore was clicked autosaved over the crashed session, and
+    Restore brought back the new one."""
+    from pointspro.app.window import autosave_path, unsaved_session_path
+
+    win = _window(qtbot, [_scattered(tmp_path)])
+    win.session.add_step("aperture", {"diameter": 80})
+    win.autosave_now()
+    win._autosave_thread.join()
+    w2 = _window(qtbot, [EXAMPLE / "asphere_cmm.csv"])  # the "crash": a new window with another file
+    assert not w2.banner.isHidden()
+    w2.autosave_now()
+    w2._autosave_thread.join()
+    assert unsaved_session_path().is_file() and autosave_path().is_file()
+    w2.restore_autosave()
+    assert w2.session.steps == [{"aperture": {"diameter": 80}}]
+    assert w2.session.input_path.resolve() == (tmp_path / "c.csv").resolve()
+    assert not unsaved_session_path().exists()
+
+
+def test_explain_compares_the_points_kept(qtbot, tmp_path, monkeypatch):
+    """A review: Explain read the file again, the spikes deleted in the window included (gap 5.6 µm
+    for 2 nm). It is given the measurement less the deletions."""
+    import pointspro.core.explain.workflow as wf
+
+    seen = {}
+
+    def fake(measured, out, model, sim, bootstrap=10, measured_cloud=None):
+        seen["n"] = None if measured_cloud is None else measured_cloud.n
+        raise wf.RecipeError("stop here")
+    monkeypatch.setattr(wf, "explain", fake)
+    win = _window(qtbot, [EXAMPLE / "asphere_cmm.csv"])
+    n0 = win.session.input_cloud.n
+    win.session.delete(np.arange(n0) < 25)
+    win.explain.path.setText(str(EXAMPLE / "spiral_model.yaml"))
+    assert win.explain.start()
+    qtbot.waitUntil(lambda: not win.explain.worker.busy, timeout=60_000)
+    assert seen["n"] == n0 - 25
+    assert f"comparing the {n0 - 25:,} points kept (25 deleted" in win.log_widget.toPlainText()
