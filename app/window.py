@@ -361,7 +361,11 @@ class MainWindow(QtWidgets.QMainWindow):
     def open_any(self, path: str) -> None:
         p = Path(path)
         if p.name.endswith((".pointspro.yaml", ".pointspro")):
-            ok = self.act(lambda: self.session.open_project(p) or True)
+            # the recipe runs in the worker, as Run all (a review: a project with edits ran on the GUI
+            # thread, the window frozen and its result missing from the Report tab and the exports)
+            ok = self.act(lambda: self.session.open_project(p, run=False) or True)
+            if ok and any(st.id == "manual_edit" for st in self.session.recipe.steps):
+                self.start_run(None)
         elif p.suffix.lower() in (".yaml", ".yml"):
             ok = self.act(lambda: self.session.load_recipe(p) or True)
         else:

@@ -20,7 +20,10 @@ def test_project_whose_recipe_fails_opens_and_the_log_says_why(qtbot, tmp_path):
                                     "recipe": recipe}), encoding="utf-8")
     win = build_window([])
     qtbot.addWidget(win)
-    win.open_any(str(proj))
+    win.open_any(str(proj))  # the recipe runs in the worker thread, as Run all
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=60_000)
     log = win.log_widget.toPlainText()
-    assert "warning:" in log and "did not run" in log and "no point lies inside the aperture" in log
-    assert win.session.shown is win.session.input_cloud and win.pipeline.list.count() == 2
+    assert "run: " in log and "no point lies inside the aperture" in log
+    assert win.pipeline.bar.format() == "failed"
+    # the project is open, shown less its manual edit's row, the steps there to fix
+    assert win.session.shown.n == win.session.input_cloud.n - 1 and win.pipeline.list.count() == 2

@@ -248,8 +248,9 @@ def test_select_delete_undo_redo_project_and_batch_replay(qtbot, tmp_path, run_c
     # save, reopen in a new window: the same cloud
     win.session.save_project(tmp_path / "p.pointspro.yaml")
     w2 = _window(qtbot)
-    w2.open_any(str(tmp_path / "p.pointspro.yaml"))
-    assert w2.session.shown.equals(win.session.shown)
+    w2.open_any(str(tmp_path / "p.pointspro.yaml"))  # its recipe runs in the worker, as Run all
+    qtbot.waitUntil(lambda: not w2.runner.busy, timeout=120_000)
+    assert w2.session.shown.equals(win.session.shown) and w2.last_report is not None
     # the saved recipe replays identically in the batch
     win.session.save_recipe(tmp_path / "r.yaml")
     code, _, err = run_cli("--batch", tmp_path / "r.yaml", EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o")
