@@ -39,7 +39,7 @@ def format_validation_error(e: ValidationError, prefix: str = "") -> str:
     parts = []
     for err in e.errors():
         names = [str(x) for x in err["loc"] if not str(x).startswith("function-")]
-        msg = err["msg"]
+        msg = err["msg"].removeprefix("Value error, ")  # a validator's own words, without pydantic's tag
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
         elif err["type"] == "missing":

@@ -189,8 +189,12 @@ def test_zernike_bad_input():
     with pytest.raises(StepError, match="cannot determine 36 Zernike terms"):
         _run(ZernikeStep, cloud)
     x, y, z = raster_620(step=20.0)
-    with pytest.raises(StepError, match="term 40 is not among the 36"):
-        _run(ZernikeStep, PointCloud.from_xyz(x, y, z), remove=[40])
+    # an index outside the fitted terms is refused with the parameters (a review: the window's form
+    # took -4 and 400, the run failed later)
+    for bad, ordering in ((40, "fringe"), (-4, "fringe"), (0, "noll"), (36, "ansi")):
+        with pytest.raises(ValidationError, match=f"remove: index {bad} is not among the 36 fitted {ordering} terms"):
+            ZernikeStep.Params.model_validate({"remove": [bad], "ordering": ordering})
+    assert ZernikeStep.Params.model_validate({"remove": [0, 35], "ordering": "ansi"}).remove == [0, 35]
     # a name none of whose terms was fitted: removed nothing, silently, while the figure's title
     # named it (a review); now refused as an index is
     with pytest.raises(StepError, match="remove: spherical is not among the 4 fitted fringe terms"):

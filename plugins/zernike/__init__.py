@@ -15,7 +15,7 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import field_validator
+from pydantic import field_validator, model_validator
 
 from pointspro.core.errors import StepError
 from pointspro.core.metrics import zernike as zk
@@ -48,6 +48,18 @@ class ZernikeParams(PupilCentreParams):
                 raise ValueError(f"unknown term name {t!r}; use one of {', '.join(zk.TERM_NAMES)} "
                                  "or an index")
         return v
+
+    @model_validator(mode="after")
+    def _indices_fitted(self):
+        """An index in ``remove`` names one of the fitted terms: ANSI counts from 0, Fringe and Noll
+        from 1, up to ``terms`` of them (a review: -4 and 400 were taken in the window's form and
+        failed only when the step ran)."""
+        first = 0 if self.ordering == "ansi" else 1
+        for t in self.remove:
+            if isinstance(t, int) and not first <= t < first + self.terms:
+                raise ValueError(f"remove: index {t} is not among the {self.terms} fitted {self.ordering} terms "
+                                 f"({first} … {first + self.terms - 1})")
+        return self
 
 
 #: the terms an evenly sampled area's best-fit plane and sphere are made of (piston, tilt, power)
