@@ -12,7 +12,8 @@
     pointspro simulate / explain                        simulated measurements, missing effects
 
 Exit codes: 0 all done; 1 some inputs failed (the others are complete); 2 usage, recipe or input
-error — one line on stderr naming what is wrong, no traceback unless --debug; 130 interrupted.
+error, or the only input failed — one line on stderr naming what is wrong, no traceback unless
+--debug; 130 interrupted.
 Only the window path imports Qt; the batch, `info` and `steps` paths never do.
 """
 from __future__ import annotations
