@@ -76,18 +76,21 @@ def test_profiles_and_psd_csv_round_trip(tmp_path):
     from pointspro.plugins.bspline_map import _write_profiles, _write_psd
 
     g = _grid()
-    _write_profiles(tmp_path / "profiles.csv", g, (0.0, 45.0), (0.35, 0.0))
+    _write_profiles(tmp_path / "profiles.csv", g, (0.0, 45.0, 90.0), (0.35, 0.0))
     assert (tmp_path / "profiles.csv").read_text(encoding="utf-8").startswith(
         "angle [deg],s [mm],x [mm],y [mm],z [mm]\n")
     back = read_cloud(tmp_path / "profiles.csv")  # rows outside the map (z NaN) are dropped
     assert back.meta["channel_units"] == {"angle": "deg", "s": "mm"}
-    for a in (0.0, 45.0):
+    for a in (0.0, 45.0, 90.0):
         s, z = profile(g, a, (0.35, 0.0))
         ok = np.isfinite(z)
         mine = back["angle"] == a
         assert np.array_equal(back["s"][mine], s[ok]) and np.array_equal(back.z[mine], z[ok])
         t = np.deg2rad(a)
-        assert np.array_equal(back.x[mine], 0.35 + s[ok] * np.cos(t))
+        if a == 90.0:  # exactly the centre's x, and y the nodes' own (a review: x read 0.35 − 3.9e-14)
+            assert np.all(back.x[mine] == 0.35) and np.all(back.y[mine] == s[ok])
+        else:
+            assert np.array_equal(back.x[mine], 0.35 + s[ok] * np.cos(t))
     _write_psd(tmp_path / "psd.csv", g)
     text = (tmp_path / "psd.csv").read_text(encoding="utf-8")
     assert text.startswith("f_x [1/mm],psd_x [mm^3],f_y [1/mm],psd_y [mm^3]\n")

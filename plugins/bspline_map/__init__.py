@@ -215,16 +215,16 @@ PSD_HEADER = "f_x [1/mm],psd_x [mm^3],f_y [1/mm],psd_y [mm^3]\n"
 def _write_profiles(path, grid, angles, center) -> None:
     """angle (degrees), s (mm along the cut through the centre), x, y, z (mm); one block per angle;
     the header states the units (PROFILES_HEADER)."""
-    from pointspro.core.metrics.profiles import profile
+    from pointspro.core.metrics.profiles import cos_sin_deg, profile
 
     with open(path, "w", encoding="utf-8", newline="\n") as f:
         f.write(PROFILES_HEADER)
         for a in angles:
             s, z = profile(grid, a, center)
-            t = np.deg2rad(a)
+            c, sn = cos_sin_deg(a)  # exact at 0°, 90°: the cut's x, y are the nodes' own
             for si, zi in zip(s.tolist(), z.tolist()):
-                f.write(f"{float(a)!r},{si!r},{float(center[0] + si * np.cos(t))!r},"
-                        f"{float(center[1] + si * np.sin(t))!r},"
+                f.write(f"{float(a)!r},{si!r},{float(center[0] + si * c)!r},"
+                        f"{float(center[1] + si * sn)!r},"
                         f"{'nan' if zi != zi else repr(zi)}\n")
 
 
