@@ -63,13 +63,19 @@ def levenberg_marquardt_normal(model: Callable, x0, **options) -> LMResult:
     return _lm(lambda x: (*model(x), None), x0, **options)
 
 
+#: a residual RMS below this (mm: a femtometre) is an exact fit — no measurement tells it from zero
+RMS_FLOOR_MM = 1e-12
+
+
 def _lm(evaluate: Callable, x0, *, max_iter: int = 100, xtol: float = 1e-12, ftol: float = 1e-10,
         floor: float = 1e-13, check: Callable[[], None] | None = None) -> LMResult:
     """Minimise |r(x)|². Converged when an accepted step is below ``xtol`` relative to x, or lowers
     the cost by less than ``ftol`` of it (a parameter error that small moves the fit by 10⁻⁵ of the
     residual's RMS), or when the linear model predicts a gain below ``floor``·cost — the floor set by
     rounding, where no step can be told from noise (without this test LM would keep damping steps
-    it cannot accept)."""
+    it cannot accept) — or when the residual's RMS is below RMS_FLOOR_MM (a review: noise-free points
+    at 4e-25 mm² of cost kept lowering it by more than ``ftol``·cost each step, rounding against
+    rounding, and the fit was refused as "did not converge" after 100 iterations)."""
     x = np.asarray(x0, dtype=np.float64).copy()
     r, A0, g0, J = evaluate(x)
     cost = float(r @ r)
@@ -119,7 +125,7 @@ def _lm(evaluate: Callable, x0, *, max_iter: int = 100, xtol: float = 1e-12, fto
         cost = cost_new
         history.append(cost)
         lam = lam / 10.0 if lam > 1e-9 else 0.0
-        if small_step or small_gain or cost == 0.0:
+        if small_step or small_gain or cost <= RMS_FLOOR_MM ** 2 * max(len(r), 1):
             converged = True
             message = "converged"
             break
