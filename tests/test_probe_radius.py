@@ -208,3 +208,20 @@ def test_noise_free_contact_points_then_misalignment_converge():
     mis = MisalignmentStep().run(res.cloud, MisalignmentStep.Params(), Context(surface=TABLE1_SURFACE))
     assert mis.report["alpha_deg"] == pytest.approx(0.17, abs=1e-9) and mis.report["iterations"] < 100
     assert np.max(np.abs(mis.cloud["residual"])) < 1e-9
+
+
+def test_wrong_side_on_a_nearly_spherical_part_is_not_accepted():
+    """A review: on a nearly spherical asphere the right side's 5-DOF fit cannot separate the tilts
+    from the decentres and is refused, the wrong side's converges with a 2 µm false form error — and
+    the side check's own fit of the right side failed alike and was passed over. It is tried again
+    with the tilts and piston only: the wrong side is refused, naming the right one."""
+    surface = EvenAsphere(c=1 / 2000, k=-0.5, aperture=150.0)
+    g = np.linspace(-74, 74, 80)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    x, y = x[np.hypot(x, y) < 75], y[np.hypot(x, y) < 75]
+    a = 1e-4 / 75.0 ** 2  # 0.1 µm of astigmatism at the edge
+    form = (a * (x * x - y * y), 2 * a * x, -2 * a * y)
+    _, q = centres(surface, Pose(0.3, -0.2, 0.0, 0.0, 1.0), x, y, radius=5.0, side=1, form_error=form)
+    q[:, 2] += 2e-5 * np.random.default_rng(4).standard_normal(len(q))
+    with pytest.raises(StepError, match=r"with side \+1 the centres fit .*× better"):
+        run(q, surface, radius=5.0, side=-1)

@@ -103,13 +103,26 @@ def _other_side_check(surface, centres, dof, params, e, ctx) -> str | None:
     step = max(1, len(centres) // SIDE_CHECK_POINTS)
     sub = centres[::step]
     other = -params.side
-    try:
-        alt = PosedSurfaceFit(surface, sub, dof, params.initial.as_dof(), "normal",
-                              offset=other * params.radius, max_iter=params.max_iterations,
-                              check=ctx.progress.check).fit()
-        _, _, d = alt.foot_point()
-    except (StepError, DomainError):
-        return None
+    # the other side with the same DOF; where that fit cannot separate the tilts from the decentres (a
+    # nearly spherical part), with the tilts and the piston only — a review: the right side's fit
+    # failed so, the wrong side's converged with a 2 µm false form error, and the check's own fit of
+    # the right side failed alike and was passed over in silence
+    tries = [dof] + ([[d for d in dof if d not in ("dx", "dy")]]
+                     if {"dx", "dy"} & set(dof) and {"alpha", "beta"} & set(dof) else [])
+    d = why = None
+    for dofs in tries:
+        try:
+            alt = PosedSurfaceFit(surface, sub, dofs, params.initial.as_dof(), "normal",
+                                  offset=other * params.radius, max_iter=params.max_iterations,
+                                  check=ctx.progress.check).fit()
+            _, _, d = alt.foot_point()
+            break
+        except (StepError, DomainError) as err:
+            why = str(err).split(":")[0]
+    if d is None:
+        return (f"the distance residual RMS {rms * 1e3:.4g} µm is far above a probing error, and the "
+                f"centres could not be fitted with side {other:+d} to compare ({why}): check `side` "
+                "(+1: the ball touches the part from +z, −1: from below)")
     e_alt = d - other * params.radius
     rms_sub = float(np.sqrt(np.mean(e[::step] ** 2)))
     rms_alt = float(np.sqrt(np.mean(e_alt * e_alt)))
