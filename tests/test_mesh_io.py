@@ -70,6 +70,40 @@ def test_stl_copies_are_unified_not_reported(tmp_path):
     assert check_mesh(v, f).problems() == []
 
 
+def _ascii_stl(V, F, digits=None) -> str:
+    fmt = (lambda v: repr(float(v))) if digits is None else (lambda v: f"{v:.{digits}e}")
+    lines = ["solid part"]
+    for t in F:
+        lines += ["  facet normal 0 0 1", "    outer loop"]
+        lines += [f"      vertex {fmt(V[i, 0])} {fmt(V[i, 1])} {fmt(V[i, 2])}" for i in t]
+        lines += ["    endloop", "  endfacet"]
+    return "\n".join(lines + ["endsolid part", ""])
+
+
+def test_ascii_stl_is_read_in_float64(tmp_path):
+    """pymeshlab stores an ASCII STL's vertices in float32: a vertex near 500 mm written with 12
+    digits came back 19 nm off (a review). They are parsed here in float64; a binary STL whose header
+    starts with "solid" is still read as binary."""
+    V, F = sheet(off=(523.456789012345, -800.123456789012))
+    (tmp_path / "a.stl").write_text(_ascii_stl(V, F), encoding="ascii")
+    v, f = read_mesh(tmp_path / "a.stl")  # vertices unified in the order the facets name them
+
+    def corners(V, F):
+        return sorted(tuple(sorted(map(tuple, V[t].tolist()))) for t in F)
+    assert len(v) == len(V) and corners(v, f) == corners(V, F)  # the very same float64 numbers
+    write_mesh(tmp_path / "b.stl", V, F)
+    data = bytearray((tmp_path / "b.stl").read_bytes())
+    data[:5] = b"solid"
+    (tmp_path / "b.stl").write_bytes(bytes(data))
+    v, f = read_mesh(tmp_path / "b.stl")
+    assert len(f) == len(F) and np.allclose(np.array(corners(v, f)), np.array(corners(V, F)), atol=1e-3)
+    assert corners(v, f) != corners(V, F)  # float32, as the binary format stores
+    text = _ascii_stl(V, F)
+    (tmp_path / "cut.stl").write_text(text[: text.index("vertex", len(text) // 2) + 20], encoding="ascii")
+    with pytest.raises(InputError, match=r"cut.stl: cannot read the mesh: .*ASCII STL"):
+        read_mesh(tmp_path / "cut.stl")
+
+
 def test_read_errors(tmp_path):
     with pytest.raises(InputError, match="mesh file not found"):
         read_mesh(tmp_path / "nope.obj")
