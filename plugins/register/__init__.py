@@ -471,6 +471,18 @@ class _Eval:
         self.cost = float(np.mean(d * d)) if np.all(np.isfinite(d)) else float("inf")
 
 
+def _edge_dihedral(fn, key, srt, count) -> np.ndarray:
+    """For each (triangle, edge) of the flattened (T·3) edge list: the angle (rad) between the normals
+    of the two faces on the edge (oriented coherently), 0 on a boundary or non-manifold edge."""
+    out = np.zeros(len(key))
+    ks = key[srt]
+    pair = np.flatnonzero((ks[1:] == ks[:-1]) & (count[srt[1:]] == 2))
+    i, j = srt[pair], srt[pair + 1]
+    ang = np.arccos(np.clip(np.einsum("ij,ij->i", fn[i // 3], fn[j // 3]), -1.0, 1.0))
+    out[i], out[j] = ang, ang
+    return out
+
+
 class _Geometry:
     """What register needs of the nominal beyond ``foot_point``: for a mesh the boundary edges and
     vertices (a foot on them lies beyond the nominal), vertex normals (the smooth surface the facets
@@ -516,6 +528,15 @@ class _Geometry:
         # an edge whose normals differ by more than _CREASE is a crease of the part, not a curvature
         a, b = self.vn[e[..., 0]], self.vn[e[..., 1]]
         theta = np.arccos(np.clip(np.einsum("ijk,ijk->ij", a, b), -1.0, 1.0))
+        # at a crease the vertex normals mix the faces on both sides (a box's rim: top and wall), which
+        # split a 90° edge into "curvature" below the crease limit — flat walls read sagittas of 372 µm
+        # and a chordal error of 125 µm for 0.06 µm (a review): on the edges of a crease's vertices
+        # the angle between the two faces on the edge is taken instead
+        dihedral = _edge_dihedral(self.fn, key, srt, count).reshape(F.shape)
+        on_crease = np.zeros(nv, bool)
+        on_crease[e[dihedral > _CREASE].ravel()] = True
+        near = on_crease[e[..., 0]] | on_crease[e[..., 1]]
+        theta = np.where(near, dihedral, theta)
         L = np.linalg.norm(V[e[..., 0]] - V[e[..., 1]], axis=2)
         self.sagitta = np.max(np.where(theta <= _CREASE, L * theta / 8, 0.0), axis=1)
 
