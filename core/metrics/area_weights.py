@@ -32,7 +32,11 @@ restores (three adjacent of 12: astigmatism 10 % low, the points' mean 23 %); un
 the hull (stars of 5–24 lines, spirals of 10–80 turns, a dense patch, annular stars and spirals;
 spherical aberration, astigmatism with a ripple, an edge, a central bump): within −3.3…+3.5 % where
 the points' RMS was −19…+166 % off (the central bump on an annulus, whose values there are tiny:
-+10 %). Even samplings get no weights — the plain mean is the area mean there, to the last bit:
++10 %). Not within it (an independent review, 2026-11-27): a spiral of few turns with a feature off
+its centre — a 0.2 µm bump 18 mm off the centre of a 50 mm spiral read −31 % at 10 turns (2,000
+points), −15 % at 18 turns, −0.9 % at 40 — because density_centre's medians land 0.2–0.9 mm off a
+coarse spiral's centre (its first turn is not symmetric about it); with the true centre the same
+cases read +4.8 % and +2.7 %. A spiral of ≥ 40 turns, a star or rings are not affected. Even samplings get no weights — the plain mean is the area mean there, to the last bit:
 pixel maps (points on a lattice holding at least MAP_OCCUPANCY of its nodes in their hull: a map's
 valid pixels are its measured area, dropouts or not — interferometer practice; a sparse subset of a
 lattice, a fine patch in a coarse raster, is weighted), those core.metrics.sampling.uniform_sampling
