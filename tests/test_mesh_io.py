@@ -119,6 +119,12 @@ def test_read_errors(tmp_path):
     write_mesh(tmp_path / "pts.ply", V, np.zeros((0, 3), int))
     with pytest.raises(InputError, match=r"pts.ply: unusable nominal mesh: it has no faces"):
         load_mesh(tmp_path / "pts.ply")
+    V, F = sheet()  # coordinates MeshLab cannot parse read as 0: named, not "duplicated vertices" (a review)
+    (tmp_path / "repr.obj").write_text("".join(f"v np.float64({a}) {b} {c}\n".replace(f" {b} {c}", f" np.float64({b}) np.float64({c})")
+                                               for a, b, c in V.tolist()) + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F.tolist()),
+                                       encoding="utf-8")
+    with pytest.raises(InputError, match=r"repr.obj: cannot read the mesh: all 121 vertices are at one point"):
+        read_mesh(tmp_path / "repr.obj")
     (tmp_path / "m.xyz").write_text("0 0 0\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"m.xyz: not a mesh file"):
         read_mesh(tmp_path / "m.xyz")
@@ -335,3 +341,29 @@ def test_simulate_never_writes_over_the_models_nominal_mesh(run_cli, tmp_path):
     code, _, err = run_cli("simulate", tmp_path / "m.yaml", "--out", tmp_path / "part.ply")
     assert code == 2 and "is the model's nominal mesh (part.ply)" in err
     assert (tmp_path / "part.ply").read_bytes() == before
+
+
+@pytest.mark.parametrize("unit, mm", [("millimeter", 1.0), ("meter", 1000.0), ("inch", 25.4), ("micron", 1e-3)])
+def test_a_3mf_is_read_in_its_stated_unit(tmp_path, unit, mm):
+    """A 3MF states its unit on its model (millimetre by default); a model in metres or inches was read
+    as mm (a review)."""
+    import zipfile
+
+    V, F = sheet(h=0.01)
+    verts = "".join(f'<vertex x="{a!r}" y="{b!r}" z="{c!r}"/>' for a, b, c in V.tolist())
+    tris = "".join(f'<triangle v1="{a}" v2="{b}" v3="{c}"/>' for a, b, c in F.tolist())
+    model = (f'<?xml version="1.0" encoding="UTF-8"?><model unit="{unit}" xml:lang="en-US" '
+             'xmlns="http://schemas.microsoft.com/3dmanufacturing/core/2015/02"><resources><object id="1" '
+             f'type="model"><mesh><vertices>{verts}</vertices><triangles>{tris}</triangles></mesh></object>'
+             '</resources><build><item objectid="1"/></build></model>')
+    with zipfile.ZipFile(tmp_path / "m.3mf", "w") as z:
+        z.writestr("[Content_Types].xml", '<?xml version="1.0" encoding="UTF-8"?><Types xmlns="http://schemas.'
+                   'openxmlformats.org/package/2006/content-types"><Default Extension="rels" ContentType='
+                   '"application/vnd.openxmlformats-package.relationships+xml"/><Default Extension="model" '
+                   'ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/></Types>')
+        z.writestr("_rels/.rels", '<?xml version="1.0" encoding="UTF-8"?><Relationships xmlns="http://schemas.'
+                   'openxmlformats.org/package/2006/relationships"><Relationship Target="/3D/3dmodel.model" '
+                   'Id="rel0" Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/></Relationships>')
+        z.writestr("3D/3dmodel.model", model)
+    v, f = read_mesh(tmp_path / "m.3mf")
+    assert np.allclose(np.ptp(v, axis=0), np.ptp(V, axis=0) * mm, rtol=1e-6)

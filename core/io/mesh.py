@@ -78,7 +78,44 @@ def read_mesh(path, *, reader: str = "auto") -> tuple[np.ndarray, np.ndarray]:
         V, F = _read_pymeshlab(path)
     if suffix == ".stl":  # one vertex record per face corner: unify them (exactly equal ones)
         V, F = merge_duplicate_vertices(V, F)
+    if suffix == ".3mf":
+        scale = _3mf_unit_to_mm(path)
+        if scale != 1.0:
+            V = V * scale
+    if len(V) >= 3 and not np.ptp(V, axis=0).any():
+        # MeshLab reads a coordinate it cannot parse as 0 (`v np.float64(-20.0) …`): every vertex at one
+        # point was "6560 duplicated vertices, 12800 degenerate faces" (a review)
+        raise InputError(f"{path}: cannot read the mesh: all {len(V):,} vertices are at one point "
+                         f"({V[0, 0]:g}, {V[0, 1]:g}, {V[0, 2]:g}) — its coordinates are not numbers the "
+                         "reader takes?")
     return V, F
+
+
+#: 3MF's units (3MF Core Specification §3.3, the model's ``unit`` attribute; millimetre by default)
+_3MF_UNITS = {"micron": 1e-3, "millimeter": 1.0, "centimeter": 10.0, "inch": 25.4, "foot": 304.8,
+              "meter": 1000.0}
+
+
+def _3mf_unit_to_mm(path: Path) -> float:
+    """mm per unit of a 3MF's model, which states its unit (pymeshlab reads the numbers as they are: a
+    model in metres or inches was taken as mm — a review)."""
+    import re
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            name = next((n for n in z.namelist() if n.lower().endswith(".model")), None)
+            head = z.open(name).read(8192).decode("utf-8", "replace") if name else ""
+    except (OSError, zipfile.BadZipFile, KeyError):
+        return 1.0  # pymeshlab read it; its unit is the default
+    m = re.search(r"<(?:\w+:)?model\b[^>]*?\sunit\s*=\s*[\"']([^\"']+)[\"']", head)
+    if not m:
+        return 1.0
+    unit = m.group(1).strip().lower()
+    if unit not in _3MF_UNITS:
+        raise InputError(f"{path}: the 3MF model's unit {m.group(1)!r} is none of the standard's "
+                         f"({', '.join(_3MF_UNITS)})")
+    return _3MF_UNITS[unit]
 
 
 def _is_ascii_stl(path: Path) -> bool:
