@@ -55,6 +55,33 @@ def test_cancel_stops_the_child_and_wait_after_it_is_a_no_op(tmp_path, forking):
         os.waitpid(pid, os.WNOHANG)
 
 
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_child_signalled_with_its_group_ends_without_a_python_error(tmp_path, forking, sig):
+    """Ctrl-C and `timeout` signal the whole process group: the child had the batch's SIGTERM handler
+    (raise KeyboardInterrupt) and sent back "KeyboardInterrupt: " as its error (a review saw that line
+    printed). It now ends at once, as a process without handlers does."""
+    import signal
+    import threading
+
+    previous = signal.signal(signal.SIGTERM, lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
+    ready_r, ready_w = os.pipe()
+
+    def work():  # runs after the child set its handlers: says so, then waits for ever
+        os.write(ready_w, b"1")
+        threading.Event().wait()
+    try:
+        job = background.BackgroundWrite(work, what="cloud.csv")
+        assert os.read(ready_r, 1) == b"1"
+        os.kill(job.pid, getattr(signal, sig))
+        with pytest.raises(OSError) as e:
+            job.wait()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        os.close(ready_r)
+        os.close(ready_w)
+    assert "KeyboardInterrupt" not in str(e.value) and "ended with" in str(e.value)
+
+
 def test_inline_when_threads_are_running(tmp_path):
     """A process with other threads (the window) never forks: the write happens inline."""
     import threading

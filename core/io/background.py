@@ -36,6 +36,7 @@ class BackgroundWrite:
         if pid == 0:  # the child: run, report an error's one line through the pipe, never return
             code = 0
             try:
+                _die_on_interrupt()
                 os.close(r)
                 fn(*args)
             except BaseException as e:  # noqa: BLE001 — reported to the parent, which raises it
@@ -75,6 +76,19 @@ class BackgroundWrite:
             return
         _kill(self.pid, self._read)
         self.pid = None
+
+
+def _die_on_interrupt() -> None:
+    """In a forked child: SIGINT and SIGTERM end it at once, as they do a process that set no
+    handler. A terminal's Ctrl-C and `timeout` signal the whole process group; the child had the
+    batch's SIGTERM handler (raise KeyboardInterrupt) and Python's SIGINT one, and sent back
+    "KeyboardInterrupt: " as its error — a line a review saw printed once. The batch itself gets the
+    signal too and stops the inputs; a child ended so leaves only its temporary file, which the
+    batch removes with the input's temporary folder."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _can_fork() -> bool:
@@ -132,6 +146,7 @@ def share_out(tasks, *, workers: int, fork: bool = True) -> dict[str, float]:
             if pid == 0:  # a child: its share of the queue; its seconds or its error back; never return
                 code, mine = 0, {}
                 try:
+                    _die_on_interrupt()
                     os.close(r)
                     drain(mine, True)
                     msg = json.dumps(mine)
