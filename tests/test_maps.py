@@ -415,3 +415,26 @@ def test_x3p_record_names_pointspro_and_claims_no_calibration(tmp_path, revision
     assert "<Manufacturer>PointsPro</Manufacturer>" in xml and f"<Version>{__version__}</Version>" in xml
     assert "x3pio" not in xml.split("<Record3>")[0]
     assert ("<CalibrationDate>" in xml) == (revision == "2000")
+
+
+@pytest.mark.parametrize("noise_nm, warned", [(0.0, False), (2.0, True), (10.0, True)])
+def test_extrapolated_map_reports_the_measured_nodes_and_warns(noise_nm, warned):
+    """A review: points to 9 mm mapped with `extrapolate` over a 20 mm aperture read map PV 3155 nm for
+    a true 418 nm at 10 nm of noise (791 nm at 2 nm) without a word. The report now gives the map's
+    RMS and PV over the measured nodes and the extrapolated share, and warns when the PV over all
+    nodes is well above the measured nodes'."""
+    import pointspro.core as pp
+
+    g = np.arange(-9.0, 9.0 + 1e-9, 0.12)
+    X, Y = np.meshgrid(g, g)
+    k = np.hypot(X, Y) <= 9.0
+    x, y = X[k], Y[k]
+    r2 = (x * x + y * y) / 100.0
+    v = 80e-6 * (x * x - y * y) / 100.0 + 30e-6 * (6 * r2 * r2 - 6 * r2 + 1)
+    v = v + np.random.default_rng(7).normal(0, noise_nm * 1e-6, v.size)
+    res = pp.run({"steps": [{"bspline_map": {"diameter": 20.0, "extrapolate": True}}]},
+                 pp.PointCloud.from_numpy(np.column_stack([x, y, v]), residual=v))
+    rep = res.steps[-1].report
+    assert 0.1 < rep["extrapolated_node_fraction"] < 0.3
+    assert rep["map_pv_measured_um"] < 0.45  # the field over the points: ~0.32 µm
+    assert any("extrapolated beyond the points" in w for w in rep["warnings"]) == warned

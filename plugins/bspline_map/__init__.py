@@ -150,6 +150,8 @@ class BSplineMapStep(Step):
         }
         if resolution:
             report["resolution_note"] = resolution
+        if params.extrapolate:
+            _extrapolation_report(report, grid, spline, spacing, x, y, diameter, center)
         unit = params.matrix_unit
         mesh_art = None
         if params.mesh != "none":
@@ -184,6 +186,41 @@ class BSplineMapStep(Step):
     @classmethod
     def example_params(cls) -> dict:
         return {}
+
+
+#: the map's PV over all its nodes above this many times its PV over the measured ones: warned
+EXTRAPOLATION_PV_RATIO = 1.5
+
+
+def _extrapolation_report(report, grid, spline, spacing, x, y, diameter, center) -> None:
+    """With ``extrapolate``, the nodes beyond the measured points are the continuation of the outermost
+    knot cells, where the noise is least held: a review's 9 mm of points mapped over 20 mm read PV
+    3155 nm for a true 418 nm at 10 nm of noise (791 nm at 2 nm), with no word. The report gives the
+    map's RMS and PV over the measured nodes too, the share of extrapolated nodes, and a warning when
+    the PV over all of them is well above the measured nodes' (EXTRAPOLATION_PV_RATIO)."""
+    from pointspro.core.maps import grid_map
+
+    measured = grid_map(spline, spacing, x, y, diameter=diameter, center=center, extrapolate=False)
+    key = {(i, j) for i, j in zip(*(np.rint(a / spacing).astype(np.int64) for a in measured.nodes()[:2]))}
+    X, Y = np.meshgrid(grid.xs, grid.ys)
+    ok = grid.valid
+    ix, iy = np.rint(X[ok] / spacing).astype(np.int64), np.rint(Y[ok] / spacing).astype(np.int64)
+    inside = np.fromiter(((i, j) in key for i, j in zip(ix.tolist(), iy.tolist())), bool, count=ix.size)
+    zv = grid.z[ok]
+    if not inside.any():
+        return
+    pv_all, pv_in = float(np.ptp(zv)), float(np.ptp(zv[inside]))
+    report.update(map_rms_measured_um=float(np.std(zv[inside]) * 1e3), map_pv_measured_um=pv_in * 1e3,
+                  extrapolated_node_fraction=float(1.0 - inside.mean()))
+    if pv_all > EXTRAPOLATION_PV_RATIO * pv_in:
+        from pointspro.core.units import format_length
+
+        report["warnings"].append(
+            f"the map's PV {format_length(pv_all, 4)} includes {1.0 - inside.mean():.0%} of its nodes "
+            f"extrapolated beyond the points; over the measured nodes it is {format_length(pv_in, 4)}. "
+            "Beyond the points the map is the continuation of the outermost knot cells, which their noise "
+            "swings (a few nm of noise: µm at the rim) — use extrapolate only where the map must cover the "
+            "whole aperture (map_pv_measured_um, map_rms_measured_um in the report)")
 
 
 def _map_mesh(grid, channel, params, ctx):
