@@ -182,8 +182,12 @@ class ZernikeStep(Step):
                 f"terms trade against each other on these points — fit fewer terms, or check the "
                 f"pupil (centre ({c[0]:.6g}, {c[1]:.6g}) mm, radius {R:.6g} mm, {pupil.how})")
         if cond > 1e6:
+            # a patch off the axis of a nominal with an aperture: the pupil is the whole aperture and
+            # the coefficients its wild extrapolation (a review: Z(2,2) −5.9·10⁸ nm) — the pupil named
             warnings.append(f"the terms are nearly dependent on these points (condition {cond:.3g}): "
-                            "fewer terms, or a fuller sampling of the aperture")
+                            f"fewer terms, a fuller sampling of the pupil, or a pupil the points fill — "
+                            f"`centre` and `norm_radius` (now centre ({c[0]:.6g}, {c[1]:.6g}) mm, radius "
+                            f"{R:.6g} mm, {pupil.how})")
         # the report's RMS is over the area (docs/conventions.md, Summary figures): a star scan crowds
         # its centre, and its points' RMS read astigmatism ~20 % low (tests/test_area_rms_reports.py);
         # an even sampling: the points' RMS, as before
