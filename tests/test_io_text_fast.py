@@ -106,3 +106,17 @@ def test_a_space_before_an_opening_quote_is_named(tmp_path, body, where):
     p.write_text(body, encoding="utf-8")
     with pytest.raises(InputError, match=where + r": ' \"\d\"' has a space before its opening quote"):
         read_cloud(p)
+
+
+@pytest.mark.parametrize("text, channel", [("Pt# X Y Z\n1 0.0 0.0 1.0\n2 1.0 0.0 1.5\n3 0.0 1.0 2.0\n", "pt"),
+                                           ("Pt#,X,Y,Z\n1,0.0,0.0,1.0\n2,1.0,0.0,1.5\n3,0.0,1.0,2.0\n", "pt"),
+                                           ("X Y Z Refl[%]\n0.0 0.0 1.0 50\n1.0 0.0 1.5 60\n0.0 1.0 2.0 70\n",
+                                            "refl")])
+def test_a_comment_marker_inside_a_column_name_is_part_of_it(tmp_path, text, channel):
+    """A review of the inline-comment fix: cut at any marker, "Pt# X Y Z" became "Pt" — a title — and
+    the point numbers became x, silently; "Refl[%]" was refused. A marker starts a comment only at the
+    start of a field."""
+    p = tmp_path / "h.txt"
+    p.write_text(text, encoding="utf-8")
+    c = read_cloud(p)
+    assert np.array_equal(c.xyz, [[0.0, 0.0, 1.0], [1.0, 0.0, 1.5], [0.0, 1.0, 2.0]]) and channel in c.channels

@@ -97,6 +97,17 @@ def _code(line: str) -> str:
     return line
 
 
+_INLINE_COMMENT = re.compile(r"(?:^|(?<=[\s,;]))(?:#|//|%|!)")
+
+
+def _uncommented(line: str) -> str:
+    """``line`` up to a comment marker that starts a field (after whitespace or a separator): "1 2 3 #
+    first point" is a row; "Pt# X Y Z" and "X Y Z Refl[%]" keep their names (a review: cut at any
+    marker, "Pt#" became a title and the point numbers x)."""
+    m = _INLINE_COMMENT.search(line)
+    return line[:m.start()] if m else line
+
+
 def _split(line: str, delim: str | None) -> list[str]:
     parts = line.strip().split(delim) if delim else line.split()
     return [p.strip() for p in parts]
@@ -387,7 +398,7 @@ def _decode(raw: bytes) -> tuple[str, str]:
 def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True) -> _Layout:
     """The first data line, the delimiter, the column count and the header (if any)."""
     first_data, candidates = _first_data_line(path, head, lines, quote)
-    delim, decimal_comma = _sniff_delimiter(_code(lines[first_data]))
+    delim, decimal_comma = _sniff_delimiter(_uncommented(lines[first_data]))
     comma_line = first_data if decimal_comma else None
     if delim in (";", "\t") and not decimal_comma:
         # "1;2;3" then "4,5;5;6": a decimal comma in any data row of the head decides, not the first
@@ -395,7 +406,7 @@ def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True)
         comma_line = next((i for i in range(first_data + 1, len(head))
                            if "," in head[i] and _comma_row(head[i], delim)), None)
         decimal_comma = comma_line is not None
-    first_toks = _split(_code(lines[first_data]), delim)
+    first_toks = _split(_uncommented(lines[first_data]), delim)
     trailing_empty = bool(first_toks) and first_toks[-1] == ""
     ncols = len(first_toks) - (1 if trailing_empty else 0)
     lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty, comma_line=comma_line)
@@ -459,7 +470,7 @@ def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = T
         line = line.rstrip("\r")
         if _is_comment(line):
             continue
-        line = _code(line)  # "1 2 3 # first point": the rows' parser ends a line at its comment too
+        line = _uncommented(line)  # "1 2 3 # first point": the rows' parser ends a line at its comment too
         delim, dc = _sniff_delimiter(line)
         toks = _split(line, delim)
         if all(_is_number(t, dc) for t in toks if t != "") and any(t != "" for t in toks):
@@ -484,7 +495,7 @@ def _find_header(path, lines: "_LazyLines", i: int, lay: _Layout, quote: bool = 
     """The header is the last non-numeric line before the data when it has as many fields: split at
     the data's separator, else at the one other separator (tab, ';', ',', whitespace) that gives as
     many fields naming the axes — "y x z" over tab-separated rows, "y;x;z" over "1,2,3"."""
-    hline = _code(lines[i])  # "x y z  # probe centres": the names before the comment
+    hline = _uncommented(lines[i])  # "x y z  # probe centres": the names before the comment
     htoks = _header_tokens(hline, lay.delim)
     numeric = [_is_number(t, lay.decimal_comma) for t in htoks]
     if len(htoks) == lay.ncols and all(numeric):  # numbers, split otherwise than the rows after
