@@ -301,6 +301,7 @@ class MainWindow(QtWidgets.QMainWindow):
             res.summary()  # the metrics fit a map: in the worker, not in the GUI thread
             return res
         self._run_recipe = session.recipe  # what the run computes (Recipe edits make new objects)
+        self._run_input = session.input_cloud  # and of which measurement (another opened meanwhile)
         self.runner.start(job)
 
     def cancel_run(self):
@@ -321,6 +322,12 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _ran(self, res):
         self._run_ended()
+        if getattr(self, "_run_input", self.session.input_cloud) is not self.session.input_cloud:
+            # another measurement was opened while the steps ran (a review: its result was then taken
+            # as the new file's, and Export report wrote it under the new name)
+            self.pipeline.bar.setFormat("discarded")
+            self.log("run: another measurement was opened while it ran; its result is discarded")
+            return
         if self.session.recipe is not getattr(self, "_run_recipe", self.session.recipe):
             # the recipe changed while the steps ran (an edit, Undo, Restore all): the result is of
             # the recipe as it was, and shown it would undo the change on screen (a review: points
@@ -358,7 +365,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.report.set_stale("a run was cancelled" if cancelled else "a run failed")
 
     # -- files ----------------------------------------------------------------------------------------
-    def open_any(self, path: str) -> None:
+    def open_any(self, path: str) -> bool:
         p = Path(path)
         if p.name.endswith((".pointspro.yaml", ".pointspro")):
             # the recipe runs in the worker, as Run all (a review: a project with edits ran on the GUI
@@ -384,6 +391,7 @@ class MainWindow(QtWidgets.QMainWindow):
             recent = [str(p)] + [r for r in recent if r != str(p)]
             self.settings.setValue("recent", recent[:10])
             QtCore.QTimer.singleShot(0, self._warm)
+        return bool(ok)
 
     def _warm(self):
         """Load the step classes while the optician looks at the data, so the first edit is quick."""
@@ -536,8 +544,9 @@ class MainWindow(QtWidgets.QMainWindow):
     def restore_autosave(self) -> None:
         self.banner.hide()
         kept = unsaved_session_path()
-        self.open_any(str(kept))
-        kept.unlink(missing_ok=True)  # restored: this session's autosave holds it from now on
+        if self.open_any(str(kept)):  # restored: this session's autosave holds it from now on
+            kept.unlink(missing_ok=True)
+        # else kept, offered again at the next start (its data file moved: put back, then restore)
 
     def discard_autosave(self) -> None:
         self.banner.hide()

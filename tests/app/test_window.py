@@ -626,3 +626,33 @@ def test_explain_compares_the_points_kept(qtbot, tmp_path, monkeypatch):
     qtbot.waitUntil(lambda: not win.explain.worker.busy, timeout=60_000)
     assert seen["n"] == n0 - 25
     assert f"comparing the {n0 - 25:,} points kept (25 deleted" in win.log_widget.toPlainText()
+
+
+def test_a_run_of_the_file_open_before_is_discarded(qtbot, tmp_path):
+    """A review of this session's change: a file opened while the steps ran got the old file's result
+    when the run ended, and Export report wrote it under the new name."""
+    win = _example_window(qtbot, steps=7)
+    win.start_run(None)
+    assert win.runner.busy
+    win.open_any(str(_scattered(tmp_path)))
+    qtbot.waitUntil(lambda: not win.runner.busy, timeout=120_000)
+    assert win.last_report is None and win.session.shown.n == 2000
+    assert "another measurement was opened while it ran" in win.log_widget.toPlainText()
+
+
+def test_a_restore_that_fails_keeps_the_unsaved_session(qtbot, tmp_path):
+    """A review: Restore deleted the kept session even when it could not be opened (its data file
+    moved): putting the file back no longer helped."""
+    from pointspro.app.window import unsaved_session_path
+
+    win = _window(qtbot, [_scattered(tmp_path)])
+    win.session.add_step("aperture", {"diameter": 80})
+    win.autosave_now()
+    win._autosave_thread.join()
+    (tmp_path / "c.csv").rename(tmp_path / "moved.csv")
+    w2 = _window(qtbot)
+    w2.restore_autosave()
+    assert "moved or deleted" in w2.log_widget.toPlainText() and unsaved_session_path().is_file()
+    (tmp_path / "moved.csv").rename(tmp_path / "c.csv")
+    w2.restore_autosave()
+    assert w2.session.steps == [{"aperture": {"diameter": 80}}] and not unsaved_session_path().exists()
