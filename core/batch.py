@@ -88,14 +88,16 @@ def output_stems(inputs: list[Path]) -> list[str]:
 BATCH_FILES = ("summary.json",)
 
 
-def check_output_targets(out: Path, inputs: list[Path], stems: list[str]) -> None:
+def check_output_targets(out: Path, inputs: list[Path], stems: list[str], resume: bool = False) -> None:
     """Refuse, before anything is written, a batch whose outputs would destroy what is not its own:
     an input's folder ``out/<stem>`` replaces a folder as a whole, so it must not hold an input, be
     a file, or be a folder that is not a PointsPro output (no report.json; an empty one is fine);
     no input may be named like the batch's own files (``summary.json``) or be one of them, and an
     existing summary.json must be a batch's. Measured before this check: an input o/part/part.csv
     with --out o was deleted with its folder, an input o/summary.json overwritten by the summary, a
-    folder o/<stem> of the user's notes replaced — all with exit status 0."""
+    folder o/<stem> of the user's notes replaced — all with exit status 0. With ``resume`` a file added
+    to an earlier output's folder is checked later, for the inputs --resume runs again
+    (cli._plan_jobs): a skipped input's folder stays as it is, notes and all."""
     import json
 
     out_r = out.resolve()
@@ -118,10 +120,10 @@ def check_output_targets(out: Path, inputs: list[Path], stems: list[str]) -> Non
         if stem in BATCH_FILES:
             raise RecipeError(f"{p}: its output folder would be the batch's own {out / stem}; rename "
                               "the input")
-        check_replaceable(out / stem, inputs, p)
+        check_replaceable(out / stem, inputs, p, extra=not resume)
 
 
-def check_replaceable(folder: Path, inputs, of) -> None:
+def check_replaceable(folder: Path, inputs, of, extra: bool = True) -> None:
     """Refuse (RecipeError) writing the output of ``of`` into ``folder``, which write_outputs replaces
     as a whole, when that would destroy what is not an earlier output of ours: an input inside it, a
     file, a folder of other files, or an earlier output's folder holding a file it did not write
@@ -136,6 +138,8 @@ def check_replaceable(folder: Path, inputs, of) -> None:
     if why[0] == "file":
         raise RecipeError(f"{folder}: exists and is not a folder; the output of {of} would go there — "
                           "move it or choose another output folder")
+    if why[0] == "extra" and not extra:
+        return  # --resume: checked again for the inputs it runs (a skipped one's folder stays as it is)
     if why[0] == "extra":
         raise RecipeError(f"{folder / why[1].name}: is not one of the files of the earlier output in "
                           f"{folder}, which is replaced as a whole with the output of {of} — move it or "

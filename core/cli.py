@@ -298,7 +298,7 @@ def _batch(args, recipe_path: Path, pool) -> int:
     _check_surface_needed(recipe, recipe_path, surface)
     out = Path(args.out)
     stems = output_stems(inputs)
-    check_output_targets(out, inputs, stems)  # before the folder is made: a refusal leaves nothing
+    check_output_targets(out, inputs, stems, resume=args.resume)  # before the folder is made: a refusal leaves nothing
     made = not out.exists()
     check_output_folder(out)
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
@@ -564,6 +564,11 @@ def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: 
             results[str(path)] = entry(str(path), "skipped", report=done)
         else:
             jobs.append((path, stem))
+    if resume:  # a folder run again is replaced whole: never over a file the user added to it
+        from .batch import check_replaceable
+
+        for path, stem in jobs:
+            check_replaceable(out / stem, inputs, path)
     return results, jobs
 
 
