@@ -98,7 +98,15 @@ def test_ascii_stl_is_read_in_float64(tmp_path):
     v, f = read_mesh(tmp_path / "b.stl")
     assert len(f) == len(F) and np.allclose(np.array(corners(v, f)), np.array(corners(V, F)), atol=1e-3)
     assert corners(v, f) != corners(V, F)  # float32, as the binary format stores
+    # a review of the change: trailing bytes after a binary STL whose header says "solid"; an ASCII STL
+    # in capitals, or named "vertex cloud" — each read as before
+    (tmp_path / "b2.stl").write_bytes(bytes(data) + b"\n\n")
+    assert len(read_mesh(tmp_path / "b2.stl")[1]) == len(F)
     text = _ascii_stl(V, F)
+    (tmp_path / "upper.stl").write_text(text.upper(), encoding="ascii")
+    assert corners(*read_mesh(tmp_path / "upper.stl")) == corners(V, F)
+    (tmp_path / "named.stl").write_text(text.replace("solid part", "solid vertex cloud"), encoding="ascii")
+    assert corners(*read_mesh(tmp_path / "named.stl")) == corners(V, F)
     (tmp_path / "cut.stl").write_text(text[: text.index("vertex", len(text) // 2) + 20], encoding="ascii")
     with pytest.raises(InputError, match=r"cut.stl: cannot read the mesh: .*ASCII STL"):
         read_mesh(tmp_path / "cut.stl")

@@ -67,9 +67,9 @@ def read_mesh(path, *, reader: str = "auto") -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"{path}: not a mesh file this reads ({', '.join(MESH_SUFFIXES)})")
     if reader == "auto":
         reader = "open3d" if suffix == ".ply" and _has_open3d() else "pymeshlab"
-    ascii_stl = suffix == ".stl" and _is_ascii_stl(path)
-    if ascii_stl:
-        V, F = _read_ascii_stl(path)
+    parsed = _read_ascii_stl(path) if suffix == ".stl" and _is_ascii_stl(path) else None
+    if parsed is not None:
+        V, F = parsed
     elif reader == "open3d":
         V, F = _read_open3d(path)
         if len(F) == 0 and suffix == ".ply":  # a PLY layout open3d does not take: ask pymeshlab
@@ -119,31 +119,35 @@ def _3mf_unit_to_mm(path: Path) -> float:
 
 
 def _is_ascii_stl(path: Path) -> bool:
-    """An STL in text: it starts with ``solid`` and its size is not the binary layout's (84 bytes
-    and 50 a face, the count at byte 80 — a binary STL may begin its header with "solid" too)."""
+    """An STL in text: it starts with ``solid`` (any case), its head holds no NUL byte and names a
+    ``facet``, and its size is not the binary layout's (84 bytes and 50 a face, the count at byte 80
+    — a binary STL may begin its header with "solid" too)."""
     with open(path, "rb") as f:
-        head = f.read(84)
-    if not head.lstrip().startswith(b"solid"):
+        head = f.read(1024)
+    if not head.lstrip(b"\xef\xbb\xbf \t\r\n").lower().startswith(b"solid") or b"\0" in head \
+            or b"facet" not in head.lower():
         return False
-    if len(head) == 84 and path.stat().st_size == 84 + 50 * int.from_bytes(head[80:84], "little"):
-        return False
-    return True
+    size = path.stat().st_size
+    return not (len(head) >= 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little"))
 
 
 def _read_ascii_stl(path: Path):
     """An ASCII STL's ``vertex x y z`` records in float64, three a facet (pymeshlab's reader stores
     them in float32: a vertex near 500 mm written with 12 digits came back 19 nm off, and a part
-    placed at (800, 600, 300) mm got 6–15 nm of residual error from its nominal alone — a review)."""
+    placed at (800, 600, 300) mm got 6–15 nm of residual error from its nominal alone — a review).
+    None when the text holds no facet this parse reads (pymeshlab then reads the file as before)."""
     import re
 
     text = path.read_bytes().decode("latin-1")
     num = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
-    found = re.findall(rf"\bvertex\s+{num}\s+{num}\s+{num}", text)
-    if not found or len(found) % 3:
-        what = "no facet" if not found else f"{len(found)} vertex records, not three a facet"
-        raise InputError(f"{path}: cannot read the mesh: an ASCII STL with {what} (damaged or truncated?)")
-    if len(found) != len(re.findall(r"\bvertex\b", text)):
-        raise InputError(f"{path}: cannot read the mesh: a vertex record of the ASCII STL is not three numbers")
+    found = re.findall(rf"(?im)^\s*vertex\s+{num}\s+{num}\s+{num}\s*$", text)
+    records = len(re.findall(r"(?im)^\s*vertex\b", text))  # a vertex line at its start (not the solid's name)
+    if not found:
+        return None
+    if len(found) != records or len(found) % 3:
+        what = (f"{records - len(found)} vertex record(s) are not three numbers" if len(found) != records
+                else f"{len(found)} vertex records, not three a facet")
+        raise InputError(f"{path}: cannot read the mesh: an ASCII STL whose {what} (damaged or truncated?)")
     V = np.array(found, dtype=np.float64)
     return V, np.arange(len(V), dtype=np.int64).reshape(-1, 3)
 
