@@ -273,3 +273,22 @@ def test_a_measurement_on_another_clock_keeps_the_drift_it_shows(tmp_path):
         assert found["thermal_drift"]["d1"] == pytest.approx(1.0e-4, rel=0.05), (shift, found)
         said = any("outside the model's scan" in w for w in rep["warnings"])
         assert said == (shift > 0), rep["warnings"]
+
+
+def test_a_measurement_less_deleted_rows_is_matched_to_its_simulation_by_row(tmp_path):
+    """A review of the window's Explain on the points kept: five rows deleted made the match "by
+    position", with a false warning that the simulation was not made at the measured positions. The
+    simulation's same rows (the measurement's `index`) are taken: by row, no warning."""
+    from pointspro.core.io import read_cloud
+
+    scan = {"type": "raster", "radius": 14.0, "spacing": 0.2, "lines": 15, "speed": 10.0}
+    truth = model(ASPHERE, scan, BASE, seed=82)
+    s = simulate(truth)
+    write_meas(tmp_path / "meas.csv", s, t=s["t"], c=s["c"])
+    p = simulate(truth, noise=False)
+    write_csv(PointCloud.from_xyz(p["x"], p["y"], p["z"], t=p["t"], c=p["c"]), tmp_path / "sim.csv")
+    meas = read_cloud(tmp_path / "meas.csv")
+    kept = meas.select(np.arange(meas.n) % 97 != 5)  # rows deleted in the window
+    rep = explain(tmp_path / "meas.csv", tmp_path / "o", simulated=tmp_path / "sim.csv", bootstrap=0,
+                  measured_cloud=kept)
+    assert rep["match"].startswith("by row") and not any("not made at the measured" in w for w in rep["warnings"])

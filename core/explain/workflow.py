@@ -272,6 +272,22 @@ def against_model(meas, model, base: Path, measured="the measurement", warnings:
     return ctx, sim["z"], "model evaluated at the measured positions"
 
 
+def _kept_rows(meas, simc):
+    """The simulation's rows of a measurement some rows of which were deleted (its ``index`` the rows
+    of the file as read, the simulation made at that file's positions), or None: matched by row, not by
+    position (a review: five points deleted in the window turned "by row" into "by position", with a
+    false warning that the simulation was not made at the measured positions)."""
+    if simc.n <= meas.n or "index" not in meas.channels:
+        return None
+    idx = np.asarray(meas["index"])
+    if idx.size == 0 or idx.min() < 0 or idx.max() >= simc.n or np.any(idx != np.round(idx)):
+        return None
+    idx = idx.astype(np.int64)
+    if np.max(np.abs(simc.xyz[idx, :2] - meas.xyz[:, :2])) >= 1e-6:
+        return None
+    return idx
+
+
 def against_simulation(meas, simulated: Path, warnings: list[str] | None = None):
     """A simulated cloud (with t and c) matched to the measurement by row when the positions agree,
     else by position: the simulation's heights interpolated to the measured positions
@@ -287,10 +303,13 @@ def against_simulation(meas, simulated: Path, warnings: list[str] | None = None)
             raise InputError(f"{simulated}: the simulation has no '{ch}' channel")
     t_sim, c_sim = clock_of(simc, simulated)
     order = np.argsort(t_sim, kind="stable")
-    if simc.n == meas.n and np.max(np.abs(simc.xyz[:, :2] - meas.xyz[:, :2])) < 1e-6:
+    rows = _kept_rows(meas, simc)  # the measurement less rows deleted (the window): the same rows
+    if rows is not None or (simc.n == meas.n and np.max(np.abs(simc.xyz[:, :2] - meas.xyz[:, :2])) < 1e-6):
+        # slopes through the whole simulation, its scan normalising the effects (with_norms_of below)
         fx, fy, how = cloud_slopes(simc.x, simc.y, simc.z, order)
-        z_sim, j = simc.z, np.arange(meas.n)
-        match = "by row"
+        j = np.arange(meas.n) if rows is None else rows
+        z_sim, fx, fy = simc.z[j], fx[j], fy[j]
+        match = "by row" if rows is None else f"by row (the simulation's rows of the {meas.n} points kept)"
     else:
         from scipy.spatial import cKDTree
 
