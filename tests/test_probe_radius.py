@@ -196,8 +196,8 @@ def test_noise_free_contact_points_then_misalignment_converge():
     — its star and finite-difference normals — made misalignment's cost sit at rounding, ~1e-25 mm²,
     each accepted step still lowering it by more than ftol·cost, and the fit was refused as "did not
     converge" after 100 iterations; a residual RMS below a femtometre now ends the iteration,
-    core/geometry/lsq.py RMS_FLOOR_MM. This set-up converges with or without that test: the exact
-    rounding pattern is the generator's.)"""
+    core/geometry/lsq.py RMS_FLOOR_MM, tested directly in tests/test_lsq.py; this set-up converges
+    with or without it: the exact rounding pattern was the generator's.)"""
     from pointspro.plugins.misalignment import MisalignmentStep
 
     s = np.arange(-650 + 2.5, 650, 5.0)  # 18 lines, 260 points each, half a pitch off the centre

@@ -282,3 +282,11 @@ def test_las_projected_crs_code_without_its_unit(tmp_path):
         read_cloud(tmp_path / "ny.las")
     src = _las(tmp_path / "ny_ft.las", geokeys=[(1024, 1), (3072, 2263), (3076, 9003)])  # the unit given
     assert np.allclose(read_cloud(tmp_path / "ny_ft.las").x, np.asarray(src.x) * 1200 / 3937 * 1e3, rtol=1e-15)
+
+
+@pytest.mark.parametrize("code", [2154, 6340])
+def test_las_common_metric_crs_codes_without_a_unit_key_read_in_metres(tmp_path, code):
+    """A review of the EPSG rule: Lambert-93 and NAD83(2011) / UTM (USGS 3DEP) files without
+    ProjLinearUnitsGeoKey, read as metres before, were refused."""
+    src = _las(tmp_path / "m.las", geokeys=[(1024, 1), (3072, code)])
+    assert np.array_equal(read_cloud(tmp_path / "m.las").x, np.asarray(src.x) * 1e3)

@@ -115,11 +115,17 @@ def _metre_crs(code: int) -> bool:
     its ProjLinearUnitsGeoKey: WGS 84 / UTM (326xx, 327xx), NAD83 / UTM (269xx), ETRS89 / UTM and
     ETRS89-extended (258xx), Web Mercator (3857), CH1903+ (2056), British National Grid (27700),
     DHDN / Gauss-Krüger (31466–31469), SWEREF99 TM (3006), Amersfoort / RD New (28992), ETRS89 / LAEA
-    and LCC Europe (3035, 3034), GDA94 / GDA2020 MGA (283xx, 78xx). Others (the US State Planes:
-    metres or US feet by zone and realisation) are not guessed."""
+    and LCC Europe (3035, 3034), GDA94 / GDA2020 MGA (283xx, 78xx), NAD83(2011) / UTM (6328–6348),
+    RGF93 / Lambert-93 (2154), NZTM2000 (2193), ETRS-TM35FIN (3067), CS92 (2180), S-JTSK Krovak East
+    North (5514), CH1903 LV03 (21781), MGI / Austria GK (31254–31259), Slovenia 1996 (3794), HTRS96
+    (3765), ETRS89 / Austria Lambert (3416). Others (the US State Planes: metres or US feet by zone and
+    realisation) are not guessed."""
     return (32601 <= code <= 32660 or 32701 <= code <= 32760 or 26901 <= code <= 26923
-            or 25828 <= code <= 25838 or code in (3857, 2056, 27700, 3006, 28992, 3035, 3034)
-            or 31466 <= code <= 31469 or 28348 <= code <= 28358 or 7846 <= code <= 7859)
+            or 6328 <= code <= 6348  # NAD83(2011) / UTM (USGS 3DEP's lidar)
+            or 25828 <= code <= 25838 or code in (3857, 2056, 21781, 27700, 3006, 28992, 3035, 3034, 2154,
+                                                  2193, 3067, 2180, 5514, 3794, 3765, 3416)
+            or 31466 <= code <= 31469 or 31254 <= code <= 31259 or 28348 <= code <= 28358
+            or 7846 <= code <= 7859)
 
 
 def _units(header) -> tuple[tuple[str, float, str], tuple[str, float, str], bool]:
