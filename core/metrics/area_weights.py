@@ -15,8 +15,8 @@ annular scan):
                                        points' convex hull),   dN/dr = points per unit radius,
 
 dN/dr counted in bins of a quarter bandwidth and smoothed by a Gaussian of the bandwidth h — twice
-the widest gaps between sorted radii (a star's spacing along its lines, rings' pitch), half the
-spacing of neighbours along the radius (a spiral's pitch), at least 1 % of the largest radius — reflected at 0 and at the outermost radius, normalised over the radii
+the widest gaps between sorted radii (a star's spacing along its lines, rings' pitch), at least
+1 % of the largest radius — reflected at 0 and at the outermost radius, normalised over the radii
 the points span (gaps up to 2h closed) so that nothing leaks into a bore. Σ w_i is the measured
 area. This is exact where the density varies with the distance from that centre only — star,
 spiral, concentric rings, a full or partial raster — and, because each circle gets its area whatever
@@ -32,13 +32,16 @@ restores (three adjacent of 12: astigmatism 10 % low, the points' mean 23 %); un
 the hull (stars of 5–24 lines, spirals of 10–80 turns, a dense patch, annular stars and spirals;
 spherical aberration, astigmatism with a ripple, an edge, a central bump): within −3.3…+3.5 % where
 the points' RMS was −19…+166 % off (the central bump on an annulus, whose values there are tiny:
-+10 %). A spiral of few turns needed more (an independent review, 2026-11-27): a 0.2 µm bump 18 mm off
-the centre of a 50 mm spiral read −31 % at 10 turns (2,000 points) and −15 % at 18 — density_centre's
-medians land 0.2–0.9 mm off a coarse spiral's centre (its first turn is not symmetric about it), and
-the sorted radii, which each turn fills in, hide the pitch between the turns, so dN/dr smoothed over
-1 % of the radius was lumpy on that scale; the bandwidth is now at least half the spacing seen along
-the radius (_radial_neighbour_spacing: the pitch; a star's step), and the same cases read +0.3 %,
-+0.1 %, −0.0 % (40 turns). Even samplings get no weights — the plain mean is the area mean there, to the last bit:
++10 %). Not within it (independent reviews, 2026-11-27): a spiral of few turns with a feature off
+its centre — a 0.2 µm bump 18 mm off the centre of a 50 mm spiral read −31 % at 10 turns (2,000
+points), −15 % at 18 turns, −0.9 % at 40 — because density_centre's medians land 0.2–1.7 mm off a
+coarse spiral's centre (its first turn is not symmetric about it) and dN/dr, smoothed over 1 % of the
+radius, turns lumpy on that scale; with the true centre the same cases read +4.8 % and +2.7 %. Tried
+and not kept: a bandwidth of half the spiral's pitch (the bump within 0.3 %, but an edge roll-off
+read +5 % at 10 turns, +12…+23 % at 4–6); the points' hull centroid as the centre where it is near
+the density centre (within 3 % from 10 turns, but a star with points removed at its rim moved off
+its crossing: the example's RMS 644.6 → 643.3 nm). A spiral of ≥ 40 turns, a star or rings are not
+affected. Even samplings get no weights — the plain mean is the area mean there, to the last bit:
 pixel maps (points on a lattice holding at least MAP_OCCUPANCY of its nodes in their hull: a map's
 valid pixels are its measured area, dropouts or not — interferometer practice; a sparse subset of a
 lattice, a fine patch in a coarse raster, is weighted), those core.metrics.sampling.uniform_sampling
@@ -103,7 +106,7 @@ def area_weights(x, y) -> np.ndarray | None:
     c = density_centre(x, y)
     r = np.hypot(x - c[0], y - c[1])
     r_max = float(r.max())
-    h = max(_radial_pitch(r), 0.5 * _radial_neighbour_spacing(x, y, c), r_max / 100.0)
+    h = max(_radial_pitch(r), r_max / 100.0)
     bins = max(int(np.ceil(4.0 * r_max / h)), 8)
     width = r_max / bins
     k = np.minimum((r / width).astype(np.int64), bins - 1)
@@ -275,34 +278,3 @@ def _radial_pitch(r) -> float:
     if gaps.size < 2:
         return 0.0
     return 2.0 * float(np.quantile(gaps, 0.99))
-
-
-#: query points for the radial neighbour spacing, and neighbours looked at per point
-_SPACING_QUERIES, _SPACING_K = 2000, 48
-
-
-def _radial_neighbour_spacing(x, y, c) -> float:
-    """The median distance from a point to its nearest neighbour lying along the radius through it
-    (within ~37° of it) — a spiral's pitch between its turns, a star's step along its lines. Sorted
-    radii cannot show a spiral's pitch (each turn fills in the radii between the turns), and smoothed
-    over less than it dN/dr turned lumpy wherever the centre found was off the spiral's (its first
-    turn is not symmetric about it): an off-centre bump read 31 % low on 10 turns (a review)."""
-    from scipy.spatial import cKDTree
-
-    n = x.size
-    pts = np.column_stack([x, y])
-    tree_pts = pts[:: max(1, n // 200_000)]
-    q = pts[:: max(1, n // _SPACING_QUERIES)]
-    k = min(_SPACING_K + 1, len(tree_pts))
-    d, j = cKDTree(tree_pts).query(q, k=k)
-    v = tree_pts[j[:, 1:]] - q[:, None, :]
-    rad = q - np.asarray(c, dtype=np.float64)
-    rn = np.linalg.norm(rad, axis=1)
-    ok = rn > 0
-    u = np.where(ok[:, None], rad / np.where(ok, rn, 1.0)[:, None], 0.0)
-    dist = d[:, 1:]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.abs(np.einsum("nkj,nj->nk", v, u)) / dist
-    radial = np.where((cos > 0.8) & (dist > 0), dist, np.inf).min(axis=1)
-    radial = radial[ok & np.isfinite(radial)]
-    return float(np.median(radial)) if radial.size else 0.0
