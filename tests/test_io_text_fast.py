@@ -19,13 +19,15 @@ CASES = {
     "inline_comment_first_row.csv": "1,2,3 // probe 1\n4,5,6\n7,8,9\n",
     "inline_comments_header.txt": "x y z  # mm\n1 2 3 % first\n4 5 6\n7 8 9\n",
     "decimal_comma_last_column.txt": "0 0 1,25\n1 0 1,5\n2 0 1,75\n",
+    "comment_right_after_a_number.txt": "1 2 3# first\n4 5 6# second\n7 8 9\n",
 }
 
 #: what the cases above hold (x, y, z rows)
 EXPECTED = {"inline_comment_first_row.txt": [[1, 2, 3], [4, 5, 6], [7, 8, 9]],
             "inline_comment_first_row.csv": [[1, 2, 3], [4, 5, 6], [7, 8, 9]],
             "inline_comments_header.txt": [[1, 2, 3], [4, 5, 6], [7, 8, 9]],
-            "decimal_comma_last_column.txt": [[0, 0, 1.25], [1, 0, 1.5], [2, 0, 1.75]]}
+            "decimal_comma_last_column.txt": [[0, 0, 1.25], [1, 0, 1.5], [2, 0, 1.75]],
+            "comment_right_after_a_number.txt": [[1, 2, 3], [4, 5, 6], [7, 8, 9]]}
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))

@@ -87,8 +87,9 @@ def _die_on_interrupt() -> None:
     batch removes with the input's temporary folder."""
     import signal
 
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(sig) is not signal.SIG_IGN:  # a batch started with it ignored (nohup, `&`)
+            signal.signal(sig, signal.SIG_DFL)           # keeps its writers through it (a review)
 
 
 def _can_fork() -> bool:

@@ -100,6 +100,19 @@ def _code(line: str) -> str:
 _INLINE_COMMENT = re.compile(r"(?:^|(?<=[\s,;]))(?:#|//|%|!)")
 
 
+def _data_part(line: str) -> str:
+    """A candidate data row without its comment: cut where a marker starts a field (_uncommented),
+    or at any marker when only that leaves a row of numbers — "1 2 3# first" is the row 1 2 3, as
+    the rows' parser reads it (a review: such rows were dropped as a preamble)."""
+    u = _uncommented(line)
+    if "#" not in u and "//" not in u and "%" not in u and "!" not in u:
+        return u
+    c = _code(line)
+    delim, dc = _sniff_delimiter(c)
+    toks = [t for t in _split(c, delim) if t != ""]
+    return c if toks and all(_is_number(t, dc) for t in toks) else u
+
+
 def _uncommented(line: str) -> str:
     """``line`` up to a comment marker that starts a field (after whitespace or a separator): "1 2 3 #
     first point" is a row; "Pt# X Y Z" and "X Y Z Refl[%]" keep their names (a review: cut at any
@@ -398,7 +411,7 @@ def _decode(raw: bytes) -> tuple[str, str]:
 def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True) -> _Layout:
     """The first data line, the delimiter, the column count and the header (if any)."""
     first_data, candidates = _first_data_line(path, head, lines, quote)
-    delim, decimal_comma = _sniff_delimiter(_uncommented(lines[first_data]))
+    delim, decimal_comma = _sniff_delimiter(_data_part(lines[first_data]))
     comma_line = first_data if decimal_comma else None
     if delim in (";", "\t") and not decimal_comma:
         # "1;2;3" then "4,5;5;6": a decimal comma in any data row of the head decides, not the first
@@ -406,7 +419,7 @@ def _find_layout(path, head: list[str], lines: "_LazyLines", quote: bool = True)
         comma_line = next((i for i in range(first_data + 1, len(head))
                            if "," in head[i] and _comma_row(head[i], delim)), None)
         decimal_comma = comma_line is not None
-    first_toks = _split(_uncommented(lines[first_data]), delim)
+    first_toks = _split(_data_part(lines[first_data]), delim)
     trailing_empty = bool(first_toks) and first_toks[-1] == ""
     ncols = len(first_toks) - (1 if trailing_empty else 0)
     lay = _Layout(first_data, delim, decimal_comma, ncols, trailing_empty, comma_line=comma_line)
@@ -470,7 +483,7 @@ def _first_data_line(path, head: list[str], lines: "_LazyLines", quote: bool = T
         line = line.rstrip("\r")
         if _is_comment(line):
             continue
-        line = _uncommented(line)  # "1 2 3 # first point": the rows' parser ends a line at its comment too
+        line = _data_part(line)  # "1 2 3 # first point": the rows' parser ends a line at its comment too
         delim, dc = _sniff_delimiter(line)
         toks = _split(line, delim)
         if all(_is_number(t, dc) for t in toks if t != "") and any(t != "" for t in toks):
