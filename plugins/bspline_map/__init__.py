@@ -200,14 +200,22 @@ def _extrapolation_report(report, grid, spline, spacing, x, y, diameter, center)
     the PV over all of them is well above the measured nodes' (EXTRAPOLATION_PV_RATIO)."""
     from pointspro.core.maps import grid_map
 
-    measured = grid_map(spline, spacing, x, y, diameter=diameter, center=center, extrapolate=False)
-    key = {(i, j) for i, j in zip(*(np.rint(a / spacing).astype(np.int64) for a in measured.nodes()[:2]))}
-    X, Y = np.meshgrid(grid.xs, grid.ys)
+    try:
+        measured = grid_map(spline, spacing, x, y, diameter=diameter, center=center, extrapolate=False)
+    except ValueError:  # too few nodes over the points to be a map of them
+        return
+    # both grids' nodes lie at multiples of the spacing: the measured one is a window of the whole
+    ox, oy = (int(np.rint((m[0] - g[0]) / spacing)) for m, g in ((measured.xs, grid.xs),
+                                                                  (measured.ys, grid.ys)))
+    inside_grid = np.zeros(grid.z.shape, bool)
+    ny, nx = measured.z.shape
+    if 0 <= ox and 0 <= oy and oy + ny <= grid.z.shape[0] and ox + nx <= grid.z.shape[1]:
+        inside_grid[oy:oy + ny, ox:ox + nx] = measured.valid
     ok = grid.valid
-    ix, iy = np.rint(X[ok] / spacing).astype(np.int64), np.rint(Y[ok] / spacing).astype(np.int64)
-    inside = np.fromiter(((i, j) in key for i, j in zip(ix.tolist(), iy.tolist())), bool, count=ix.size)
+    inside = inside_grid[ok]
     zv = grid.z[ok]
-    if not inside.any():
+    if np.count_nonzero(inside) < 4:  # too few measured nodes to state a PV of them
+        report["extrapolated_node_fraction"] = float(1.0 - inside.mean())
         return
     pv_all, pv_in = float(np.ptp(zv)), float(np.ptp(zv[inside]))
     report.update(map_rms_measured_um=float(np.std(zv[inside]) * 1e3), map_pv_measured_um=pv_in * 1e3,
@@ -216,7 +224,7 @@ def _extrapolation_report(report, grid, spline, spacing, x, y, diameter, center)
         from pointspro.core.units import format_length
 
         report["warnings"].append(
-            f"the map's PV {format_length(pv_all, 4)} includes {1.0 - inside.mean():.0%} of its nodes "
+            f"the map's PV {format_length(pv_all, 4)} includes {100 * (1.0 - inside.mean()):.3g} % of its nodes "
             f"extrapolated beyond the points; over the measured nodes it is {format_length(pv_in, 4)}. "
             "Beyond the points the map is the continuation of the outermost knot cells, which their noise "
             "swings (a few nm of noise: µm at the rim) — use extrapolate only where the map must cover the "
