@@ -119,13 +119,12 @@ def _3mf_unit_to_mm(path: Path) -> float:
 
 
 def _is_ascii_stl(path: Path) -> bool:
-    """An STL in text: it starts with ``solid`` (any case), its head holds no NUL byte and names a
-    ``facet``, and its size is not the binary layout's (84 bytes and 50 a face, the count at byte 80
-    — a binary STL may begin its header with "solid" too)."""
+    """An STL in text: it starts with ``solid`` (any case), its head holds no NUL byte, and its size
+    is not the binary layout's (84 bytes and 50 a face, the count at byte 80 — a binary STL may
+    begin its header with "solid" too)."""
     with open(path, "rb") as f:
         head = f.read(1024)
-    if not head.lstrip(b"\xef\xbb\xbf \t\r\n").lower().startswith(b"solid") or b"\0" in head \
-            or b"facet" not in head.lower():
+    if not head.lstrip(b"\xef\xbb\xbf \t\r\n").lower().startswith(b"solid") or b"\0" in head:
         return False
     size = path.stat().st_size
     return not (len(head) >= 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little"))
@@ -142,6 +141,9 @@ def _read_ascii_stl(path: Path):
     num = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
     found = re.findall(rf"(?im)^\s*vertex\s+{num}\s+{num}\s+{num}\s*$", text)
     records = len(re.findall(r"(?im)^\s*vertex\b", text))  # a vertex line at its start (not the solid's name)
+    if not found:  # a whole STL on one line, or other line breaks: the records wherever they stand
+        found = re.findall(rf"(?i)\bvertex\s+{num}\s+{num}\s+{num}(?![\w.])", text)
+        records = len(found)
     if not found:
         return None
     if len(found) != records or len(found) % 3:
