@@ -309,6 +309,9 @@ def _batch(args, recipe_path: Path, pool) -> int:
         session = _cluster_session(args, recipe_path, recipe, inputs, out, workers)  # --scheduler
         if args.check_only:
             try:
+                if args.resume:  # what --resume would run must be replaceable, as the run checks it
+                    _plan_jobs(inputs, stems, out, recipe, True, args.cloud_format or "auto", args.figures,
+                               dry=True)
                 return _check_only(args, recipe, inputs, out, session)
             finally:
                 _remove_if_made_empty(out, made)
@@ -545,17 +548,18 @@ def _cores() -> int:
 
 
 def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: bool,
-               cloud_format: str = "csv", figures: str = "all"):
+               cloud_format: str = "csv", figures: str = "all", dry: bool = False):
     """(results of the inputs already complete, jobs (path, stem) left to run). With ``resume``,
     what a killed run left behind is removed first and complete outputs (same recipe, same cloud
-    format) are skipped."""
+    format) are skipped; a folder run again must be replaceable (core.batch.check_replaceable).
+    ``dry`` (--check-only): nothing is removed."""
     from .batch import cleanup_partials, is_complete, parameter_file_digests
     from .summary import entry
 
     results: dict[str, dict] = {}
     jobs = []
     files = None
-    if resume:
+    if resume and not dry:
         cleanup_partials(out)  # what a killed run left behind
         files = parameter_file_digests(recipe)  # once for the batch, not per input (a 200 MB mesh: 0.15 s)
     for path, stem in zip(inputs, stems):

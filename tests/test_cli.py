@@ -227,9 +227,12 @@ def test_a_file_added_to_an_earlier_output_is_not_deleted_by_a_rerun(run_cli, tm
     assert (tmp_path / "o" / "good" / "notes.txt").read_text(encoding="utf-8") == "precious"
     status = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))["inputs"][0]["status"]
     assert status == "skipped"
+    code, _, err = run_cli("--batch", recipe, good, "--out", tmp_path / "o", "--resume", "--check-only")
+    assert code == 0, err
     good.write_text(good.read_text(encoding="utf-8") + "\n", encoding="utf-8")  # changed: it runs again
-    code, _, err = run_cli("--batch", recipe, good, "--out", tmp_path / "o", "--resume")
-    assert code == 2 and "notes.txt: is not one of the files of the earlier output" in err
+    for extra in (("--check-only",), ()):  # --check-only says what the run then does (a review)
+        code, _, err = run_cli("--batch", recipe, good, "--out", tmp_path / "o", "--resume", *extra)
+        assert code == 2 and "notes.txt: is not one of the files of the earlier output" in err
     (tmp_path / "o" / "good" / "notes.txt").unlink()
     assert run_cli("--batch", recipe, good, "--out", tmp_path / "o")[0] == 0
 
