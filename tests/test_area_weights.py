@@ -196,16 +196,13 @@ def test_a_fit_that_takes_the_radius_fits_the_areas_sphere():
             assert fit.values["radius"] == pytest.approx(200.0, abs=tol_r)
 
 
-@pytest.mark.parametrize("turns, n", [
-    pytest.param(10, 2000, marks=pytest.mark.xfail(strict=True, reason="known limit: a coarse spiral's "
-                 "centre is found 0.2–1.7 mm off; the bump reads 31 % low (core/metrics/area_weights.py)")),
-    pytest.param(18, 10000, marks=pytest.mark.xfail(strict=True, reason="known limit: the bump reads 15 % low")),
-    (40, 20000)])
+@pytest.mark.parametrize("turns, n", [(8, 2000), (10, 2000), (18, 10000), (40, 20000)])
 def test_a_coarse_spiral_with_a_feature_off_its_centre(turns, n):
     """A review: on even-angle spirals of few turns (points at even angular steps from the centre to
     the rim, in one sweep) a bump 18 mm off the centre read 31 % (10 turns) and 15 % (18) low: the
-    centre is found 0.2–1.7 mm off a coarse spiral's, and dN/dr smoothed over 1 % of the radius is
-    lumpy on that scale. Two remedies were tried and not kept (the module's docstring); 40 turns hold."""
+    centre was found 0.2–1.7 mm off a coarse spiral's, and dN/dr smoothed over 1 % of the radius is
+    lumpy on that scale. The centre is now where the radius follows the scan order exactly
+    (_spiral_centre); two other remedies were tried and not kept (the module's docstring)."""
     th = np.linspace(0, 2 * np.pi * turns, n)
     r = R * th / th[-1]
     x, y = r * np.cos(th), r * np.sin(th)
