@@ -269,6 +269,23 @@ class MeshCheck:
         return asdict(self)
 
 
+def _edge_groups(F: np.ndarray, nv: int):
+    """The half-edges grouped by edge: (s, t, order, starts, count) — half-edge h = 3f + k runs from
+    s[h] (corner k of face f) to t[h] (corner k + 1); order[starts[i] : starts[i] + count[i]] are the
+    half-edges of the i-th edge (a boundary edge has one, an interior one two, a non-manifold one
+    more)."""
+    s = F.ravel()
+    t = F[:, [1, 2, 0]].ravel()
+    key = np.minimum(s, t) * nv + np.maximum(s, t)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    first = np.empty(len(ks), bool)
+    first[0] = True
+    np.not_equal(ks[1:], ks[:-1], out=first[1:])
+    starts = np.flatnonzero(first)
+    return s, t, order, starts, np.diff(np.append(starts, len(ks)))
+
+
 def check_mesh(vertices, faces, *, merge: bool = True) -> MeshCheck:
     """Count the mesh's problems (module docstring). ``merge``: topology with coincident vertices
     merged (their count is reported as duplicated vertices; the other counts are then those of the
@@ -296,18 +313,7 @@ def check_mesh(vertices, faces, *, merge: bool = True) -> MeshCheck:
     m = len(F)
     if m == 0:
         return out
-    # half-edges h = 3f + k run from corner k to corner k+1 of face f
-    s = F.ravel()
-    t = F[:, [1, 2, 0]].ravel()
-    lo, hi = np.minimum(s, t), np.maximum(s, t)
-    key = lo * nv + hi
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    first = np.empty(len(ks), bool)
-    first[0] = True
-    np.not_equal(ks[1:], ks[:-1], out=first[1:])
-    starts = np.flatnonzero(first)
-    count = np.diff(np.append(starts, len(ks)))
+    s, t, order, starts, count = _edge_groups(F, nv)
     out.non_manifold_edges = int((count > 2).sum())
     # orientation: the two half-edges of an interior edge run it in opposite directions
     two = starts[count == 2]
@@ -444,13 +450,8 @@ def _faces_off_the_sheet(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     orientation) stay, the others go. pymeshlab's "Remove Faces" kept a stray fin on a sheet's edge
     and removed a face of the sheet, whose hole was then closed into a tent 1 mm high — 117 µm of
     false residual, repaired without a word (a review)."""
-    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    face = np.tile(np.arange(len(F)), 3)
-    key = e[:, 0] * (int(e.max()) + 1) + e[:, 1]
-    order = np.argsort(key, kind="stable")
-    key, face = key[order], face[order]
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    counts = np.diff(np.r_[starts, len(key)])
+    _, _, order, starts, counts = _edge_groups(F, len(V))
+    face = order // 3  # the face of each half-edge, in edge order
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
     off = np.zeros(len(F), bool)

@@ -105,7 +105,7 @@ def _data_part(line: str) -> str:
     or at any marker when only that leaves a row of numbers — "1 2 3# first" is the row 1 2 3, as
     the rows' parser reads it (a review: such rows were dropped as a preamble)."""
     u = _uncommented(line)
-    if "#" not in u and "//" not in u and "%" not in u and "!" not in u:
+    if not any(c in u for c in COMMENTS):
         return u
     c = _code(line)
     delim, dc = _sniff_delimiter(c)
