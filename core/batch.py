@@ -138,9 +138,9 @@ def check_replaceable(folder: Path, inputs, of, extra: bool = True) -> None:
     if why[0] == "file":
         raise RecipeError(f"{folder}: exists and is not a folder; the output of {of} would go there — "
                           "move it or choose another output folder")
-    if why[0] == "extra" and not extra:
-        return  # --resume: checked again for the inputs it runs (a skipped one's folder stays as it is)
     if why[0] == "extra":
+        if not extra:
+            return  # --resume: checked again for the inputs it runs (a skipped one's folder stays as it is)
         raise RecipeError(f"{folder / why[1].name}: is not one of the files of the earlier output in "
                           f"{folder}, which is replaced as a whole with the output of {of} — move it or "
                           "choose another output folder")
