@@ -81,9 +81,11 @@ def _onto_nodes(p, axis, d):
 
 def bilinear(ys, xs, z, py, px) -> np.ndarray:
     """z (ny × nx on the ascending axes ys, xs) bilinearly interpolated at the points (py, px), NaN
-    outside the grid or next to a NaN node — scipy's RegularGridInterpolator((ys, xs), z, "linear",
-    bounds_error=False, fill_value=NaN) to the last bit (same cell search, same expression; tested),
-    without importing scipy.interpolate (0.15–0.25 s of a batch's start; issue 17)."""
+    outside the grid or where a NaN node carries weight — scipy's RegularGridInterpolator((ys, xs),
+    z, "linear", bounds_error=False, fill_value=NaN) to the last bit where the cell's four nodes are
+    valid (same cell search, same expression; tested), without importing scipy.interpolate
+    (0.15–0.25 s of a batch's start; issue 17). Unlike it, a point on a node or a cell's edge next to
+    unmapped nodes keeps its value (``_term``)."""
     ys, xs = np.asarray(ys, dtype=np.float64), np.asarray(xs, dtype=np.float64)
     px, py = np.asarray(px, dtype=np.float64), np.asarray(py, dtype=np.float64)
     out = np.full(px.shape, np.nan)
@@ -93,9 +95,16 @@ def bilinear(ys, xs, z, py, px) -> np.ndarray:
     j = np.clip(np.searchsorted(xs, qx, "right") - 1, 0, len(xs) - 2)
     ty = (qy - ys[i]) / (ys[i + 1] - ys[i])
     tx = (qx - xs[j]) / (xs[j + 1] - xs[j])
-    out[inside] = (z[i, j] * (1 - ty) * (1 - tx) + z[i, j + 1] * (1 - ty) * tx
-                   + z[i + 1, j] * ty * (1 - tx) + z[i + 1, j + 1] * ty * tx)
+    out[inside] = (_term(z[i, j], 1 - ty, 1 - tx) + _term(z[i, j + 1], 1 - ty, tx)
+                   + _term(z[i + 1, j], ty, 1 - tx) + _term(z[i + 1, j + 1], ty, tx))
     return out
+
+
+def _term(zc, wy, wx):
+    """One corner's share z·wy·wx, 0 where a weight is 0: a point on a node or on a cell's edge does
+    not use the nodes across the cell, and NaN × 0 = NaN there lost the map's rim nodes from the
+    profiles (a map row from −640 to 640 mm profiled from −630; a review). Elsewhere the same bits."""
+    return np.where((wy == 0.0) | (wx == 0.0), 0.0, zc * wy * wx)
 
 
 def radial_profile(grid, center=(0.0, 0.0)):
