@@ -149,7 +149,7 @@ def _records(v: list) -> str:
     heads, scales = [], []
     for k in keys:
         unit = unit_of_key(str(k))
-        if unit in SHOWN_LENGTH_MM and str(k) != _label(k, 1.0):
+        if unit in SHOWN_LENGTH_MM:  # a suffixed key (coefficient_nm) or a bare length (dz, u_dz)
             shown = column_unit([r.get(k) * SHOWN_LENGTH_MM[unit] for r in v
                                  if isinstance(r.get(k), (int, float)) and not isinstance(r.get(k), bool)],
                                 default=unit)

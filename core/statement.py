@@ -21,11 +21,12 @@ SUMMARY_FIGURES = (("rms_um", "RMS", "µm"), ("pv_um", "PV", "µm"),
 #: verdicts (core.tolerance, ISO 14253-1) and their banner colours
 VERDICT_COLOURS = {"conforms": "#1b7f3b", "does not conform": "#b3261e", "undecided": "#a45200"}
 
-_SCALES_UM = ((1e3, "mm"), (1.0, "µm"), (1e-3, "nm"), (1e-6, "pm"))
+_SCALES_UM = ((1e3, "mm"), (1.0, "µm"), (1e-3, "nm"))
 
 
 def _unit_for(size_um: float) -> tuple[float, str]:
-    """(scale in µm, unit) so that ``size_um`` reads between 1 and 1000 (nm below 1 µm)."""
+    """(scale in µm, unit) so that ``size_um`` reads between 1 and 1000 — nm below 1 µm, also below
+    1 nm ("0.72 nm", as core.units.format_length and docs/conventions.md say; it read "720 pm")."""
     a = abs(size_um)
     for scale, unit in _SCALES_UM:
         if a >= scale:
@@ -76,6 +77,8 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
     (95 % interval 0.0 … 6.6 nm)" — since value ± U would understate its upper end."""
     if value is None or not math.isfinite(value):
         return "—"
+    if U is None or not math.isfinite(U):
+        value = float(f"{value:.4g}")  # the unit of the value as shown: 0.99996 µm is "1.000 µm"
     scale = 1.0
     if unit == "µm":  # the unit of the larger of the two: "0.46 ± 1.00 µm", not "463 ± 1002 nm"
         scale, unit = _unit_for(max(abs(value), abs(U)) if U is not None and math.isfinite(U) else value
@@ -86,11 +89,16 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
         scale, unit = (1e6, "rad") if big >= 1e6 else (1e3, "mrad") if big >= 1e3 else (1.0, "µrad")
         value, U = value / scale, (None if U is None else U / scale)
     if U is None or not math.isfinite(U):
-        return f"{value:.4g} {unit}"
+        return f"{_four_digits(value)} {unit}"
     if isinstance(interval, (list, tuple)) and len(interval) == 2 and all(
             isinstance(v, (int, float)) for v in interval):
         interval = (interval[0] / scale, interval[1] / scale)
     return value_and_uncertainty(value, U, interval, unit=unit, k=k)
+
+
+def _four_digits(v: float) -> str:
+    """At most four significant digits ("43.9 nm", "3.978 µm")."""
+    return f"{v:.4g}"
 
 
 #: a summary figure the points cannot give (PVr needs more than 72 points, slope RMS 50 and an area)
@@ -205,4 +213,7 @@ def pupil_text(pupil: dict | None) -> str:
         return "—" if v is None else format_length(v, 6)
 
     c = pupil.get("centre_mm") or [None, None]
-    return f"; PVr's pupil: centre ({num(c[0])}, {num(c[1])}), radius {num(pupil.get('norm_radius_mm'))}"
+    radius = pupil.get("norm_radius_mm")
+    if isinstance(radius, (int, float)) and radius > 0:  # a centre at rounding's distance from 0 is 0:
+        c = [0.0 if isinstance(v, (int, float)) and abs(v) < 1e-9 * radius else v for v in c]  # not "-3.55271e-08 nm"
+    return f"; PVr's pupil: centre ({num(c[0])}, {num(c[1])}), radius {num(radius)}"

@@ -135,11 +135,13 @@ BARE_LENGTH_KEYS = frozenset({"dx", "dy", "dz", "tx", "ty", "tz", "diameter", "a
 
 def unit_of_key(name: str) -> str:
     """The unit a report key names ("" for none): its suffix's (``rms_um`` µm, ``alpha_deg`` °), or mm
-    for a bare length (``BARE_LENGTH_KEYS``; "pose.dz" is the pose's dz). The report's tables, the
-    window's step tables and the Monte Carlo's histograms label figures by it."""
+    for a bare length (``BARE_LENGTH_KEYS``; "pose.dz" is the pose's dz) and its uncertainty
+    (``u_dz``). The report's tables, the window's step tables and the Monte Carlo's histograms label
+    figures by it."""
     unit = next((u for suffix, u in KEY_UNITS if name.endswith(suffix)), "")
-    if not unit and name.rsplit(".", 1)[-1] in BARE_LENGTH_KEYS:
-        return "mm"
+    last = name.rsplit(".", 1)[-1]
+    if not unit and (last in BARE_LENGTH_KEYS or last.startswith("u_") and last[2:] in BARE_LENGTH_KEYS):
+        return "mm"  # a bare length, or its uncertainty (``u_dz`` read "1.58193e-06" without a unit)
     return unit
 
 

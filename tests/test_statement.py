@@ -169,3 +169,21 @@ def test_a_verdict_line_never_reads_as_a_contradiction():
     assert item_text(item | {"value": 0.62, "limit": 0.5}) == "irregularity B 0.62 µm > 0.5 µm"
     assert item_text(item | {"value": 0.1234567, "limit": 0.1234566}) == \
         "irregularity B 0.1235 µm > 0.1234566 µm"
+
+
+def test_a_figure_reads_in_the_unit_of_its_rounded_value_and_never_in_pm():
+    """Below 1 nm still nm, as core.units.format_length and docs/conventions.md say ("720 pm" read
+    beside "0.72 nm"); the unit chosen for the value as shown ("1000 nm" for 0.99996 µm; a review)."""
+    assert with_uncertainty(0.00072, None) == "0.72 nm"
+    assert with_uncertainty(0.99996, None) == "1 µm"
+    assert with_uncertainty(999.96, None) == "1 mm"
+    assert with_uncertainty(0.00099996, None) == "1 nm"
+    assert with_uncertainty(999.96, None, "µrad") == "1 mrad"
+    assert with_uncertainty(0.00072, 0.0002) == "0.72 ± 0.20 nm (k = 2)"
+
+
+def test_pupil_centre_at_roundings_distance_from_zero_reads_zero():
+    from pointspro.core.statement import pupil_text
+
+    text = pupil_text({"centre_mm": [-3.55271e-14, 1.5], "norm_radius_mm": 10.0})
+    assert text == "; PVr's pupil: centre (0 mm, 1.5 mm), radius 10 mm"

@@ -150,3 +150,23 @@ def test_a_column_of_lengths_reads_in_the_unit_of_its_largest_value():
     assert "<th>coefficient (nm)</th>" in small and "<td>3.2</td>" in small
     assert column_unit([0.0, float("nan")], default="nm") == "nm"
     assert column_unit([2e-3, 5e-7]) == "µm" and column_unit([1500.0]) == "mm"
+
+
+def test_the_uncertainty_of_a_bare_length_is_a_length():
+    """``u_dz`` beside ``dz`` in a stylus profile's table read "1.58193e-06" with no unit (a review)."""
+    from pointspro.core.units import format_keyed, unit_of_key
+
+    assert unit_of_key("u_dz") == "mm" and unit_of_key("pose.u_dx") == "mm"
+    assert format_keyed("u_dz", 1.58193e-06) == "1.58193 nm"
+    assert unit_of_key("u_count") == ""
+
+
+def test_a_reports_table_shows_bare_lengths_in_a_unit():
+    """A stylus profile's per-profile table: ``dz`` and ``u_dz`` (mm) under "dz (nm)", not raw
+    "4.9975e-08" beside a "decentre (nm)" column (a review)."""
+    from pointspro.core.report import _records
+
+    html = _records([{"label": "a", "dz": 4.9975e-08, "u_dz": 1.58193e-6},
+                     {"label": "b", "dz": -2e-7, "u_dz": 1.6e-6}])
+    assert "<th>dz (nm)</th>" in html and "<th>u_dz (nm)</th>" in html
+    assert "<td>1.58193</td>" in html and "e-0" not in html
