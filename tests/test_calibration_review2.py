@@ -21,3 +21,23 @@ def test_chi2_counts_the_reference_noise_on_a_null_field():
         red.append(fit.chi2 / fit.dof)
     # ν = 60 per fit: χ²/ν has σ ≈ 0.18, its mean over 30 fits ≈ 0.033
     assert 0.85 < np.mean(red) < 1.15, np.mean(red)
+
+
+def test_a_kinematic_map_with_bin_centred_angles_wraps_on_both_sides():
+    """c_deg 0.5…359.5 (no node at 0°): c in [0, 0.5) and (359.5, 360) interpolate between 359.5 and
+    0.5 (360.5) — it was an internal error 'xi out of bounds'."""
+    from pointspro.core.kinematics.errormap import KinematicMap
+
+    r = np.linspace(0.0, 20.0, 21)
+    c = np.arange(0.5, 360.0, 1.0)
+    e = 1e-6 * np.outer(r / 20, np.cos(np.deg2rad(2 * c)))
+    m = KinematicMap.from_json(KinematicMap(r, c, e).to_json())
+    q = np.array([0.0, 0.2, 359.8, 360.0, -0.3, 180.0])
+    got = m(np.full(q.size, 20.0), q)
+    # linear between the nodes 359.5 and 360.5 (= 0.5): the mean of the two equal values at c = 0
+    c0, c1 = -0.5, 0.5
+    f = lambda cq: np.cos(np.deg2rad(2 * cq))  # noqa: E731
+    lin = lambda cq: f(c0) + (f(c1) - f(c0)) * (cq - c0) / (c1 - c0)  # noqa: E731
+    mid = (f(179.5) + f(180.5)) / 2  # 180° lies between the nodes 179.5 and 180.5
+    expect = 1e-6 * np.array([lin(0.0), lin(0.2), lin(-0.2), lin(0.0), lin(-0.3), mid])
+    assert np.allclose(got, expect, rtol=0, atol=1e-15), (got, expect)

@@ -41,8 +41,10 @@ class KinematicMap:
             raise InputError(f"{int(out.sum())} points with the probe at X from {r[out].min():.4g} to "
                              f"{r[out].max():.4g} mm lie outside the kinematic map (X {self.r[0]:g}–"
                              f"{self.r[-1]:g} mm)")
-        cc = np.r_[self.c_deg, self.c_deg[0] + 360.0]
-        ee = np.concatenate([self.e, self.e[:, :1]], axis=1)
+        # periodic in c on both sides: a map whose angles start above 0 (bin centres 0.5…359.5°) has
+        # c in [0, c_deg[0]) below its first node (a review: an internal error "xi out of bounds")
+        cc = np.r_[self.c_deg[-1] - 360.0, self.c_deg, self.c_deg[0] + 360.0]
+        ee = np.concatenate([self.e[:, -1:], self.e, self.e[:, :1]], axis=1)
         f = RegularGridInterpolator((self.r, cc), ee)
         return f(np.column_stack([np.clip(r, self.r[0], self.r[-1]), c]))
 
