@@ -41,3 +41,36 @@ def test_a_kinematic_map_with_bin_centred_angles_wraps_on_both_sides():
     mid = (f(179.5) + f(180.5)) / 2  # 180° lies between the nodes 179.5 and 180.5
     expect = 1e-6 * np.array([lin(0.0), lin(0.2), lin(-0.2), lin(0.0), lin(-0.3), mid])
     assert np.allclose(got, expect, rtol=0, atol=1e-15), (got, expect)
+
+
+def test_volumetric_reference_frame_turns_the_uncertainty_into_its_axes(tmp_path):
+    """A reference frame turned 90° about z: the machine's x is the reference's y. The model's
+    σ differs per machine axis (x 3 µm, y 0.1 µm, z 0.2 µm): in the reference frame u_y carries
+    the 3 µm and u_x the 0.1 µm, each with the transform's share; in the machine frame they stay put."""
+    from pointspro.core import PointCloud
+    from pointspro.core.calibration import volumetric_model as vm
+    from pointspro.core.calibration.gp import ZeroGP
+    from pointspro.core.step import Context
+    from pointspro.plugins.volumetric import VolumetricStep
+
+    rng = np.random.default_rng(3)
+    cad = np.column_stack([rng.uniform(-20, 20, 24), rng.uniform(-100, 100, 24), rng.uniform(0, 50, 24)])
+    Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    meas = cad @ Rz.T + [100.0, 20.0, 5.0]
+    fit = fit_affine(cad, meas + rng.normal(0, 0.1e-3, meas.shape), 0.1e-3, 0.2e-3)
+    sig = {"ex": 3e-3, "ey": 0.1e-3, "ez": 0.2e-3}
+    specs = {k: vm.encode_gp(ZeroGP(v), "none", meas, np.zeros(len(meas))) for k, v in sig.items()}
+    (tmp_path / "m.json").write_text(vm.model_text(fit, meas, specs, {}), encoding="utf-8")
+    W = meas[:5] + 1.0
+    out = {}
+    for frame in ("machine", "reference"):
+        res = VolumetricStep().run(PointCloud(W), VolumetricStep.Params(model="m.json", frame=frame),
+                                   Context(base_dir=tmp_path))
+        out[frame] = np.column_stack([res.cloud[k] for k in ("u_x", "u_y", "u_z")])
+    assert np.allclose(out["machine"], [3e-3, 0.1e-3, 0.2e-3])
+    ref_pts = fit.inverse(W)
+    ut = fit.point_sigma(ref_pts)  # the transform's σ (≈ the same in both frames' axes for a turn)
+    u = out["reference"]
+    assert np.allclose(u[:, 0], np.hypot(0.1e-3, ut[:, 1]), rtol=1e-3)
+    assert np.allclose(u[:, 1], np.hypot(3e-3, ut[:, 0]), rtol=1e-3)
+    assert np.allclose(u[:, 2], np.hypot(0.2e-3, ut[:, 2]), rtol=1e-3)

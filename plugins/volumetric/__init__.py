@@ -2,9 +2,11 @@
 
 frame `machine`: p' = p + e(p), e the GP's predicted volumetric error (at the fiducials e = X_c − X_m,
 so corrected points land where the calibrated transform puts them); frame `reference`: also
-X_r = D⁻¹(p' − A), the CMM's frame. Channels u_x, u_y, u_z: standard uncertainties (mm) — the GP's
-predictive σ, plus the transform's (001 eqs 12–14) in the reference frame. Points outside the
-calibrated workspace get `outside_workspace` = 1 and a warning.
+X_r = D⁻¹(p' − A), the CMM's frame. Channels u_x, u_y, u_z: standard uncertainties (mm) along the
+output's axes — the GP's predictive σ (per machine axis); in the reference frame the square roots of
+the diagonal of D⁻¹ (diag(σ_GP²) + J Σθ Jᵀ) D⁻ᵀ, the transform's covariance (001 eqs 12–14) included
+and both turned into the reference axes. Points outside the calibrated workspace get
+`outside_workspace` = 1 and a warning.
 """
 from __future__ import annotations
 
@@ -55,8 +57,15 @@ class VolumetricStep(Step):
                         t["dof"], t["condition_number"], np.zeros((0, 3)))
         if params.frame == "reference":
             corr = fit.inverse(corr)
-            ut = fit.point_sigma(corr)
-            u = np.sqrt(u**2 + ut**2)
+            # X_r = D⁻¹(p + e − A): the GP's σ is per machine axis and the transform's J Σθ Jᵀ is that
+            # of D X_r + A, so both turn through D⁻¹ — Σ_ref = D⁻¹ (diag(u_GP²) + J Σθ Jᵀ) D⁻ᵀ, the
+            # square roots of its diagonal reported (a review: added per axis to a frame turned 90°
+            # about z, u_y was the machine's y σ and covered 10 % of the errors at 2u)
+            J = fit.jacobian(corr)
+            S = np.einsum("nkp,pq,nlq->nkl", J, fit.cov, J)
+            S[:, [0, 1, 2], [0, 1, 2]] += u**2
+            Dinv = np.linalg.inv(fit.D)
+            u = np.sqrt(np.einsum("kl,nlm,km->nk", Dinv, S, Dinv))
         ws = np.asarray(spec.workspace)
         # the workspace is the box of the measured ball centres; a workpiece point some µm beyond it
         # (a review: 46 of 56 runs warned of points 4–22 µm outside a 200 mm box, all inside the
