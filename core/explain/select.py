@@ -673,22 +673,64 @@ def uncentred_vif(G: np.ndarray) -> np.ndarray:
     return np.diag(np.linalg.pinv(G / np.outer(dn, dn)))
 
 
-def _raw_params(gr: Group, beta: np.ndarray, sd: np.ndarray) -> tuple[dict, dict]:
+def _raw_params(gr: Group, beta: np.ndarray, sd: np.ndarray, cov3: np.ndarray | None = None) -> tuple[dict, dict]:
     """A candidate's fitted coefficients in the library's parameters and units, with their standard
-    deviations."""
+    deviations. For a vibration, ``cov3`` is the covariance of its raw cos and sin coefficients and of
+    its frequency (``_vibration_covariances``)."""
     raw, raw_sd = beta / gr.scale, sd / gr.scale
     if gr.effect == "vibration":
-        # A = √(a² + b²), φ = atan2 of them: first-order propagation of the cos and sin coefficients'
-        # deviations (nearly uncorrelated: the columns are near-orthogonal). hypot(σa, σb), as before,
-        # is √2 too large (review: u 1.15e-7 against a scatter of 7.3e-8 over 40 seeds).
-        (a, b), (sa, sb) = raw[:2], raw_sd[:2]
+        # A = √(a² + b²), φ = atan2(b, a): first-order propagation of the covariance of a, b and the
+        # frequency f. The frequency is estimated from the same record, and φ is quoted at t = 0 (the
+        # record's edge), where an error δf moves the phase by 2π·δf·T/2 on average: with f taken as
+        # known, u(φ) was half the scatter (a review: 0.246° reported, 0.53° observed on a spiral).
+        (a, b) = raw[:2]
+        C = np.diag(np.r_[raw_sd[:2] ** 2, 0.0]) if cov3 is None else cov3
+        p = Vibration.from_columns(gr.frequency, raw)
+        u = {"frequency_hz": float(np.sqrt(max(C[2, 2], 0.0)))} if cov3 is not None else {}
         A = float(np.hypot(a, b))
         if A > 0:
-            uA = float(np.hypot(a * sa, b * sb) / A)
-            uphi = float(np.degrees(np.hypot(b * sa, a * sb) / (A * A)))
-            return Vibration.from_columns(gr.frequency, raw), {"amplitude": uA, "phase_deg": uphi}
-        return Vibration.from_columns(gr.frequency, raw), {"amplitude": float(np.hypot(sa, sb))}
+            jA = np.array([a / A, b / A, 0.0])
+            jphi = np.array([-b / (A * A), a / (A * A), 0.0])
+            u["amplitude"] = float(np.sqrt(max(jA @ C @ jA, 0.0)))
+            u["phase_deg"] = float(np.degrees(np.sqrt(max(jphi @ C @ jphi, 0.0))))
+        else:
+            u["amplitude"] = float(np.hypot(*raw_sd[:2]))
+        return p, u
     return ({n: float(v) for n, v in zip(gr.params, raw)}, {n: float(v) for n, v in zip(gr.params, raw_sd)})
+
+
+def _vibration_covariances(s: "_Search", idx: list, X: np.ndarray, beta: np.ndarray, s2: float) -> dict:
+    """Each chosen vibration line's 3×3 covariance of its raw cos and sin coefficients and its
+    frequency: the final fit's design bordered by each line's derivative in its frequency,
+    ∂/∂f [a cos ωt − b sin ωt] = −2πt·(a sin ωt + b cos ωt), so that the frequency's uncertainty
+    (estimated from the same record) and its correlation with the phase at t = 0 and with every other
+    column enter (the linearised model at the fitted frequency, the least-squares optimum)."""
+    lines = [st.candidate for st in s.stages if st.effect == "vibration"]
+    if not lines:
+        return {}
+    pos = {i: j for j, i in enumerate(idx)}
+    t = np.asarray(s.ctx.t, float)
+    cols, js = [], []
+    for name in lines:
+        gr = s.by_name[name]
+        j = [pos[i] for i in s.D.index[name]]
+        a, b = beta[j][:2] / gr.scale[:2]
+        w = 2 * np.pi * gr.frequency * t
+        cols.append(-2 * np.pi * t * (a * np.sin(w) + b * np.cos(w)))
+        js.append(j)
+    Dc = np.column_stack(cols)
+    sc = np.sqrt(np.mean(Dc * Dc, axis=0))
+    sc[~(sc > 0)] = 1.0
+    Xa = np.hstack([X, Dc / sc])
+    Ca = np.linalg.pinv(Xa.T @ Xa) * s2
+    P = X.shape[1]
+    out = {}
+    for k, (name, j) in enumerate(zip(lines, js)):
+        gr = s.by_name[name]
+        jj = list(j[:2]) + [P + k]
+        unscale = np.r_[1.0 / gr.scale[:2], 1.0 / sc[k]]
+        out[name] = Ca[np.ix_(jj, jj)] * np.outer(unscale, unscale)
+    return out
 
 
 def _fitted_effects(s: _Search) -> tuple[list[dict], np.ndarray]:
@@ -707,6 +749,7 @@ def _fitted_effects(s: _Search) -> tuple[list[dict], np.ndarray]:
     cov = np.linalg.pinv(Gs) * s2
     vif = uncentred_vif(Gs)
     pos = {i: j for j, i in enumerate(idx)}
+    vib_cov = _vibration_covariances(s, idx, X, beta, s2)
     found, upto = [], list(D.index["_piston"])
     # an effect's harmonics are one entry; each vibration line is an entry of its own (its frequency)
     groups = list(dict.fromkeys(st.candidate if st.effect == "vibration" else st.effect for st in s.stages))
@@ -716,7 +759,8 @@ def _fitted_effects(s: _Search) -> tuple[list[dict], np.ndarray]:
         params, unc, js, vifs = {}, {}, [], []
         for st in stages:
             j = [pos[i] for i in D.index[st.candidate]]
-            p, u = _raw_params(s.by_name[st.candidate], beta[j], np.sqrt(np.clip(np.diag(cov)[j], 0, None)))
+            p, u = _raw_params(s.by_name[st.candidate], beta[j], np.sqrt(np.clip(np.diag(cov)[j], 0, None)),
+                               vib_cov.get(st.candidate))
             params.update(p)
             unc.update(u)
             js += j
