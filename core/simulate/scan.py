@@ -30,7 +30,16 @@ class ScanSpec(BaseModel):
     points: int = Field(20, ge=1, le=100000, description="fiducials: points per patch")
 
 
+#: the fewest samples a raster, star or spiral may have: explain's MIN_POINTS (core/explain/workflow.py),
+#: the fewest that tell an effect from the noise. A spiral with `fs: 0.001` (a sampling interval in s
+#: written for the rate in Hz) had 0 samples: `pointspro simulate` wrote a header-only file, exit 0.
+MIN_SAMPLES = 100
+
+
 def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
+    """x, y, t, c of the scan (and ``fiducial`` on a fiducial pattern). ValueError for a spiral of more
+    than 5,000,000 samples, and for a raster, star or spiral of fewer than MIN_SAMPLES, naming the keys
+    (and the unit slip most likely behind it)."""
     R = spec.radius
     if spec.type == "spiral":
         revs = R / spec.pitch
@@ -38,6 +47,13 @@ def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
         n = int(T * spec.fs)
         if n > 5_000_000:
             raise ValueError(f"the spiral has {n} samples; lower fs or raise pitch")
+        if n < MIN_SAMPLES:
+            raise ValueError(
+                f"scan: the spiral has {n} sample(s), fewer than the {MIN_SAMPLES} a simulated measurement "
+                f"needs: radius {R:g} mm / pitch {spec.pitch:g} mm/rev = {revs:.3g} rev at rpm {spec.rpm:g} "
+                f"take {T:.3g} s, sampled at fs {spec.fs:g} Hz — check the units of scan.fs (a rate in Hz: "
+                "1 kHz is `fs: 1000`, not 1, nor a sampling interval such as 0.001), scan.radius and "
+                "scan.pitch (mm) and scan.rpm (rev/min)")
         t = np.arange(n) / spec.fs
         c = (360.0 * spec.rpm / 60.0 * t) % 360.0
         frac = t / T
@@ -75,6 +91,11 @@ def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
             xs.append(s * np.cos(a))
             ys.append(s * np.sin(a))
     x, y = np.concatenate(xs), np.concatenate(ys)
+    if x.size < MIN_SAMPLES:
+        raise ValueError(
+            f"scan: the {spec.type} has {x.size} point(s), fewer than the {MIN_SAMPLES} a simulated "
+            f"measurement needs: radius {R:g} mm, spacing {spec.spacing:g} mm, lines {spec.lines} — check "
+            "the units of scan.radius and scan.spacing (mm) and raise scan.lines")
     step = np.r_[0.0, np.hypot(np.diff(x), np.diff(y))]
     t = np.cumsum(step) / spec.speed
     c = np.degrees(np.arctan2(y, x)) % 360.0
