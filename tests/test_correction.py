@@ -95,7 +95,7 @@ def test_low_pass_is_iso_gaussian_50_percent_at_cutoff():
     for lam in (2.0, 8.0, 0.5):
         res = _run(_map_cloud(lambda x, y, lam=lam: 1e-4 * np.cos(2 * np.pi * x / lam), h=0.05, half=12),
                    None, diameter=16.0, cutoff_mm=2.0, outputs=["cutting"])
-        g = res.artifacts["correction.x3p"].__self__  # the correction grid
+        g = res.artifacts["correction.x3p"].grid  # the correction grid
         X, Y = np.meshgrid(g.xs, g.ys)
         inner = np.hypot(X, Y) <= 8 - 2 * 2.0  # away from the edge's continuation
         e = 1e-4 * np.cos(2 * np.pi * X[inner] / lam)
@@ -132,7 +132,7 @@ def test_loop_two_runs_keep_under_20_percent(case):
                    outputs=["cutting"], history_rms_um=meas)
         meas.append(res.report["error_rms_um"])
         true.append(true_form_error(prog, machine, radius))
-        cor = res.artifacts["correction.x3p"].__self__
+        cor = res.artifacts["correction.x3p"].grid
         prog = prog.add(cor.xs, cor.ys, cor.z)
     assert meas[0] > 0.05  # a real error to correct (µm)
     assert meas[1] <= 0.2 * meas[0], meas
@@ -152,7 +152,7 @@ def test_gain_below_one_converges_run_by_run(tmp_path):
         res = _run(cloud, NOMINAL, cutoff_mm=2.5, knot_spacing=1.0, spacing=0.25, gain=0.5,
                    outputs=["cutting"], history_rms_um=runs)
         runs.append(res.report["error_rms_um"])
-        cor = res.artifacts["correction.x3p"].__self__
+        cor = res.artifacts["correction.x3p"].grid
         prog = prog.add(cor.xs, cor.ys, cor.z)
     assert all(b < 0.7 * a for a, b in zip(runs, runs[1:])), runs
     assert runs[-1] < 0.2 * runs[0]

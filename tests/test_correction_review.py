@@ -227,3 +227,70 @@ def test_a_flat_faced_on_a_lathe_gets_a_radial_program(tmp_path):
     assert rep["corrected_surface"]["fit_rms_nm"] <= 1.0 and (out / "corrected_surface.yaml").exists()
     # the default outputs of a flat include the radial program now
     assert "radial" in _run(cloud, flat, cutoff_mm=2.0).report["outputs"]
+
+
+def _turned_down_edge(x, y):
+    r = np.hypot(x, y)
+    return 1e-4 * np.exp(-(x**2 + y**2) / (2 * 8**2)) - 3e-4 * np.clip((r - 22) / 3, 0, 1) ** 2
+
+
+def test_the_removal_maps_zero_lies_in_the_clear_aperture():
+    """A turned-down edge: the continuation beyond the rim kept its low value and the filter lifted
+    the rim's inside, so the whole map's minimum lay in the run-out ring — every polishing job took
+    51 nm more everywhere (+15 % depth, +21 % volume) for nothing, and min_depth_um, over the whole
+    map, said 0 (a review). The zero is now the aperture's minimum; the ring is clipped at 0."""
+    nom = EvenAsphere(1 / 200.0, -0.5, {}, aperture=50.0)
+    cloud = _cloud(_turned_down_edge, radius=25.0, h=0.25)
+    deep = []
+    for extend in (None, 0.0):
+        p = {} if extend is None else {"extend_mm": extend}
+        rep = _run(cloud, nom, outputs=["polishing"], cutoff_mm=4.0, **p).report["removal"]
+        assert rep["min_depth_um"] == pytest.approx(0.0, abs=1e-9)
+        deep.append(rep["max_depth_um"])
+    assert deep[0] == pytest.approx(deep[1], rel=1e-6)  # the run-out adds nothing to the part's removal
+
+
+def test_an_error_map_in_nm_read_as_mm_is_refused_naming_the_unit():
+    """An instrument's error map written "x,y,z" with z in nm is read as mm (the documented default):
+    the correction was a 99 mm deep removal on a 40 mm part, status ok (a review). Its slopes (rad)
+    no form error has: refused, naming the header's unit; heights in µm read as mm are warned of."""
+    g = np.arange(-20.0, 20.01, 0.5)
+    X, Y = np.meshgrid(g, g)
+    keep = np.hypot(X, Y) <= 20.0
+    x, y = X[keep], Y[keep]
+    bump_mm = 1e-4 * np.exp(-(x**2 + y**2) / (2 * 4.0**2))  # 100 nm
+    with pytest.raises(StepError, match=r"rad.*read as mm.*z \[nm\]"):
+        _run(PointCloud.from_xyz(x, y, bump_mm * 1e6), None, diameter=40.0, cutoff_mm=2.0, channel="z")
+    rep = _run(PointCloud.from_xyz(x, y, bump_mm * 1e3), None, diameter=40.0, cutoff_mm=2.0,
+               channel="z").report  # in µm, read as mm: 0.1 mm deep
+    assert any("µm PV" in w and "unit" in w for w in rep["warnings"])
+    rep = _run(PointCloud.from_xyz(x, y, bump_mm), None, diameter=40.0, cutoff_mm=2.0, channel="z").report
+    assert not any("unit" in w for w in rep["warnings"])
+
+
+def test_the_correction_x3p_files_say_what_their_heights_mean(tmp_path):
+    """correction.x3p (dz to add) and removal.x3p (material to remove) were plain height maps, nothing
+    telling them from a form-error map.x3p of the opposite sign (a review): Record2's Comment states
+    the convention."""
+    import x3pio
+
+    res = _run(_cloud(_bump, radius=20.0, h=0.5), None, diameter=40.0, cutoff_mm=2.0,
+               outputs=["cutting", "polishing"])
+    out = _write_all(res, tmp_path / "o")
+    dz = x3pio.read(str(out / "correction.x3p")).metadata.comment
+    rem = x3pio.read(str(out / "removal.x3p")).metadata.comment
+    assert "height to ADD" in dz and "metres" in dz
+    assert "REMOVE" in rem and "metres" in rem
+
+
+def test_grid_files_write_the_nodes_as_their_decimals(tmp_path):
+    """x, y of correction.csv were Python's repr of x0 + k·h: -2.8000000000000003 (a review)."""
+    res = _run(_cloud(_bump, radius=20.0, h=0.2), None, diameter=40.0, cutoff_mm=2.0,
+               outputs=["cutting", "polishing"])
+    out = _write_all(res, tmp_path / "o")
+    for name in ("correction.csv", "removal.csv"):
+        rows = [ln.split(",") for ln in (out / name).read_text(encoding="utf-8").splitlines()
+                if not ln.startswith("#")][1:]
+        coords = [v for r in rows for v in r[:2]]
+        assert max(len(v.split(".")[1]) for v in coords) == 1, name  # 0.2 mm nodes: one decimal
+        assert "-2.8" in coords

@@ -401,9 +401,14 @@ def radial_remainder(cor: Correction, r, mean, axis=(0.0, 0.0)):
 
 
 def removal_map(cor: Correction, bias_mm: float = 0.0, side: int = 1):
-    """Material to remove (mm, ≥ 0) over the written region: side·gain·F about its minimum, plus bias.
+    """Material to remove (mm, ≥ 0) over the written region: side·gain·F about its minimum over the
+    clear aperture, plus bias; the run-out ring beyond the aperture is clipped at 0 there (no part to
+    polish: its minimum, where a turned-down edge continues, had set the zero and added 51 nm of
+    removal everywhere, +21 % of the volume, for nothing — a review).
     ``side``: where the surface is seen from (the probe's side, docs/conventions.md Correction): +1
     from +z (the material lies below the surface: a high spot, residual > 0, is excess), −1 from below
     (the material lies above it: a low spot is excess). dz itself is geometric and the same for both."""
     m = -float(side) * cor.dz  # side 1: gain·F less its plane, what is high is removed
-    return m - np.nanmin(m) + bias_mm
+    inside = cor.aperture_mask
+    low = np.nanmin(np.where(inside, m, np.nan)) if np.isfinite(m[inside]).any() else np.nanmin(m)
+    return np.maximum(m - low, 0.0) + bias_mm

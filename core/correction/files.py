@@ -2,8 +2,10 @@
 
 Grid CSVs have ``#`` comment lines first (the sign convention, the process, the filter), then the
 header with units, then one row per valid node, y-major (row by row from the lowest y) — the same
-order as map.csv. x and y are Python's shortest round-trip decimals of the nodes (formatted once per
-column and row); the value is written in fixed point with ``decimals`` places (12 in mm: 1 fm, far
+order as map.csv. x and y are written in fixed point with 12 decimals (formatted once per column
+and row): a node k × spacing from a decimal origin reads as its decimal (-2.8, not Python's
+-2.8000000000000003 — a review: 41,524 of 114,418 coordinates so, which fixed-width and G-code
+post-processors choke on); the value in fixed point with ``decimals`` places (12 in mm: 1 fm, far
 below anything a machine or a measurement resolves), trailing zeros dropped. The radial table
 (correction_radial.csv) writes both r and dz that way. The rows are assembled
 as one byte matrix in numpy, so a 1001 × 1001 grid is written in a fraction of a second.
@@ -15,12 +17,6 @@ import numpy as np
 
 def _comment(lines) -> str:
     return "".join(f"# {ln}\n" for ln in lines)
-
-
-def _strings(values) -> np.ndarray:
-    """(n, width) uint8 of repr(value), zero-padded."""
-    s = np.array([repr(v).encode() for v in np.asarray(values, dtype=np.float64).tolist()])
-    return s.view(np.uint8).reshape(len(s), -1)
 
 
 #: the 1000 three-digit groups "000" … "999" as ASCII digits
@@ -76,7 +72,7 @@ def write_grid_csv(path, xs, ys, Z, header: str, comments=(), scale: float = 1.0
     iy, ix = np.nonzero(ok)
     comma = np.full((iy.size, 1), ord(","), np.uint8)
     nl = np.full((iy.size, 1), ord("\n"), np.uint8)
-    M = np.concatenate([_strings(xs)[ix], comma, _strings(ys)[iy], comma,
+    M = np.concatenate([fixed_point_bytes(xs, 12)[ix], comma, fixed_point_bytes(ys, 12)[iy], comma,
                         fixed_point_bytes(Z[ok] * scale, decimals), nl], axis=1)
     with open(path, "wb") as f:
         f.write((_comment(comments) + header).encode("utf-8"))

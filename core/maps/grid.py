@@ -79,13 +79,14 @@ class MapGrid:
             write_number_columns(buf, [np.ascontiguousarray(z[:, j]) for j in range(z.shape[1])], delimiter=" ")
             f.buffer.write(buf.getvalue().replace(b"nan", b"NaN"))
 
-    def write_x3p(self, path: Path, revision: str = "2000") -> None:
+    def write_x3p(self, path: Path, revision: str = "2000", comment: str | None = None) -> None:
         """ISO 25178-72 areal file: row r of the matrix is y index r, column c is x index c; the
         placement offset carries the first node's (x, y) so the file keeps the map's position.
 
         ``revision`` "2000" writes the 'ISO5436 - 2000' record that every reader takes (MountainsMap,
         Gwyddion, OpenGPS, SurfaceTopography — which refuses the newer one); "2017" writes
-        'ISO25178-72:2017/DAM1' (x3pio reads both)."""
+        'ISO25178-72:2017/DAM1' (x3pio reads both). ``comment``: Record2's Comment — what the
+        heights mean where it is not a form-error map (a correction's dz to add, a removal depth)."""
         import x3pio
 
         rev = {"2000": x3pio.Revision.ISO5436_2000,
@@ -93,10 +94,20 @@ class MapGrid:
         placement = x3pio.Placement.translation(self.xs[0] * 1e-3, self.ys[0] * 1e-3, 0.0)
         x3pio.write(str(path), self.z * 1e-3, x_scale=self.spacing * 1e-3, y_scale=self.spacing * 1e-3,
                     placement=placement, coordinate_system=x3pio.CoordinateSystem.VIEW, revision=rev,
-                    metadata=x3p_record())
+                    metadata=x3p_record(comment))
 
 
-def x3p_record():
+@dataclass(frozen=True)
+class X3pWriter:
+    """An artifact writer (core.step.Artifact) of ``grid`` as map.x3p with Record2's ``comment``."""
+    grid: MapGrid
+    comment: str | None = None
+
+    def __call__(self, path: Path) -> None:
+        self.grid.write_x3p(path, comment=self.comment)
+
+
+def x3p_record(comment: str | None = None):
     """Record2 of a file PointsPro computed: PointsPro (and its version) as the software that made it
     — x3pio named itself — with a software probing system and no calibration date: ISO 25178-72's
     CalibrationDate is the instrument's last calibration, which computed data has none of (a review:
@@ -106,7 +117,12 @@ def x3p_record():
 
     from pointspro.core import __version__
 
-    return x3pio.Metadata.for_software("PointsPro", __version__)
+    meta = x3pio.Metadata.for_software("PointsPro", __version__)
+    if comment:
+        from dataclasses import replace
+
+        meta = replace(meta, comment=comment)
+    return meta
 
 
 def read_x3p_map(path: Path) -> MapGrid:

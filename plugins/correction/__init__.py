@@ -4,7 +4,7 @@ Sign convention (docs/conventions.md, Correction): residual = z − sag in the p
 material above the nominal, a high spot); the correction ``dz`` is the height to ADD to the
 programmed surface for the next run, dz = −gain × (the error low-passed), piston and tilt removed
 (set-up, not form). The material to remove (polishing) is gain × (the error low-passed) − its minimum
-+ bias, ≥ 0 everywhere. The math is core.correction (module doc there).
+over the clear aperture + bias, ≥ 0 everywhere. The math is core.correction (module doc there).
 
 Input: a cloud with a ``residual`` (after `misalignment`, `probe_radius`, `register`…) or a map
 whose z is the error (a `bspline_map` map.csv read back, an instrument's error map). Points on one
@@ -132,6 +132,43 @@ def _domain_radius(surface) -> float:
         if r is not None:
             return float(r)
     return float("inf")
+
+
+#: the steepest form error a correction is made for (rad, 99th percentile of the error map's slope
+#: over the aperture): 0.1 rad is 5.7° — a form error (what a machine or a polisher corrects) has
+#: slopes of µrad to mrad; a map this steep is heights in µm or nm read as mm (a review: an instrument's
+#: error map written "x,y,z" in nm became a 99 mm deep removal on a 40 mm part, status ok)
+MAX_ERROR_SLOPE = 0.1
+#: a form error deeper than this (mm, PV over the aperture) is warned of: possible (a ground blank),
+#: rarely what a correction is for, and what heights in µm read as mm look like
+WARN_ERROR_PV_MM = 0.05
+
+
+def _check_plausible(E, h: float, channel: str) -> None:
+    """Refuse an error map no machine correction is for (module constants), naming the likely unit
+    mistake; the warning for a deep one is the caller's (``_deep_warning``)."""
+    if not np.isfinite(E).any():
+        return
+    gy, gx = np.gradient(E, h)
+    slope = np.hypot(gx, gy)
+    slope = slope[np.isfinite(slope)]
+    if slope.size and float(np.percentile(slope, 99)) > MAX_ERROR_SLOPE:
+        pv = float(np.nanmax(E) - np.nanmin(E))
+        raise StepError(
+            f"the form error to correct ({channel}) has slopes of {np.percentile(slope, 99):.3g} rad "
+            f"(99th percentile) and a PV of {pv:.6g} mm over the clear aperture: no machine correction "
+            f"is that steep (above {MAX_ERROR_SLOPE:g} rad) — the heights are probably in µm or nm but "
+            "were read as mm; state the unit in the file's header (e.g. `x [mm],y [mm],z [nm]`, "
+            "docs/formats.md)")
+
+
+def _deep_warning(E) -> list[str]:
+    pv = float(np.nanmax(E) - np.nanmin(E)) if np.isfinite(E).any() else 0.0
+    if pv > WARN_ERROR_PV_MM:
+        return [f"the form error to correct is {pv * 1e3:.4g} µm PV over the clear aperture: deeper than a "
+                f"correction usually is ({WARN_ERROR_PV_MM * 1e3:g} µm) — if the heights were in µm or nm, "
+                "state the unit in the file's header (docs/formats.md)"]
+    return []
 
 
 def _probe_side(cloud) -> int | None:
@@ -360,6 +397,7 @@ class CorrectionStep(Step):
         except C.CorrectionInputError as e:
             raise StepError(str(e)) from None
         inside = cor.aperture_mask
+        _check_plausible(cor.E, h, channel)
         RR = np.hypot(cor.xs[None, :] - center[0], cor.ys[:, None] - center[1])
         inner = inside & (RR <= radius - cutoff)
         rep = {
@@ -387,7 +425,8 @@ class CorrectionStep(Step):
                                   "; the points also hold what the map does not resolve "
                                   "(unresolved_rms_um: noise and detail finer than the knots), which "
                                   "stays")),
-            "warnings": ([resolution_warning] if resolution_warning else []) + extend_warning,
+            "warnings": ([resolution_warning] if resolution_warning else []) + extend_warning
+            + _deep_warning(cor.E),
         }
         if em.unresolved_rms is not None:
             rep["unresolved_rms_um"] = em.unresolved_rms * 1e3
@@ -403,10 +442,12 @@ class CorrectionStep(Step):
         if "cutting" in outputs:
             from pointspro.core.correction.files import write_grid_csv
             from pointspro.core.maps import MapGrid
+            from pointspro.core.maps.grid import X3pWriter
 
             arts["correction.csv"] = lambda p: write_grid_csv(
                 p, cor.xs, cor.ys, cor.dz, "x [mm],y [mm],dz [mm]\n", comments)
-            arts["correction.x3p"] = MapGrid(cor.xs, cor.ys, cor.dz, h).write_x3p
+            arts["correction.x3p"] = X3pWriter(MapGrid(cor.xs, cor.ys, cor.dz, h),
+                                               "\n".join(comments) + "\nheights: dz in metres")
         if "polishing" in outputs:
             # which side of the surface is material: a high spot (residual > 0) is excess only when
             # the surface is seen from +z; probed from below (probe_radius side −1) the material lies
@@ -431,35 +472,38 @@ class CorrectionStep(Step):
                               "a high spot (residual > 0) is excess" if side else
                               "seen from +z (no probe side known: an instrument's map): the material is "
                               "taken to lie below the surface, a high spot (residual > 0) is excess")
-                formula = "gain × low-passed error − its minimum + bias"
+                formula = "gain × low-passed error − its minimum over the clear aperture + bias"
             else:
                 side_words = ("seen from below (probe_radius side −1): the material lies above the "
                               "surface, a low spot (residual < 0) is excess")
-                formula = "−gain × low-passed error − its minimum + bias"
+                formula = "−gain × low-passed error − its minimum over the clear aperture + bias"
             rep["removal"] = {"max_depth_um": depth_um, "max_depth_written_um": depth_all_um,
-                              "min_depth_um": float(np.nanmin(removal)) * 1e3,
+                              "min_depth_um": float(np.nanmin(np.where(inside, removal, np.nan))) * 1e3,
                               "bias_um": params.bias_um, "volume_mm3": vol,
                               "volume_aperture_mm3": vol_ap, "probe_side": seen,
                               "side_from": "probe_radius" if side else "default (+z)",
                               "material": side_words,
-                              "depth_note": "max_depth_um (and the max_depth_um limit) is over the clear "
-                                            "aperture; max_depth_written_um includes the run-out beyond it",
+                              "depth_note": "max_depth_um and min_depth_um (and the max_depth_um limit) "
+                                            "are over the clear aperture; max_depth_written_um includes the "
+                                            "run-out beyond it, where the removal is clipped at 0 (bias added)",
                               "sign": f"removal = material to remove (µm, ≥ 0) = {formula}; surface "
                                       f"{side_words}"}
             rcom = [f"PointsPro removal map (polishing): removal = material to REMOVE, um, >= 0 "
-                    f"everywhere = {'' if seen > 0 else '-'}gain x low-passed form error - its minimum + "
-                    f"bias {params.bias_um:g} um",
+                    f"everywhere = {'' if seen > 0 else '-'}gain x low-passed form error - its minimum over "
+                    f"the clear aperture (the run-out beyond it clipped at 0) + bias {params.bias_um:g} um",
                     f"surface {side_words}".replace("−", "-").replace("µ", "u"),
                     comments[1], comments[2],
                     f"max depth {depth_um:.6g} um inside the clear aperture ({depth_all_um:.6g} um with "
                     f"the run-out); volume removed {vol:.6g} mm^3"]
             from pointspro.core.correction.files import write_grid_csv
             from pointspro.core.maps import MapGrid
+            from pointspro.core.maps.grid import X3pWriter
 
             arts["removal.csv"] = lambda p: write_grid_csv(
                 p, cor.xs, cor.ys, removal, "x [mm],y [mm],removal [um]\n", rcom, scale=1e3,
                 decimals=9)
-            arts["removal.x3p"] = MapGrid(cor.xs, cor.ys, removal, h).write_x3p
+            arts["removal.x3p"] = X3pWriter(MapGrid(cor.xs, cor.ys, removal, h), "\n".join(rcom)
+                                            + "\nheights: removal in metres (not um as in removal.csv)")
         ctx.progress.check()
         if "radial" in outputs:
             ctx.progress.update(0.6, "radial program")
