@@ -71,3 +71,39 @@ def test_simulate_refuses_a_scan_with_too_few_samples(run_cli, tmp_path, scan, k
     assert code == 2 and "m.yaml" in err and "internal error" not in err
     assert all(k in err for k in keys), err
     assert not (tmp_path / "s.csv").exists()
+
+
+def _dyn_run(tmp_path, cloud, **kw):
+    from pointspro.core.dynamics.identify import write_example_calibration
+    from pointspro.core.step import Context
+    from pointspro.plugins.dynamic import DynamicStep
+
+    write_example_calibration(tmp_path)
+    return DynamicStep().run(cloud, DynamicStep.Params(calibration="calibration.csv", **kw), Context(base_dir=tmp_path))
+
+
+def _moving_cloud(n=3000, fs=1000.0):
+    from pointspro.core import PointCloud
+
+    t = np.arange(n) / fs
+    xd = 2 + 0.01 * np.sin(2 * np.pi * 2 * t)
+    return PointCloud.from_xyz(np.linspace(0, 10, n), np.zeros(n), xd, t=t, xd=xd, xc=np.zeros(n))
+
+
+@pytest.mark.parametrize("bad", [[0.0], [-5.0], [50.0, -1.0]])
+def test_dynamic_vibrations_must_be_positive(bad):
+    """[0] was an internal ZeroDivisionError ("please report"), [-5] advised a spatial period of
+    −667 µm: refused with the parameter's message."""
+    from pydantic import ValidationError
+
+    from pointspro.plugins.dynamic import DynamicStep
+
+    with pytest.raises(ValidationError, match="each vibration frequency must be > 0 Hz"):
+        DynamicStep.Params(calibration="calibration.csv", vibrations=bad)
+
+
+def test_dynamic_vibration_at_the_sampling_rate_reads_as_an_offset(tmp_path):
+    """1000 Hz sampled at 1 kHz aliases to 0 Hz: "a false spatial period of inf µm" before."""
+    rep = _dyn_run(tmp_path, _moving_cloud(), vibrations=[1000.0, 680.0]).report
+    assert "inf" not in rep["advice"][0] and "constant offset or a slow drift" in rep["advice"][0]
+    assert "appears at 320 Hz" in rep["advice"][1]

@@ -65,14 +65,19 @@ def dominant_peaks(f, p, count: int = 3, fmin: float = 0.0) -> list[float]:
 
 
 def advice(fs: float, vibrations_hz, speed_mm_s: float) -> list[str]:
+    """Seed 000 §3.1 for each known vibration frequency (> 0 Hz): aliased or not, and the spatial
+    period it marks the map with at the scan's speed. A vibration at a multiple of fs aliases to 0 Hz:
+    a constant offset or a slow drift, no period (it read "inf µm")."""
     out = []
     for f in vibrations_hz:
         fa = float(aliased_frequency(f, fs))
         if f > fs / 2:
-            period = speed_mm_s / fa * 1e3 if fa > 0 else float("inf")
-            out.append(f"vibration at {f:g} Hz is above the Nyquist frequency ({fs / 2:g} Hz): it "
-                       f"appears at {fa:g} Hz, i.e. a false spatial period of {period:.3g} µm at "
-                       f"{speed_mm_s:.3g} mm/s — sample at ≥ {2 * f:g} Hz or low-pass the sensor")
+            alias = (f"it appears at {fa:g} Hz, i.e. a false spatial period of {speed_mm_s / fa * 1e3:.3g} µm at "
+                     f"{speed_mm_s:.3g} mm/s" if fa > 1e-9 * fs else
+                     "it is a multiple of the sampling rate and appears as a constant offset or a slow drift "
+                     "(0 Hz)")
+            out.append(f"vibration at {f:g} Hz is above the Nyquist frequency ({fs / 2:g} Hz): {alias} — "
+                       f"sample at ≥ {2 * f:g} Hz or low-pass the sensor")
         else:
             period = speed_mm_s / f * 1e3
             out.append(f"vibration at {f:g} Hz is sampled correctly; it marks the map with a spatial "

@@ -19,7 +19,7 @@ frequency.
 from __future__ import annotations
 
 import numpy as np
-from pydantic import model_validator
+from pydantic import field_validator, model_validator
 
 from pointspro.core.errors import InputError, StepError
 from pointspro.core.step import Context, Params, Step, StepResult, param
@@ -35,7 +35,16 @@ class DynamicParams(Params):
     xd: str = param("xd", help="encoder channel of the axis carrying the sensor (mm)")
     xc: str = param("xc", help="sensor reading channel (mm)")
     vibrations: list[float] = param(default_factory=list, unit="Hz",
-                                    help="known vibration frequencies to check for aliasing")
+                                    help="known vibration frequencies to check for aliasing (each > 0 Hz)")
+
+    @field_validator("vibrations")
+    @classmethod
+    def _positive(cls, v):
+        # a review: [0] was an internal ZeroDivisionError, [-5] advised a spatial period of −667 µm
+        bad = [f for f in v if not f > 0]
+        if bad:
+            raise ValueError(f"{', '.join(f'{f:g}' for f in bad)} Hz: each vibration frequency must be > 0 Hz")
+        return v
 
     @model_validator(mode="after")
     def _one_source(self):
