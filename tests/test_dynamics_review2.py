@@ -107,3 +107,52 @@ def test_dynamic_vibration_at_the_sampling_rate_reads_as_an_offset(tmp_path):
     rep = _dyn_run(tmp_path, _moving_cloud(), vibrations=[1000.0, 680.0]).report
     assert "inf" not in rep["advice"][0] and "constant offset or a slow drift" in rep["advice"][0]
     assert "appears at 320 Hz" in rep["advice"][1]
+
+
+def _scan_csv(path, n=3000, fs=1000.0, edit=None):
+    """A scan file (header on line 1, sample k on line k + 2): x, y, z, t, xd, xc; ``edit`` changes the
+    columns first."""
+    t = np.arange(n) / fs
+    xd = 2 + 0.01 * np.sin(2 * np.pi * 2 * t)
+    cols = {"x": np.linspace(0, 10, n), "y": np.zeros(n), "z": xd.copy(), "t": t, "xd": xd, "xc": np.zeros(n)}
+    if edit:
+        edit(cols)
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="")
+    return path
+
+
+def _line_of_error(tmp_path, edit):
+    from pointspro.core.errors import InputError
+    from pointspro.core.io import read_cloud
+
+    cloud = read_cloud(_scan_csv(tmp_path / "scan.csv", edit=edit))
+    with pytest.raises(InputError) as e:
+        _dyn_run(tmp_path, cloud)
+    return str(e.value)
+
+
+def test_time_stamp_errors_name_the_file_line_after_a_dropped_nan_row(tmp_path):
+    """A NaN z on line 102 (dropped on reading) and a duplicated stamp on line 1003: named on line 1002
+    (the array position + 2) before."""
+    def edit(c):
+        c["z"][100] = np.nan       # line 102
+        c["t"][1001] = c["t"][1000]  # line 1003
+    msg = _line_of_error(tmp_path, edit)
+    assert "line 1003: duplicated time stamp" in msg, msg
+
+
+def test_a_gap_left_by_a_dropped_nan_row_is_said(tmp_path):
+    """A NaN on line 502 read as "line 502: the sampling interval changes": it is line 503 whose
+    interval is 2 ms, because line 502 was dropped on reading."""
+    def edit(c):
+        c["xd"][500] = np.nan  # line 502
+    msg = _line_of_error(tmp_path, edit)
+    assert "line 503: the sampling interval changes" in msg, msg
+    assert "line 502 was dropped on reading for a NaN or infinite value" in msg, msg
+
+
+def test_a_gap_in_the_time_stamps_alone_is_not_blamed_on_dropped_rows(tmp_path):
+    def edit(c):
+        c["t"][1500:] += 0.01  # line 1502
+    msg = _line_of_error(tmp_path, edit)
+    assert "line 1502: the sampling interval changes" in msg and "dropped" not in msg, msg

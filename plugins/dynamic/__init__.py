@@ -86,6 +86,19 @@ def _figure(t, z_raw, z, x, y, fs):
     return fig
 
 
+def _file_lines(cloud) -> dict:
+    """sampling_rate's ``lines`` (each sample's line in a text file: the header's line + 1 + its input
+    row, ``index``) and what the rows missing between two samples are. Array positions are not lines
+    once the reader dropped a NaN row (a review: a duplicate on line 1003 was named on line 1002, and a
+    dropped NaN row read as "the sampling interval changes")."""
+    header = cloud.meta.get("header_line")
+    first = (int(header) + 1) if cloud.meta.get("format") == "text" and header else 2
+    dropped = int(cloud.meta.get("invalid_dropped") or 0)
+    why = (f"dropped on reading for a NaN or infinite value ({dropped} row(s) of the file in all)" if dropped
+           else "removed before this step")
+    return {"lines": np.asarray(cloud.index, dtype=np.int64) + first, "missing": why}
+
+
 class DynamicStep(Step):
     id = "dynamic"
     title = "Dynamic error correction"
@@ -117,7 +130,8 @@ class DynamicStep(Step):
 
         src = cloud.meta.get("source", "scan")
         t = channel_in(cloud, params.t, "s", self.id)  # s, from the unit the file states (t [ms])
-        fs = sampling_rate(t, src, row_offset=2)
+        where = _file_lines(cloud)
+        fs = sampling_rate(t, src, **where)
         arts = {}
         if params.model is not None:
             from pointspro.core.io.text import read_parameter_text
@@ -140,7 +154,7 @@ class DynamicStep(Step):
         gap = np.abs(z_raw - (xd + xc))
         if gap.max() > 1e-6 * max(1.0, np.abs(z_raw).max()):
             i = int(np.argmax(gap))
-            raise StepError(f"z ≠ xd + xc at row {int(cloud.index[i])} (off by {gap[i]:.3g} mm): the "
+            raise StepError(f"z ≠ xd + xc on line {int(where['lines'][i])} (off by {gap[i]:.3g} mm): the "
                             "channels are not the scan's encoder and sensor")
         sensor_point = model.apply(xd)
         z = sensor_point + xc
