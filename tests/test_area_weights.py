@@ -211,3 +211,16 @@ def test_a_coarse_spiral_with_a_feature_off_its_centre(turns, n):
         return np.exp(-((x - 15) ** 2 + (y + 10) ** 2) / (2 * 4.0 ** 2))
     w = area_weights(x, y)
     assert weighted_rms(bump(x, y), w) == pytest.approx(area_truth(x, y, bump), rel=0.03)
+
+
+@pytest.mark.parametrize("n", [80, 200, 500])
+def test_points_spread_at_random_are_left_to_the_plain_mean(n):
+    """80–500 points at random on a disc (a CMM's scattered sampling) were weighted in 3–5 of 5 seeds —
+    the density of so few is noisy and their hull falls short of the rim — and the RMS read 5–14 % low
+    (a review). Over 40 seeds, at most 2 are weighted (the KS test's 0.1 % and the quarters' rule)."""
+    weighted = 0
+    for seed in range(40):
+        rng = np.random.default_rng(500 + seed)
+        r, t = 10.0 * np.sqrt(rng.random(n)), rng.random(n) * 2 * np.pi
+        weighted += area_weights(r * np.cos(t), r * np.sin(t)) is not None
+    assert weighted <= 2
