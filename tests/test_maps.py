@@ -466,3 +466,30 @@ def test_extrapolated_map_reports_the_measured_nodes_and_warns(noise_nm, warned)
     assert 0.1 < rep["extrapolated_node_fraction"] < 0.3
     assert rep["map_pv_measured_um"] < 0.45  # the field over the points: ~0.32 µm
     assert any("extrapolated beyond the points" in w for w in rep["warnings"]) == warned
+
+
+def test_a_height_maps_figure_shows_it_less_piston_and_tilt(monkeypatch):
+    """An instrument's heights (channel z, no residual) with a 50 µm offset and a 0.3 µm tilt over
+    10 nm of form: map.png was one saturated colour on a ±50 µm range, its title's RMS the tilt's (a
+    review on a real MetroPro map: 75 nm beside the summary's 13 nm). The figure shows the heights
+    less their plane and says so; map.csv keeps z."""
+    import pointspro.core.figures as figs
+
+    g = np.arange(-10.0, 10.01, 0.25)
+    X, Y = np.meshgrid(g, g)
+    x, y = X.ravel(), Y.ravel()
+    form = 1e-5 * np.cos(2 * np.pi * x / 7.0) * np.cos(2 * np.pi * y / 9.0)
+    z = 0.05 + 1.5e-5 * x + form
+    res = BSplineMapStep().run(PointCloud.from_xyz(x, y, z), BSplineMapStep.Params(), Context())
+    rep = res.report
+    grid = res.artifacts["map.csv"].__self__
+    assert np.nanmax(grid.z) > 0.049  # the file keeps the heights
+    true_rms = np.std(form) * 1e3
+    assert rep["map_rms_tilt_removed_um"] == pytest.approx(true_rms, rel=0.05)
+    assert rep["map_rms_um"] > 10 * true_rms
+    drawn = {}
+    monkeypatch.setattr(figs, "grid_map_figure", lambda gr, title: drawn.update(grid=gr, title=title))
+    monkeypatch.setattr(figs, "save_png", lambda fig, path: None)
+    BSplineMapStep().run(PointCloud.from_xyz(x, y, z), BSplineMapStep.Params(), Context()).artifacts["map.png"]("x.png")
+    assert "piston and tilt removed" in drawn["title"]
+    assert np.nanmax(np.abs(drawn["grid"].z)) < 3e-5  # the form, not the 50 µm offset
