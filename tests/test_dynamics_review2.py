@@ -156,3 +156,42 @@ def test_a_gap_in_the_time_stamps_alone_is_not_blamed_on_dropped_rows(tmp_path):
         c["t"][1500:] += 0.01  # line 1502
     msg = _line_of_error(tmp_path, edit)
     assert "line 1502: the sampling interval changes" in msg and "dropped" not in msg, msg
+
+
+def _cloud_of(t, xd):
+    from pointspro.core import PointCloud
+
+    return PointCloud.from_xyz(np.linspace(0, 10, t.size), np.zeros(t.size), xd, t=t, xd=xd, xc=np.zeros(t.size))
+
+
+def test_the_model_lag_is_quoted_at_a_slow_scan_s_own_frequency(tmp_path):
+    """Main content at 0.1 Hz (6 rpm), a weak 3 Hz beside: Welch's 8192-sample segments at 1 kHz cut
+    below ~0.25 Hz and the lag was quoted at 3.05 Hz."""
+    t = np.arange(40000) / 1000.0
+    xd = 2 + 0.05 * np.sin(2 * np.pi * 0.1 * t) + 0.0005 * np.sin(2 * np.pi * 3 * t)
+    rep = _dyn_run(tmp_path, _cloud_of(t, xd)).report
+    assert rep["phase_lag_model_deg"]["frequency_hz"] == pytest.approx(0.1, abs=0.005)
+
+
+@pytest.mark.parametrize("kind", ["constant", "ramp_with_noise"])
+def test_no_model_lag_is_quoted_on_a_constant_feed(tmp_path, kind):
+    """The encoder at a constant feed has no dominant frequency: "3.33 Hz, 0.60°" was quoted from the
+    spectrum's rounding noise. None, and the report says why."""
+    t = np.arange(3000) / 1000.0
+    xd = (np.full(t.size, 2.0) if kind == "constant"
+          else 2 + 0.5 * t + np.random.default_rng(3).normal(0, 1e-6, t.size))
+    rep = _dyn_run(tmp_path, _cloud_of(t, xd)).report
+    assert rep["phase_lag_model_deg"] is None
+    assert "no dominant frequency" in rep["phase_lag_model_note"]
+
+
+@pytest.mark.parametrize("rpm", [0.14, 15.0])
+def test_the_dominant_frequency_resolves_004_s_spindle_speeds(rpm):
+    """004 Table 1: 0.14–15 rpm. Three turns at 100 Hz, a 0.2 µm form at the spindle and noise."""
+    from pointspro.core.dynamics.vibration import dominant_frequency
+
+    fs, f0 = 100.0, rpm / 60.0
+    t = np.arange(int(3.5 / f0 * fs)) / fs
+    xd = 5 + 0.01 * t + 2e-4 * np.sin(2 * np.pi * f0 * t + 0.3) + np.random.default_rng(1).normal(0, 2e-6, t.size)
+    f, why = dominant_frequency(xd, fs)
+    assert f == pytest.approx(f0, rel=0.03) and why == ""

@@ -64,6 +64,50 @@ def dominant_peaks(f, p, count: int = 3, fmin: float = 0.0) -> list[float]:
     return [float(f[i]) for i in sorted(idx)]
 
 
+#: a line of the encoder's spectrum is the scan's dominant frequency when its power stands this many
+#: times above the spectrum's median (its floor): white noise's largest of N/2 bins stands ~ln(N/2)/ln 2
+#: times above its median (≈ 20 for 10⁶ samples), a spindle's line thousands of times
+LINE_ABOVE_FLOOR = 100.0
+#: … and when the record holds at least this many of its periods (below, a linear trend's remainder)
+MIN_PERIODS = 3.0
+
+
+def dominant_frequency(v, fs: float) -> tuple[float | None, str]:
+    """The frequency (Hz) of the largest line of v's spectrum — a periodogram of the whole record (Hann,
+    linear trend removed), its bin 1/T, so that a spindle at 0.14–15 rpm (004 Table 1: 2.3 mHz–0.25 Hz)
+    is resolved where Welch's 8192-sample segments at 1 kHz cut below ~0.25 Hz — interpolated between
+    bins; with the reason when there is none: a line at fewer than MIN_PERIODS periods in the record,
+    or none LINE_ABOVE_FLOOR times above the floor (a constant feed: "3.33 Hz" was quoted from its
+    rounding noise)."""
+    from scipy.signal import periodogram
+
+    v = np.asarray(v, dtype=np.float64)
+    n = v.size
+    if n < 16:
+        return None, "too few samples for a spectrum"
+    from scipy.signal import detrend
+
+    r = detrend(v)
+    if not np.std(r) > 1e-12 * max(float(np.max(np.abs(v))), 1.0):  # rounding: 4e-13 mm at 2 m
+        return None, ("the encoder moves at a constant feed (nothing beyond a linear trend): no dominant "
+                      "frequency to quote the model's lag at")
+    f, p = periodogram(r, fs=fs, window="hann", detrend=False)
+    k0 = max(int(np.ceil(MIN_PERIODS)), 1)  # bin k holds k periods of the record
+    if p.size < k0 + 3:
+        return None, "too few samples for a spectrum"
+    q = p[k0:-1]
+    k = int(np.argmax(q))
+    floor = float(np.median(q))
+    if not q[k] > 0 or (floor > 0 and q[k] < LINE_ABOVE_FLOOR * floor):
+        return None, ("no line of the encoder's spectrum stands clearly above its floor (a motion with no "
+                      "repeating content): no dominant frequency to quote the model's lag at")
+    k += k0
+    a, b, c = (np.log(max(x, 1e-300)) for x in p[k - 1:k + 2])
+    den = a - 2 * b + c
+    shift = 0.5 * (a - c) / den if den < 0 else 0.0
+    return float((k + float(np.clip(shift, -0.5, 0.5))) * f[1]), ""
+
+
 def advice(fs: float, vibrations_hz, speed_mm_s: float) -> list[str]:
     """Seed 000 §3.1 for each known vibration frequency (> 0 Hz): aliased or not, and the spatial
     period it marks the map with at the scan's speed. A vibration at a multiple of fs aliases to 0 Hz:

@@ -10,8 +10,10 @@ with Gm identified from ``calibration`` (core.dynamics.identify, as `dynamic_id`
 Vibration analysis in the report: PSD of the sensor signal in time and along the surface, its
 largest peaks, the phase lag of the sensor point behind the carriage, the aliased frequency of each
 known vibration (``vibrations``) and the sampling advice of 000 §3.1. Two lags: ``phase_lag_model_deg``,
-the model's lag at the frequency of the largest peak of the encoder's spectrum (the loop's lag for the
-scan's dominant content), and ``phase_lag_scan_deg``, the median over the scan of the Hilbert phase
+the model's lag at the frequency of the largest line of the encoder's spectrum (the loop's lag for the
+scan's dominant content: a periodogram of the whole record, which resolves a slow spindle; None, with
+``phase_lag_model_note`` saying why, when no line stands clearly above the spectrum's floor, as on a
+constant feed), and ``phase_lag_scan_deg``, the median over the scan of the Hilbert phase
 difference between Gm·xd and xd — weighted by amplitude, so it follows the scan's largest (usually
 slowest) content (0.0003° on a scan whose 12 Hz form lags 0.9°); it is not the loop's lag at any one
 frequency.
@@ -116,6 +118,7 @@ class DynamicStep(Step):
         from pointspro.core.dynamics.vibration import (
             advice,
             aliased_frequency,
+            dominant_frequency,
             dominant_peaks,
             phase_lag_hilbert_deg,
             psd_time,
@@ -161,15 +164,14 @@ class DynamicStep(Step):
         e = z_raw - z
         ctx.progress.update(0.8, "vibrations")
         f, ps = psd_time(xc, fs)
-        fd, pd_ = psd_time(xd, fs)
-        dom = dominant_peaks(fd, pd_, 1, fmin=2 * fd[1]) if fd.size > 3 else []
+        f_dom, no_dom = dominant_frequency(xd, fs)
         speed = float(np.sum(np.hypot(np.diff(cloud.x), np.diff(cloud.y))) / (t[-1] - t[0]))
         peaks = dominant_peaks(f, ps, 3, fmin=1.0)
         report = {
             "model": model_report(model), "fs_hz": fs, "samples": cloud.n,
             "dynamic_error_rms_um": float(np.std(e) * 1e3), "dynamic_error_pv_um": float(np.ptp(e) * 1e3),
-            "phase_lag_model_deg": ({"frequency_hz": dom[0], "lag_deg": float(model.phase_lag_deg(dom)[0])}
-                                    if dom else None),
+            "phase_lag_model_deg": ({"frequency_hz": f_dom, "lag_deg": float(model.phase_lag_deg([f_dom])[0])}
+                                    if f_dom is not None else None),
             "phase_lag_scan_deg": phase_lag_hilbert_deg(xd, sensor_point) if cloud.n > 100 else None,
             "scan_speed_mm_s": speed, "sensor_psd_peaks_hz": peaks,
             "vibrations": [{"frequency_hz": v, "aliased_hz": float(aliased_frequency(v, fs)),
@@ -177,6 +179,8 @@ class DynamicStep(Step):
             "advice": advice(fs, params.vibrations, speed) if params.vibrations else [],
             "warnings": model_warnings(model),
         }
+        if f_dom is None:
+            report["phase_lag_model_note"] = no_dom
         if not np.isfinite(model.record_s) and model.slowest_decay_s > t[-1] - t[0]:
             report["warnings"].append(f"the model has a pole decaying in {model.slowest_decay_s:.3g} s, longer than "
                                       "the scan: its correction rings on through it — identify the model again")
