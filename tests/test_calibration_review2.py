@@ -125,3 +125,119 @@ def test_z_scale_finds_no_step_on_flat_noisy_scans():
             except StepError:
                 pass
     assert found == {"white": 0, "filtered": 0, "t3": 0}, found
+
+
+def _fiducial_run(tmp_path, ref, seed=1, field=None):
+    """FiducialsStep on balls at ``ref`` (reference = machine frame, noise 0.2 µm on the probe points)."""
+    from pointspro.core import PointCloud
+    from pointspro.core.calibration.fiducials import ball_points
+    from pointspro.core.step import Context
+    from pointspro.plugins.fiducials import FiducialsStep
+
+    T = machine_frame(ref)
+    M = T if field is None else T - field(T)
+    pts, ids = ball_points(M, noise=0.2e-3, seed=seed)
+    (tmp_path / "ref.csv").write_text("fiducial,x,y,z\n" + "".join(
+        f"{i + 1},{a!r},{b!r},{c!r}\n" for i, (a, b, c) in enumerate(ref.tolist())), encoding="utf-8")
+    return FiducialsStep().run(PointCloud.from_xyz(*pts.T, fiducial=ids),
+                               FiducialsStep.Params(reference="ref.csv", monte_carlo_runs=0, Q=1),
+                               Context(base_dir=tmp_path))
+
+
+def _plate_and_tall_ball(seed=5):
+    rng = np.random.default_rng(seed)
+    ref = np.array([[x, y, 5.0] for x in (-90, -30, 30, 90) for y in (-15, 15)] + [[0, 0, 45.0]])
+    return ref + rng.normal(0, 0.5, ref.shape) * [1, 1, 0.01]
+
+
+def test_cv_folds_keep_the_ball_the_transform_leans_on():
+    """A plate of 8 balls (heights within 10 µm) and one tall ball: without the tall one the others are
+    coplanar, so it is in every training set; every fold's training balls determine its held-out ones.
+    A layout where no ball is essential keeps kfold_indices' folds."""
+    from pointspro.core.calibration.gp import MAX_FOLD_LEVERAGE, _leverage, affine_folds, kfold_indices
+
+    ref = _plate_and_tall_ball()
+    A = np.column_stack([ref, np.ones(len(ref))])
+    folds, fixed = affine_folds(A, 6)
+    assert fixed.tolist() == [8]
+    held = np.concatenate(folds)
+    assert sorted(held.tolist()) == list(range(8))
+    for f in folds:
+        train = np.setdiff1d(np.arange(9), f)
+        assert np.all(_leverage(A, train, f) <= MAX_FOLD_LEVERAGE)
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.uniform(-100, 100, 24), rng.uniform(-20, 20, 24), rng.uniform(0, 50, 24)])
+    folds, fixed = affine_folds(np.column_stack([X, np.ones(24)]), 6)
+    assert fixed.size == 0
+    assert all(np.array_equal(a, b) for a, b in zip(folds, kfold_indices(24, 6)))
+
+
+def test_a_plate_and_one_tall_ball_states_a_sane_error_left(tmp_path):
+    """The review's layout: 'none' was chosen with σ = 2.5 mm in x (a fold re-fitted the transform on
+    the coplanar plate and extrapolated it to the tall ball). Now: the error left is µm, at most a few
+    times the in-sample error, and the report names the ball never held out."""
+    from pointspro.core.calibration.fiducial_sim import EXTENT, LOW, smooth_field
+
+    f = smooth_field(3, "fourier", 1.3, EXTENT, machine_frame(LOW))
+    rep = _fiducial_run(tmp_path, _plate_and_tall_ball(), field=f).report
+    sel = rep["gp_selection"]
+    assert sel["sigma_basis"] == "cross-validation" and sel["never_held_out"] == [8]
+    assert sel["no_gp_rms_um"]["norm"] < 4 * rep["ev_rms_um"], sel["no_gp_rms_um"]
+    assert any("fiducial(s) [9] never held out" in w for w in rep["warnings"]), rep["warnings"]
+
+
+def test_four_balls_state_the_error_left_as_unknown(tmp_path):
+    """4 balls: every fold of 3 is coplanar (σ of mm was written). Now no cross-validation, σ unknown:
+    the model says so and volumetric writes nan with a warning, in both frames."""
+    from pointspro.core import PointCloud
+    from pointspro.core.calibration import volumetric_model as vm
+    from pointspro.core.step import Context
+    from pointspro.plugins.volumetric import VolumetricStep
+
+    ref = np.array([[-80.0, -15.0, 5.0], [80.0, -15.0, 10.0], [0.0, 18.0, 8.0], [10.0, 0.0, 45.0]])
+    res = _fiducial_run(tmp_path, ref)
+    sel = res.report["gp_selection"]
+    assert sel["sigma_basis"] == "unknown" and sel["chosen"] == "none"
+    assert sel["no_gp_rms_um"]["norm"] is None
+    assert any("unknown" in w for w in res.report["warnings"])
+    (tmp_path / "m.json").write_text(res.artifacts["volumetric_model.json"], encoding="utf-8")
+    vm.loads(res.artifacts["volumetric_model.json"], "m.json")  # a valid model file
+    W = machine_frame(np.array([[0.0, 0.0, 20.0], [30.0, 5.0, 25.0]]))
+    for frame in ("machine", "reference"):
+        out = VolumetricStep().run(PointCloud(W), VolumetricStep.Params(model="m.json", frame=frame),
+                                   Context(base_dir=tmp_path))
+        assert np.all(np.isnan(out.cloud["u_x"])) and np.all(np.isnan(out.cloud["u_z"]))
+        assert any("unknown" in w for w in out.report["warnings"])
+
+
+def test_five_balls_state_the_error_left_from_the_residuals(tmp_path):
+    """5 balls: too few to hold out; no GP, the σ from the in-sample residuals with ν = 1 (finite, µm
+    at most for 0.2 µm of probing noise), and said."""
+    ref = np.array([[-80.0, -15.0, 5.0], [80.0, -15.0, 10.0], [0.0, 18.0, 8.0], [10.0, 0.0, 45.0],
+                    [-40.0, 10.0, 30.0]])
+    rep = _fiducial_run(tmp_path, ref).report
+    sel = rep["gp_selection"]
+    assert sel["sigma_basis"] == "in-sample residuals" and sel["chosen"] == "none"
+    assert 0 < sel["no_gp_rms_um"]["norm"] < 2.0, sel["no_gp_rms_um"]
+    assert any("ν = 1" in w for w in rep["warnings"]), rep["warnings"]
+
+
+def test_no_cv_sigma_is_the_out_of_sample_error_on_average():
+    """Independent errors of σ about an affine fit on n = 6 and 8 balls: E[no_cv_sigma²] ≈ the mean
+    squared error, at new points uniform over the balls' box, of the fitted transform against new
+    errors like them, over 600 draws (the in-sample RMS² reads (n − 4)/n of σ² alone)."""
+    from pointspro.core.calibration.gp import no_cv_sigma
+
+    for n in (6, 8):
+        est, true = [], []
+        for seed in range(600):
+            rng = np.random.default_rng(seed)
+            X = np.column_stack([rng.uniform(-100, 100, n), rng.uniform(-20, 20, n), rng.uniform(0, 50, n)])
+            A = np.column_stack([X, np.ones(n)])
+            y = rng.normal(0, 1e-3, n)
+            th, *_ = np.linalg.lstsq(A, y, rcond=None)
+            est.append(no_cv_sigma(A @ th - y, A)[0] ** 2)
+            P = rng.uniform(X.min(axis=0), X.max(axis=0), (200, 3))
+            new = np.column_stack([P, np.ones(200)]) @ th - rng.normal(0, 1e-3, 200)
+            true.append(np.mean(new**2))
+        assert 0.85 < np.mean(est) / np.mean(true) < 1.15, (n, np.mean(est), np.mean(true))

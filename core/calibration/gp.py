@@ -23,6 +23,12 @@ alone) is a candidate too, and the fold re-fits the transform without its held-o
 part of the noise, so comparing a GP with them would favour "none" unfairly); a GP is applied only where
 it beats "none" by more than one standard error of the paired held-out difference (the one-standard-
 error rule), so on a field the balls cannot resolve the model says "none" and states the error left.
+A fold's re-fitted transform must be determined where its held-out balls lie (``affine_folds``: a ball
+the others cannot predict — the tall one beside a plate — is never held out, and folds are re-drawn
+until every training set determines its held-out balls); with fewer than MIN_HELD_OUT balls to hold out
+there is no cross-validation, no GP, and the error left is the residuals' σ with their degrees of
+freedom, or unknown with 4 balls (``_without_cv``): a fold of 3 balls had extrapolated the noise of
+their plane to mm, stored as the σ of "none".
 Spectral mixtures Q = 2, 4, … are tried only while they improve and while they beat "none" (on 24 balls
 they lose to RBF/Matérn on every simulated case, and each costs ~1 s). The closed-form LOO below is computed
 at hyperparameters fitted to all points — the held-out one included — and is biased low for a
@@ -321,6 +327,76 @@ def _regressor(kernel, restarts, seed, maxiter):
                                     random_state=seed, alpha=1e-10, optimizer=_lbfgs(maxiter))
 
 
+#: a fold's affine re-fit must determine the transform where its held-out balls lie: each one's leverage
+#: with respect to the training balls, h = aᵀ(A_trᵀA_tr)⁻¹a (a = [X_r, 1] of the held-out ball), at most
+#: this — its predicted position then carries at most √(1 + h) ≈ 3.3 × a fiducial's noise. A training
+#: set that is coplanar (4 balls → folds of 3; a plate of balls and one tall ball, the tall one held
+#: out) extrapolates the noise of the balls' heights out of their plane: a review found held-out errors
+#: of 0.3–2.5 mm (for 0.7 µm in sample), and "none" stored that as its σ — volumetric wrote u of mm
+MAX_FOLD_LEVERAGE = 10.0
+#: fewer balls than this that can be held out: no cross-validation (too few held-out errors to choose a
+#: kernel by, or to state the error left with), the error left from the in-sample residuals (no_cv_sigma)
+MIN_HELD_OUT = 6
+
+
+def _leverage(design, train, held) -> np.ndarray:
+    """Leverage of the ``held`` rows of ``design`` with respect to the least-squares fit to the
+    ``train`` rows (inf where the training rows do not determine all the parameters)."""
+    U, s, Vt = np.linalg.svd(design[train], full_matrices=False)
+    if s.size < design.shape[1] or s[-1] <= 1e-12 * s[0]:
+        return np.full(len(held), np.inf)
+    return np.sum((design[held] @ Vt.T / s) ** 2, axis=1)
+
+
+def affine_folds(design, folds: int, seed: int = 0, tries: int = 100) -> tuple[list | None, np.ndarray]:
+    """Cross-validation folds for errors that are the residuals of an affine fit with ``design`` [X_r, 1]
+    (n × 4): (held-out sets, the balls never held out). A ball the transform leans on — held out alone,
+    its leverage with respect to the others exceeds MAX_FOLD_LEVERAGE, i.e. its hat value h_ii exceeds
+    MAX/(1 + MAX) (the tall ball beside a plate of balls) — stays in every training set: the others
+    cannot predict it, and without it the fold's transform would be extrapolated. The remaining balls
+    are split as ``kfold_indices`` does (the same folds where no ball is left out and the first draw
+    serves); a draw with a fold whose training set does not determine its held-out balls is drawn
+    again (``tries`` times), then leave-one-out (each training set then determines its ball, by the
+    choice of those held out). (None, …) when fewer than MIN_HELD_OUT balls can be held out."""
+    design = np.asarray(design, dtype=np.float64)
+    n = len(design)
+    U, s, _ = np.linalg.svd(design, full_matrices=False)
+    rank = int(np.sum(s > 1e-12 * s[0]))
+    h = np.sum(U[:, :rank] ** 2, axis=1)
+    holdable = np.flatnonzero(h < MAX_FOLD_LEVERAGE / (1 + MAX_FOLD_LEVERAGE))
+    fixed = np.setdiff1d(np.arange(n), holdable)
+    if rank < design.shape[1] or holdable.size < MIN_HELD_OUT:
+        return None, fixed
+    every = np.arange(n)
+    for t in range(tries):
+        sets = [holdable[i] for i in kfold_indices(holdable.size, folds, seed + t)]
+        if all(np.all(_leverage(design, np.setdiff1d(every, f), f) <= MAX_FOLD_LEVERAGE) for f in sets):
+            return sets, fixed
+    return [np.array([i]) for i in holdable], fixed
+
+
+def no_cv_sigma(Y, design) -> np.ndarray:
+    """Per column, the standard deviation of the error left at a workpiece point when too few balls allow
+    a cross-validation: s² = Σr²/(n − p), unbiased for independent errors about the fit with ``design``
+    [X_r, 1] (n × p; the in-sample RMS is smaller: p parameters absorb part of them), times 1 + h̄,
+    h̄ the mean leverage of a point uniform over the balls' box, trace((AᵀA)⁻¹ E[aaᵀ]) — the error of
+    the re-fitted transform there, as a held-out ball's carries it in a cross-validation (with few
+    balls, points of the box lie well outside their hull: p/n, the balls' own mean, read 1.7 where 4
+    was due for 6 balls). nan when n ≤ p: the transform passes through every ball and the error left
+    is unknown."""
+    Y = np.asarray(Y, dtype=np.float64)
+    Y = Y[:, None] if Y.ndim == 1 else Y
+    A = np.asarray(design, dtype=np.float64)
+    n, p = A.shape
+    if n <= p:
+        return np.full(Y.shape[1], np.nan)
+    lo, hi = A[:, :-1].min(axis=0), A[:, :-1].max(axis=0)
+    mu = np.r_[(lo + hi) / 2, 1.0]
+    M = np.outer(mu, mu) + np.diag(np.r_[(hi - lo) ** 2 / 12, 0.0])
+    hbar = float(np.trace(np.linalg.solve(A.T @ A, M)))
+    return np.sqrt(np.sum(Y**2, axis=0) / (n - p) * (1 + hbar))
+
+
 def _affine_fold(affine, train, held):
     """The errors of the training and the held-out fiducials when the affine transform is fitted to
     the training fiducials alone: ``affine`` = (design [X_r, 1] (n × 4), targets X_m (n,)) of one
@@ -338,12 +414,12 @@ def cv_residuals(kernel, X, y, folds: list, maxiter: int = 150, affine=None) -> 
     ``_affine_fold``): the transform is fitted again without the held-out fiducials too, so their
     errors are out of sample as the workpiece's are (the errors at the fiducials the transform was
     fitted to are smaller: 12 parameters absorb part of the noise). ``kernel`` None: no GP (the
-    prediction is 0, the error is the affine transform's alone)."""
+    prediction is 0, the error is the affine transform's alone). A ball in no fold: nan."""
     import warnings
 
     from sklearn.exceptions import ConvergenceWarning
 
-    r = np.empty(len(y))
+    r = np.full(len(y), np.nan)  # nan: a ball no fold holds out (affine_folds)
     for held in folds:
         train = np.setdiff1d(np.arange(len(y)), held)
         ytr, yho = (y[train], y[held]) if affine is None else _affine_fold(affine, train, held)
@@ -372,15 +448,15 @@ class ZeroGP:
 
 
 def _evaluate(kernel, X, y, folds, maxiter, affine=None):
-    """(GP fitted to all points, its cross-validated residuals, its closed-form LOO RMS); None when the
-    kernel cannot be fitted. ``kernel`` None: no GP."""
+    """(GP fitted to all points, its cross-validated residuals (nan at a ball no fold holds out), its
+    closed-form LOO RMS); None when the kernel cannot be fitted. ``kernel`` None: no GP."""
     import warnings
 
     from sklearn.exceptions import ConvergenceWarning
 
     if kernel is None:
         r = cv_residuals(None, X, y, folds, maxiter, affine)
-        return ZeroGP(float(np.sqrt(np.mean(r**2)))), r, float(np.sqrt(np.mean(y**2)))
+        return ZeroGP(float(np.sqrt(np.nanmean(r**2)))), r, float(np.sqrt(np.mean(y**2)))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
@@ -421,7 +497,17 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
     nv = [None] * m if noise_var is None else list(np.broadcast_to(np.asarray(noise_var, float), (m,)))
     nx = [None] * m if noise_max is None else list(np.broadcast_to(np.asarray(noise_max, float), (m,)))
     aff = [None] * m if affine is None else list(affine)
-    fold_sets = kfold_indices(len(X), folds, seed)
+    fixed = np.zeros(0, dtype=int)
+    if affine is None:
+        fold_sets = kfold_indices(len(X), folds, seed)
+    else:
+        fold_sets, fixed = affine_folds(aff[0][0], folds, seed)
+        if fold_sets is None:
+            return _without_cv(Y, aff[0][0], len(fixed))
+    cv_note = None
+    if fixed.size:
+        cv_note = (f"{fixed.size} ball(s) never held out (indices {fixed.tolist()}): the other balls do not "
+                   f"determine the transform where they lie (leverage > {MAX_FOLD_LEVERAGE:g} held out)")
     stds = [_scale(Y[:, j])[1] for j in range(m)]
     cand = [{NONE: None} | candidate_kernels(X, (Y[:, j] - Y[:, j].mean()) / stds[j], Q,
                                              None if nv[j] is None else nv[j] / stds[j] ** 2, seed,
@@ -441,7 +527,7 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
                 continue
             fitted[name] = [o[0] for o in out]
             resid[name] = np.column_stack([o[1] for o in out])
-            cv[name] = [float(np.sqrt(np.mean(o[1] ** 2))) for o in out]
+            cv[name] = [float(np.sqrt(np.nanmean(o[1] ** 2))) for o in out]
             loo[name] = [o[2] for o in out]
             if is_sm:  # a larger Q is tried only while it lowers the cross-validated error, and not
                 # after a mixture predicted the held-out fiducials worse than no GP at all (more
@@ -455,10 +541,38 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
         # one-standard-error rule (Hastie, Tibshirani & Friedman §7.10) on the paired per-fiducial
         # difference of the squared held-out errors |r|² (pooled over the columns) against no GP
         d = np.sum(resid[NONE] ** 2, axis=1) - np.sum(resid[best] ** 2, axis=1)
+        d = d[np.isfinite(d)]  # the balls some fold held out
         if np.mean(d) <= np.std(d, ddof=1) / np.sqrt(len(d)):
             best = NONE
     words = CRITERION if affine is None else CRITERION_AFFINE
     info = {"chosen": best, "kind": NONE if best == NONE else kernel_kind(best),
             "criterion": words.format(k=len(fold_sets)), "cv_rms": cv, "loo_rms": loo,
-            "zero_rms": [float(np.sqrt(np.mean(Y[:, j] ** 2))) for j in range(m)]}
+            "zero_rms": [float(np.sqrt(np.mean(Y[:, j] ** 2))) for j in range(m)],
+            "held_out": int(sum(len(f) for f in fold_sets)), "never_held_out": fixed.tolist(),
+            "sigma_basis": "cross-validation", "notes": [] if cv_note is None else [cv_note]}
     return fitted[best], info
+
+
+def _without_cv(Y, design, n_fixed: int) -> tuple[list, dict]:
+    """``select_gps``'s answer when too few balls can be held out for a cross-validation: no GP, and
+    the error left's σ from the in-sample residuals with their degrees of freedom (``no_cv_sigma``),
+    or unknown (nan) with 4 balls — the transform then passes through every ball, and no number
+    from them bounds the error between them. A GP is not fitted: nothing could show it predicts
+    better than the transform alone, and one fitted to 5 balls interpolates their noise."""
+    n, m = Y.shape
+    sig = no_cv_sigma(Y, design)
+    if n <= 4:
+        basis = "unknown"
+        words = (f"no cross-validation: {n} balls determine the 12-parameter transform exactly (no degrees "
+                 "of freedom); the volumetric error left between them is unknown")
+    else:
+        basis = "in-sample residuals"
+        words = (f"no cross-validation: only {n - n_fixed} of {n} balls can be held out (at least "
+                 f"{MIN_HELD_OUT} needed; the others determine the transform where they lie); the error "
+                 f"left's σ is the residuals' √(Σr²/(n − 4)·(1 + h̄)), h̄ the transform's mean leverage over "
+                 f"the balls' box, ν = {n - 4} per component — an estimate with few degrees of freedom")
+    info = {"chosen": NONE, "kind": NONE, "criterion": words, "cv_rms": {NONE: sig.tolist()},
+            "loo_rms": {NONE: [float(np.sqrt(np.mean(Y[:, j] ** 2))) for j in range(m)]},
+            "zero_rms": [float(np.sqrt(np.mean(Y[:, j] ** 2))) for j in range(m)],
+            "held_out": 0, "never_held_out": list(range(n)), "sigma_basis": basis, "notes": [words]}
+    return [ZeroGP(float(v)) for v in sig], info

@@ -48,8 +48,10 @@ def _digest(d: dict) -> str:
 
 
 def encode_gp(gp, kind: str, X, y) -> dict:
-    if kind == "none":  # no GP: a zero correction; noise = the variance of the error left (mm²)
-        return {"kind": kind, "params": {}, "noise": float(gp.sigma) ** 2, "X": np.asarray(X).tolist(),
+    if kind == "none":  # no GP: a zero correction; noise = the variance of the error left (mm²) — 0
+        # where it is unknown (4 balls), which gp_selection's "sigma_basis" says (volumetric reads it)
+        noise = float(gp.sigma) ** 2 if np.isfinite(gp.sigma) else 0.0
+        return {"kind": kind, "params": {}, "noise": noise, "X": np.asarray(X).tolist(),
                 "y": np.asarray(y).tolist()}
     k = gp.kernel_
     main, white = k.k1, k.k2
@@ -130,7 +132,9 @@ def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None,
     "cv_rms_um": {kernel: {component: RMS}}, "gp_cv_rms_um": the chosen kernel's {component: RMS,
     "norm": RMS of |e|}, "no_gp_rms_um": the same without a GP (held out, the transform re-fitted
     without the held-out fiducials when ``ref`` is given), "no_gp_in_sample_rms_um": the errors' own RMS
-    at the fiducials the transform was fitted to (smaller: not a fair comparison)}). ``check`` (e.g. a Progress's) is
+    at the fiducials the transform was fitted to (smaller: not a fair comparison), "sigma_basis",
+    "held_out", "never_held_out" (indices into X), "notes": how the folds were made, or why there was
+    no cross-validation (gp.affine_folds, gp._without_cv)}). ``check`` (e.g. a Progress's) is
     called between candidate kernels, so a cancel stops between fits."""
     from .gp import select_gps
 
@@ -150,11 +154,20 @@ def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None,
         specs[name] = encode_gp(gp_list[k], kind, X, errors[:, k])
         loo[name] = {kk: v[k] * 1e3 for kk, v in info["loo_rms"].items()} | {"chosen": chosen}
 
-    def per_component(v):
-        d = {n: float(v[k]) * 1e3 for k, n in enumerate(ERROR_COMPONENTS)}
-        return d | {"norm": float(np.sqrt(np.sum(np.square(v)))) * 1e3}
+    def um(v):  # None where unknown: the model file is JSON without NaN
+        return float(v) * 1e3 if np.isfinite(v) else None
 
+    def per_component(v):
+        d = {n: um(v[k]) for k, n in enumerate(ERROR_COMPONENTS)}
+        return d | {"norm": um(np.sqrt(np.sum(np.square(v))))}
+
+    never = info.get("never_held_out", [])
     selection = {"criterion": info["criterion"], "chosen": chosen, "kind": kind,
+                 # how the error left (σ of "none", gp_cv_rms_um) was found: "cross-validation",
+                 # "in-sample residuals" (too few balls to hold out) or "unknown" (4 balls)
+                 "sigma_basis": info.get("sigma_basis", "cross-validation"),
+                 "held_out": info.get("held_out"), "never_held_out": never if len(never) < len(X) else "all",
+                 "notes": info.get("notes", []),
                  "gp_cv_rms_um": per_component(info["cv_rms"][chosen]),
                  "no_gp_rms_um": per_component(info["cv_rms"]["none"]),
                  "no_gp_in_sample_rms_um": per_component(info["zero_rms"]),

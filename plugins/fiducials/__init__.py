@@ -9,7 +9,9 @@ Monte Carlo (GUM Supplement 1); the volumetric errors at the fiducials and Ev; t
 ≤ ``Q`` components, RBF and Matérn 5/2, and "none" (the transform alone), chosen by 6-fold
 cross-validation with the transform and the hyperparameters re-fitted in each fold — reported as
 ``gp_cv_rms_um`` beside ``no_gp_rms_um``; a GP only where it beats "none" by more than one standard
-error; the noise term is bounded below by the centres' known σ). Writes ``volumetric_model.json`` (what `volumetric` applies), ``volumetric_grid.csv``
+error; the noise term is bounded below by the centres' known σ; a ball the other balls cannot predict
+is never held out, and with too few balls to hold out the error left comes from the residuals with
+their degrees of freedom, or is unknown with 4 balls — said in the warnings and ``sigma_basis``). Writes ``volumetric_model.json`` (what `volumetric` applies), ``volumetric_grid.csv``
 (predicted error and its uncertainty on a grid over the workspace) and figures. The cloud passes
 through unchanged.
 """
@@ -18,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from pointspro.core.calibration.fiducials import ball_points, example_layout, example_measured_centres
+from pointspro.core.calibration.gp import MIN_HELD_OUT
 from pointspro.core.errors import InputError, StepError
 from pointspro.core.step import Context, Params, Step, StepResult, param
 
@@ -192,6 +195,26 @@ class FiducialsStep(Step):
         gps, gp_specs, loo, selection = vm.fit_error_gps(meas, e, Q=params.Q, check=ctx.progress.check,
                                                          noise_var=sm**2, ref=ref,
                                                          noise_max=NOISE_CEILING * (sm**2 + sr**2))
+        # how the error left was found (core/calibration/gp.py, affine_folds and _without_cv): a fold's
+        # transform re-fitted on balls that do not determine it gave held-out errors of mm, stored as
+        # "none"'s σ (a review: 4 balls, or a plate and one tall ball — volumetric wrote u of 2.5–31 mm)
+        basis = selection["sigma_basis"]
+        if basis == "cross-validation" and selection["never_held_out"]:
+            never = [ids[i] for i in selection["never_held_out"]]
+            warnings.append(f"cross-validation: fiducial(s) {never} never held out — without them the other "
+                            "balls do not determine the transform where they lie; the error left "
+                            f"(no_gp_rms_um, gp_cv_rms_um) is that at the other {selection['held_out']} balls")
+        elif basis == "in-sample residuals":
+            warnings.append(f"too few fiducials to hold out for a cross-validation ({len(ids)}, at least "
+                            f"{MIN_HELD_OUT} that the others determine): no GP; the error left's σ "
+                            f"({format_length(selection['no_gp_rms_um']['norm'] * 1e-3)} in |e|) is the "
+                            f"residuals' with their degrees of freedom, ν = {len(ids) - 4} per axis — a rough "
+                            "estimate; add balls")
+        elif basis == "unknown":
+            warnings.append(f"{len(ids)} fiducials determine the 12-parameter transform exactly: the volumetric "
+                            "error left between them is unknown, and `volumetric` writes u_x, u_y, u_z as "
+                            f"unknown (nan) — add balls (a cross-validated σ needs at least {MIN_HELD_OUT} that "
+                            "the others determine)")
         ctx.progress.update(0.85, "grid")
         axes = [np.linspace(lo[d], hi[d], params.grid) for d in range(3)]
         G = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)

@@ -66,13 +66,22 @@ class VolumetricStep(Step):
             S[:, [0, 1, 2], [0, 1, 2]] += u**2
             Dinv = np.linalg.inv(fit.D)
             u = np.sqrt(np.einsum("kl,nlm,km->nk", Dinv, S, Dinv))
+        warnings = []
+        if spec.gp_selection.get("sigma_basis") == "unknown":
+            # calibrated on 4 balls: the transform passes through them all, nothing bounds the error left
+            u[:] = np.nan
+            warnings.append("the model states no uncertainty: its fiducials determined the transform "
+                            "exactly, so the volumetric error left between them is unknown — u_x, u_y, u_z "
+                            "are nan; calibrate with more balls")
+        elif spec.gp_selection.get("sigma_basis") == "in-sample residuals":
+            warnings.append("the model's σ of the error left comes from few balls without a cross-validation "
+                            "(fiducials' report: sigma_basis): u_x, u_y, u_z are a rough estimate")
         ws = np.asarray(spec.workspace)
         # the workspace is the box of the measured ball centres; a workpiece point some µm beyond it
         # (a review: 46 of 56 runs warned of points 4–22 µm outside a 200 mm box, all inside the
         # balls' layout) is no extrapolation worth a warning: 0.1 % of the box's largest side
         tol = max(1e-6, OUTSIDE_TOLERANCE * float(np.max(ws[:, 1] - ws[:, 0])))
         outside = np.any((P < ws[:, 0] - tol) | (P > ws[:, 1] + tol), axis=1)
-        warnings = []
         if outside.any():
             warnings.append(f"{int(outside.sum())} point(s) lie outside the calibrated workspace "
                             f"{ws.tolist()} mm: their correction is extrapolated (flag outside_workspace)")
