@@ -263,6 +263,9 @@ def _map_axes(fig, ax, img_mm, ext, quantity, title, symmetric=True, cmap=DIVERG
     img = np.asarray(img_mm, dtype=np.float64) * scale
     label = f"{quantity} ({unit})" if quantity else unit
     lo, hi = robust_limits(limits_sample(own) * scale, symmetric)
+    if hi - lo <= 2e-12:  # all values equal (a flat map): one unit either side, not ±1e-12
+        mid = 0.0 if symmetric else 0.5 * (lo + hi)
+        lo, hi = mid - 1.0, mid + 1.0
     im = ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,
                    interpolation="nearest")
     span = max(ext[1] - ext[0], ext[3] - ext[2])
@@ -360,15 +363,22 @@ def psd_figure(grid):
 
     fig = _figure(11, 4.2)
     ax1, ax2 = fig.subplots(1, 2)
+    drawn = 0
     for axis in ("x", "y"):
         f, p = psd_1d(grid, axis)
-        ax1.loglog(f[1:], p[1:] * 1e12, lw=1, label=f"along {axis}")  # mm³ → nm²·mm
+        ok = (f > 0) & (p > 0)  # a flat map's PSD is 0: no log axis (matplotlib warned in the batch)
+        if ok.any():
+            ax1.loglog(f[ok], p[ok] * 1e12, lw=1, label=f"along {axis}")  # mm³ → nm²·mm
+            drawn += 1
     ax1.set_xlabel("spatial frequency (1/mm)")
     ax1.set_ylabel("PSD (nm²·mm)")
-    ax1.legend(fontsize=8)
     ax1.set_title("1-D PSD", fontsize=10)
-    plain_log_ticks(ax1.xaxis)
-    plain_log_ticks(ax1.yaxis)
+    if drawn:
+        ax1.legend(fontsize=8)
+        plain_log_ticks(ax1.xaxis)
+        plain_log_ticks(ax1.yaxis)
+    else:
+        ax1.text(0.5, 0.5, "the PSD is zero (a flat map)", ha="center", va="center", transform=ax1.transAxes)
     fx, fy, p = psd_2d(grid)
     p = p * 1e12  # mm⁴ → nm²·mm²
     pos = p[p > 0]

@@ -40,6 +40,8 @@ def display_unit(v_mm) -> str:
         return "mm"
     lo, hi = np.percentile(v, [0.5, 99.5]) if v.size > 200 else (v.min(), v.max())
     span = float(hi - lo) or float(np.max(np.abs(v)))
+    if span == 0.0:
+        return "nm"  # all zero (a flat map, a noise-free fit): "0 nm", never a colour bar of ±1e-12 mm
     unit = length_unit(span)[1]
     return unit if unit in ("mm", "µm", "nm") else ("mm" if unit == "m" else "nm")
 

@@ -170,3 +170,23 @@ def test_a_reports_table_shows_bare_lengths_in_a_unit():
                      {"label": "b", "dz": -2e-7, "u_dz": 1.6e-6}])
     assert "<th>dz (nm)</th>" in html and "<th>u_dz (nm)</th>" in html
     assert "<td>1.58193</td>" in html and "e-0" not in html
+
+
+def test_a_flat_maps_figures_read_in_nm_without_warnings():
+    """An all-zero height map: its colour bar read ±1e-12 mm and the PSD figure warned "Data has no
+    positive values, and therefore cannot be log-scaled" in the batch's output (a review)."""
+    import warnings
+
+    from pointspro.core.figures import grid_map_figure, psd_figure
+    from pointspro.core.maps.grid import MapGrid
+    from pointspro.core.units import display_unit
+
+    g = np.arange(-5.0, 5.01, 0.5)
+    grid = MapGrid(g, g, np.zeros((g.size, g.size)), 0.5)
+    assert display_unit(grid.z) == "nm"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        psd_figure(grid)
+        mfig = grid_map_figure(grid)
+    cbar = mfig.axes[-1]
+    assert cbar.get_ylabel() == "nm" and cbar.get_ylim() == (-1.0, 1.0)
