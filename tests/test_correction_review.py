@@ -294,3 +294,17 @@ def test_grid_files_write_the_nodes_as_their_decimals(tmp_path):
         coords = [v for r in rows for v in r[:2]]
         assert max(len(v.split(".")[1]) for v in coords) == 1, name  # 0.2 mm nodes: one decimal
         assert "-2.8" in coords
+
+
+def test_a_programmed_surface_key_without_a_value_is_named_with_the_fix():
+    """`{type:even_asphere, R:-200}` (YAML: keys with no value) gave four lines of pydantic's union
+    ("….float: Input should be a valid number (got None); ….bool …") — a review."""
+    from pydantic import ValidationError
+
+    from pointspro.plugins.correction import CorrectionParams
+
+    with pytest.raises(ValidationError) as e:
+        CorrectionParams.model_validate({"programmed_surface": {"type:even_asphere": None, "R:-200": None}})
+    text = str(e.value)
+    assert "key 'type:even_asphere' has no value: write `type: even_asphere`" in text
+    assert text.count("Input should be") == 0

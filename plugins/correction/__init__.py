@@ -94,6 +94,19 @@ class CorrectionParams(PupilCentreParams):
         default_factory=list, unit="µm", help="RMS form error of the previous runs over the clear "
         "aperture, oldest first (from their reports' error_rms_um): plotted with this run")
 
+    @field_validator("programmed_surface", mode="before")
+    @classmethod
+    def _no_empty_keys(cls, v):
+        # `{type:even_asphere, R:-200}` (no space after the colons) is YAML for keys with no value:
+        # said so, instead of four lines of the value type's union (a review)
+        if isinstance(v, dict):
+            for key, val in v.items():
+                if val is None:
+                    hint = (f": write `{str(key).replace(':', ': ', 1)}` (a space after the colon)"
+                            if ":" in str(key) else "")
+                    raise ValueError(f"key '{key}' has no value{hint}")
+        return v
+
     @field_validator("programmed_surface")
     @classmethod
     def _surface(cls, v):
