@@ -241,3 +241,44 @@ def test_no_cv_sigma_is_the_out_of_sample_error_on_average():
             new = np.column_stack([P, np.ones(200)]) @ th - rng.normal(0, 1e-3, 200)
             true.append(np.mean(new**2))
         assert 0.85 < np.mean(est) / np.mean(true) < 1.15, (n, np.mean(est), np.mean(true))
+
+
+def test_a_wrong_ball_diameter_is_named():
+    """Ø12.7 mm balls under the default 9.997 mm: the message suggests `diameter` with the fitted one."""
+    import pytest
+
+    from pointspro.core import PointCloud
+    from pointspro.core.calibration.fiducials import ball_points
+    from pointspro.core.errors import StepError
+    from pointspro.plugins.fiducials import fit_centres
+
+    pts, ids = ball_points(np.array([[0.0, 0.0, 10.0], [50.0, 0.0, 12.0]]), diameter=12.7, noise=0.2e-3)
+    with pytest.raises(StepError, match=r"diameter 12\.7 mm, not the 9\.997 mm given: check `diameter`"):
+        fit_centres(PointCloud.from_xyz(*pts.T, fiducial=ids), 9.997)
+
+
+def _kinematic_map(tmp_path, **kw):
+    from pointspro.core import PointCloud
+    from pointspro.core.step import Context
+    from pointspro.plugins.kinematic_map import KinematicMapStep
+
+    from . import paper003
+
+    paper003.reversal_files(tmp_path)
+    return KinematicMapStep().run(PointCloud.from_xyz([0.0], [0.0], [0.0]), KinematicMapStep.Params(
+        straightness="straightness.csv", facial="facial.csv", probe_distance=10.0, **kw), Context(base_dir=tmp_path))
+
+
+def test_kinematic_map_r_max_beyond_the_scan_names_key_and_file(tmp_path):
+    import pytest
+
+    from pointspro.core.errors import InputError
+
+    with pytest.raises(InputError, match=r"straightness\.csv: the straightness scan covers x ≤ .* but r_max is 30 mm"):
+        _kinematic_map(tmp_path, r_max=30.0)
+
+
+def test_kinematic_map_warns_of_too_few_spindle_angles(tmp_path):
+    """n_c 8 or 16 left 0.8 and 0.2 nm RMS where 360 leaves 0.1 nm on paper 003's machine, silently."""
+    assert any("n_c = 16" in w for w in _kinematic_map(tmp_path, n_c=16).report["warnings"])
+    assert not any("n_c =" in w for w in _kinematic_map(tmp_path, n_c=36).report["warnings"])

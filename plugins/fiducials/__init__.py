@@ -58,7 +58,15 @@ def fit_centres(cloud, diameter):
         f = fit_sphere(p, None if diameter is None else diameter / 2)
         rms = float(np.sqrt(np.mean(f.residuals**2)))
         if rms > 0.01 * (diameter or 10.0):
-            raise StepError(f"fiducial {i}: the points are not on a sphere (fit RMS {rms * 1e3:.3g} µm)")
+            hint = ""
+            if diameter is not None:
+                # a review: Ø12.7 mm balls under the default 9.997 mm read only "not on a sphere"
+                free = fit_sphere(p, None)
+                d_free = 2 * float(free.params["radius"])
+                if np.sqrt(np.mean(free.residuals**2)) < 0.2 * rms and abs(d_free - diameter) > 0.01 * diameter:
+                    hint = (f" — a free sphere fits them with diameter {d_free:.4g} mm, not the {diameter:g} mm "
+                            "given: check `diameter` (empty: fitted freely)")
+            raise StepError(f"fiducial {i}: the points are not on a sphere (fit RMS {rms * 1e3:.3g} µm){hint}")
         out[int(i)] = (np.array([f.params["x0"], f.params["y0"], f.params["z0"]]), f.covariance[:3, :3], rms)
     return out
 

@@ -67,6 +67,7 @@ class KinematicMapStep(Step):
         from pointspro.core.io.text import read_table
         from pointspro.core.kinematics.errormap import (
             ARCSEC,
+            MAX_UPR,
             build_map,
             facial_coverage,
             periodic,
@@ -101,12 +102,24 @@ class KinematicMapStep(Step):
                                        float(ebc_at(180.0)), ezx=ezx_at)
         if params.r_max is not None:
             r_max = params.r_max
+            if r_max > float(np.max(st["x"])) + 1e-9:
+                # a review: the message named neither the key nor the file
+                raise InputError(f"{stp}: the straightness scan covers x ≤ {np.max(st['x']):g} mm, but r_max "
+                                 f"is {r_max:g} mm — the map stops where the scan does (EZX is not "
+                                 "extrapolated): lower r_max, or leave it empty for the scan's reach")
         elif np.max(st["x"]) > 0:
             r_max = float(np.max(st["x"]))
         else:
             raise InputError(f"{stp}: the straightness scan covers x {np.min(st['x']):g}…"
                              f"{np.max(st['x']):g} mm, none of it at x > 0 where the map starts")
         m = build_map(st["x"], ezx, fa["c"], ezc, ebc, eb0c, r_max, params.n_r, params.n_c)
+        if params.n_c < 2 * MAX_UPR:
+            # a review: n_c 8 or 16 was accepted silently, and the table's linear interpolation between
+            # its angles flattens the undulations the facial reversal resolved (up to MAX_UPR per turn)
+            warnings.append(f"n_c = {params.n_c}: the table's {360 / params.n_c:g}° between spindle angles "
+                            f"cannot hold the up to {MAX_UPR} undulations per revolution that EZC and EBC are "
+                            f"analysed for (Nyquist: n_c ≥ {2 * MAX_UPR}; for linear interpolation well above "
+                            "that — the default 360)")
         if m.r[0] > 0:
             warnings.append(f"the straightness scan starts at x = {m.r[0]:g} mm: the map (EZX) covers X "
                             f"{m.r[0]:g}…{r_max:g} mm only, and the kinematic step refuses points nearer the "
