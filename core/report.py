@@ -169,27 +169,86 @@ def _records(v: list) -> str:
                 and math.isfinite(r.get(k))]
         top = max(vals, default=0.0)
         decimals.append(None if not top else int(min(max(5 - math.floor(math.log10(top)), 0), 12)))
+    # a value column beside its uncertainty's (coefficient_nm, uncertainty_nm; dz, u_dz): both in the
+    # value's unit, to the decimal place of the smallest uncertainty's two significant digits (GUM
+    # §7.2.6; "piston −17.698 nm" beside "5.54153 nm" — a review), trailing zeros kept
+    fixed = [False] * len(keys)
+    for i, k in enumerate(map(str, keys)):
+        for j, u in enumerate(map(str, keys)):
+            if scales[i] is None or scales[j] is None or not (
+                    u == f"u_{k}" or ("_" in k and u == "uncertainty_" + k.rsplit("_", 1)[1])):
+                continue
+            if unit_of_key(u) != unit_of_key(k):
+                continue
+            scales[j] = scales[i]
+            heads[j] = f"{_label(u, 1.0)} ({heads[i].rsplit('(', 1)[1]}"
+            us = [abs(float(r.get(u))) * scales[i] for r in v if isinstance(r.get(u), (int, float))
+                  and not isinstance(r.get(u), bool) and math.isfinite(r.get(u)) and r.get(u) != 0]
+            if us:
+                from .statement import _decimals
 
-    def cell(x, scale, dec):
+                decimals[i] = decimals[j] = min(_decimals(min(us)), 15)
+                fixed[i] = fixed[j] = True
+
+    def cell(x, scale, dec, keep):
         if scale is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
             if dec is not None and math.isfinite(x):
                 t = f"{float(x) * scale:.{dec}f}"
-                t = t.rstrip("0").rstrip(".") if "." in t else t
+                if not keep:
+                    t = t.rstrip("0").rstrip(".") if "." in t else t
+                if t.startswith("-") and not any(c in "123456789" for c in t):
+                    t = t[1:]  # −0.0 reads 0.0
                 return "0" if t in ("-0", "") else t
             return _fmt(float(x) * scale)
         return _fmt(x)
 
     head = "".join(f"<th>{html.escape(h)}</th>" for h in heads)
-    body = "".join("<tr>" + "".join(f"<td>{cell(r.get(k), s, d)}</td>" for k, s, d in zip(keys, scales, decimals))
+    body = "".join("<tr>" + "".join(f"<td>{cell(r.get(k), s, d, f)}</td>"
+                                    for k, s, d, f in zip(keys, scales, decimals, fixed))
                    + "</tr>" for r in v)
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+def _fmt_with_u(key, v, u) -> str:
+    """``v`` under report key ``key`` to the decimal place of its standard uncertainty ``u``'s two
+    significant digits (GUM §7.2.6), in the unit the value's size asks for: a pose's dz of 12.500028 mm
+    with u = 4.2 nm reads "12.5000285 mm" (it read "12.5000 mm", 100 nm steps for a 4 nm u — a review)."""
+    from .statement import _decimals
+    from .units import SHOWN_LENGTH_MM, length_unit, unit_of_key
+
+    unit = unit_of_key(str(key))
+    if unit in SHOWN_LENGTH_MM:
+        v_mm, u_mm = float(v) * SHOWN_LENGTH_MM[unit], float(u) * SHOWN_LENGTH_MM[unit]
+        scale, shown = length_unit(v_mm if v_mm else u_mm)
+        return f"{v_mm / scale:.{min(_decimals(u_mm / scale), 15)}f} {shown}"
+    text = f"{float(v):.{min(_decimals(float(u)), 15)}f}"
+    return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
 def table_html(d: dict) -> str:
+    from .units import format_keyed
+
     rows = []
     keys = set(map(str, d))
+    unc = d.get("uncertainty") if isinstance(d.get("uncertainty"), dict) else {}
     for k, v in d.items():
         if k in ("warnings",):
+            continue
+        if k == "uncertainty" and unc and all(_is_number(x) for x in unc.values()):
+            # standard uncertainties to two significant digits, each with its unit
+            inner = ", ".join(f"{html.escape(_label(a, b))} = {html.escape(format_keyed(str(a), b, 2))}"
+                              for a, b in unc.items())
+            rows.append(f"<tr><th>{html.escape(k)}</th><td>{inner}</td></tr>")
+            continue
+        if _is_number(v) and _is_number(unc.get(k)) and unc.get(k) > 0:
+            label = _label(k, v)
+            label = str(k) if label != str(k) and label in keys else label
+            rows.append(f'<tr><th>{html.escape(label)}</th><td class="num">'
+                        f"{html.escape(_fmt_with_u(k, v, unc[k]))}</td></tr>")
             continue
         if (isinstance(v, list) and v and all(isinstance(r, dict) for r in v)
                 and all(r.keys() == v[0].keys() for r in v)

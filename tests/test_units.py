@@ -91,7 +91,8 @@ def test_report_keys_read_with_their_unit():
                        "uncertainty": {"dx": 2.82933e-5, "alpha_deg": 5.335e-4}, "flag": True,
                        "floor_um": float("nan")})
     assert "<td class=\"num\">797.536 µm</td>" in page and "<td class=\"num\">5</td>" in page
-    assert "dx = 28.2933 nm" in page and "alpha = 0.0005335°" in page  # the unit said once
+    # the unit said once; standard uncertainties to two significant digits (GUM §7.2.6)
+    assert "dx = 28 nm" in page and "alpha = 0.00053°" in page
     assert ">True<" in page and ">nan<" in page  # not numbers with a unit
     page = table_html({"rms_after_um": 0.013335, "points": 307200, "centre_mm": [0.35, 0.26]})
     assert "<th>rms_after</th><td class=\"num\">13.335 nm</td>" in page  # not "rms_after_um 13.335 nm"
@@ -139,13 +140,13 @@ def test_a_column_of_lengths_reads_in_the_unit_of_its_largest_value():
     rows = [{"j": 1, "name": "piston", "coefficient_nm": 50731.8, "uncertainty_nm": 5.5},
             {"j": 2, "name": "tilt x", "coefficient_nm": -12.3456789, "uncertainty_nm": 0.25}]
     page = table_html({"coefficients": rows})
-    assert "<th>coefficient (µm)</th>" in page and "<th>uncertainty (nm)</th>" in page
-    # every row in the column's unit with the decimals of its largest value (6 significant digits):
-    # -0.0123 µm, not -0.0123457, and a 0.048 nm coefficient under µm reads 0, not "4.78859e-05"
-    assert "<td>50.7318</td>" in page and "<td>-0.0123</td>" in page and "<td>5.5</td>" in page
+    # the uncertainty in its coefficient's unit; every row to the decimal place of the smallest
+    # uncertainty's two significant digits (0.25 nm = 0.00025 µm), trailing zeros kept (GUM §7.2.6)
+    assert "<th>coefficient (µm)</th>" in page and "<th>uncertainty (µm)</th>" in page
+    assert "<td>50.73180</td>" in page and "<td>-0.01235</td>" in page and "<td>0.00550</td>" in page
     tiny = table_html({"coefficients": [*rows, {"j": 3, "name": "tilt y", "coefficient_nm": 0.0478859,
                                                  "uncertainty_nm": 0.1}]})
-    assert "e-0" not in tiny and "<td>0</td>" in tiny
+    assert "e-0" not in tiny and "<td>0.00005</td>" in tiny  # 0.048 nm, u 0.1 nm: not 4.78859e-05
     small = table_html({"coefficients": [{"j": 4, "coefficient_nm": 3.2}, {"j": 5, "coefficient_nm": -0.4}]})
     assert "<th>coefficient (nm)</th>" in small and "<td>3.2</td>" in small
     assert column_unit([0.0, float("nan")], default="nm") == "nm"
@@ -169,7 +170,23 @@ def test_a_reports_table_shows_bare_lengths_in_a_unit():
     html = _records([{"label": "a", "dz": 4.9975e-08, "u_dz": 1.58193e-6},
                      {"label": "b", "dz": -2e-7, "u_dz": 1.6e-6}])
     assert "<th>dz (nm)</th>" in html and "<th>u_dz (nm)</th>" in html
-    assert "<td>1.58193</td>" in html and "e-0" not in html
+    assert "<td>1.6</td>" in html and "e-0" not in html  # u to two significant digits (GUM)
+    assert "<td>0.0</td>" in html and "<td>-0.2</td>" in html  # dz to u's decimal place, −0.0 as 0.0
+
+
+def test_a_step_tables_values_are_given_to_their_uncertaintys_decimal_place():
+    """A pose's dz of 12.500028 mm with u = 4.2 nm read "12.5000 mm" (100 nm steps), a Zernike piston
+    "−17.698 nm" beside an uncertainty of "5.54153 nm" (a review): GUM §7.2.6, u to two significant
+    digits and the value to the same decimal place."""
+    from pointspro.core.report import _records, table_html
+
+    html = table_html({"alpha_deg": 0.17000067958, "dz": 12.500028525132285,
+                       "uncertainty": {"alpha_deg": 2.62e-05, "dz": 4.1861e-06}, "iterations": 2})
+    assert "12.5000285 mm" in html and "0.170001°" in html
+    assert "dz = 4.2 nm" in html and "alpha = 2.6e-05°" in html
+    rec = _records([{"j": 1, "coefficient_nm": -17.698123, "uncertainty_nm": 5.54153},
+                    {"j": 2, "coefficient_nm": 341.69625, "uncertainty_nm": 0.3259}])
+    assert "<td>-17.70</td>" in rec and "<td>5.54</td>" in rec and "<td>0.33</td>" in rec
 
 
 def test_a_flat_maps_figures_read_in_nm_without_warnings():
