@@ -292,3 +292,16 @@ def test_a_measurement_less_deleted_rows_is_matched_to_its_simulation_by_row(tmp
     rep = explain(tmp_path / "meas.csv", tmp_path / "o", simulated=tmp_path / "sim.csv", bootstrap=0,
                   measured_cloud=kept)
     assert rep["match"].startswith("by row") and not any("not made at the measured" in w for w in rep["warnings"])
+
+
+def test_explain_html_gives_a_found_effects_values_to_their_uncertaintys_decimal_place():
+    """A vibration's frequency read "23.3 Hz ± 5.9e-05 Hz" (its u is now propagated: 59 µHz): the
+    value to the decimal place of u's two significant digits (GUM §7.2.6), u alike."""
+    from pointspro.core.explain.workflow import params_for_people
+
+    text = params_for_people({"effect": "vibration",
+                              "params": {"frequency_hz": 23.300123, "amplitude": 8.01e-6, "phase_deg": 70.123},
+                              "uncertainty": {"frequency_hz": 5.9e-5, "amplitude": 2e-7, "phase_deg": 0.49}})
+    assert text["frequency_hz"] == "23.300123 Hz ± 0.000059 Hz"
+    assert text["amplitude"] == "8.01 nm ± 0.20 nm"
+    assert text["phase_deg"].startswith("70.12") and "± 0.49" in text["phase_deg"]

@@ -606,13 +606,15 @@ def params_for_people(found: dict) -> dict[str, str]:
     ("amplitude 8.01 nm ± 0.2 nm", the report's number 8.01e-06 being mm), the others with the
     library's unit (core/simulate/effects.py)."""
     from ..simulate.effects import LIBRARY
-    from ..units import format_length
 
     eff = LIBRARY.get(found["effect"])
     units = {}
     if eff is not None:
         units = dict(zip(eff.params, eff.units)) if hasattr(eff, "units") else {}
         units.setdefault("*", getattr(eff, "unit", ""))
+    from ..statement import _decimals
+    from ..units import length_unit
+
     unc = found.get("uncertainty") or {}
     out = {}
     for name, v in found["params"].items():
@@ -620,12 +622,18 @@ def params_for_people(found: dict) -> dict[str, str]:
         u = unc.get(name)
         if not isinstance(v, (int, float)):
             out[name] = str(v)
-        elif unit == "mm":
-            out[name] = format_length(v, 3) + ("" if u is None else f" ± {format_length(u, 2)}")
+            continue
+        k, sym, digits = 1.0, "" if unit in ("", "1") else f" {unit}", 4
+        if unit == "mm":
+            k, shown = length_unit(v if v else (u or 0.0))
+            k, sym, digits = 1.0 / k, f" {shown}", 3
         elif unit == "s" and 0 < abs(v) < 1:  # a loop's time constant: µs or ms
-            k, sym = (1e6, "µs") if abs(v) < 1e-3 else (1e3, "ms")
-            out[name] = f"{v * k:.3g} {sym}" + ("" if u is None else f" ± {u * k:.2g} {sym}")
+            k, sym, digits = (1e6, " µs", 3) if abs(v) < 1e-3 else (1e3, " ms", 3)
+        if isinstance(u, (int, float)) and u > 0 and np.isfinite(u):
+            # the value to the decimal place of u's two significant digits (GUM §7.2.6): a vibration's
+            # frequency read "23.3 Hz ± 5.9e-05 Hz"
+            d = min(_decimals(u * k), 15)
+            out[name] = f"{v * k:.{d}f}{sym} ± {u * k:.{d}f}{sym}"
         else:
-            sym = "" if unit in ("", "1") else f" {unit}"
-            out[name] = f"{v:.4g}{sym}" + ("" if u is None else f" ± {u:.2g}{sym}")
+            out[name] = f"{v * k:.{digits}g}{sym}"
     return out
