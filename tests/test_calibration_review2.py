@@ -100,6 +100,22 @@ def test_z_scale_finds_the_0p2um_step_under_20nm_of_point_noise():
             assert abs(cal.amplification - 0.9754) < 0.01, (npts, noise, seed, cal.amplification)
 
 
+def test_z_scale_takes_a_small_bump_of_the_artefacts_form_for_no_step():
+    """A Gaussian bump of 20–50 nm (σ 0.1–0.3 mm) on a plateau of the staircase: against the jump's
+    noise alone a dense scan counted it as a fifth step and refused the calibration ("found more than
+    4 steps"; 0–1 of 5 seeds at 10001 points — a review); a step is at least half the smallest
+    certified height."""
+    from pointspro.core.calibration.zscale import calibrate
+
+    for npts in (2001, 10001):
+        for bump, width in ((20e-6, 0.1), (50e-6, 0.1), (50e-6, 0.3)):
+            for seed in range(3):
+                r = _staircase(seed, npts, 10e-6)
+                r[:, 1] += bump * np.exp(-0.5 * ((r[:, 0] - 9.0) / width) ** 2)
+                cal = calibrate(r[:, 0], r[:, 1], r[:, 2], np.array([0.2, 2.0, 5.0, 11.0]) * 1e-3)
+                assert abs(cal.amplification - 0.9754) < 0.01, (npts, bump, width, seed)
+
+
 def test_z_scale_finds_no_step_on_flat_noisy_scans():
     """The lower threshold's false detections: none on 150 flat scans each of white noise, of noise
     filtered by a 5-point moving average (point-to-point σ 5 × smaller than the medians' noise

@@ -91,11 +91,14 @@ def jump_noise(sigma: float, w: int) -> float:
     return float(np.sqrt(np.pi / 2) * sigma * np.sqrt(2.0 / w))
 
 
-def find_edges(x, z, count: int) -> np.ndarray:
+def find_edges(x, z, count: int, min_jump: float = 0.0) -> np.ndarray:
     """x of the ``count`` strongest steps of a profile (sorted by x): the profile levelled (``level``),
     the jump between the medians of the samples on either side, in windows of 1 % of the profile,
     above JUMP_FACTOR × the jump's noise (``jump_noise`` of the points' σ, or the jumps' own robust
-    spread where that is larger) and 5 × the typical jump (so a wavy profile without steps has none)."""
+    spread where that is larger) and 5 × the typical jump (so a wavy profile without steps has none),
+    and above ``min_jump`` (calibrate: half the smallest certified height — a local bump or groove of
+    the artefact's form, 10–25 % of its smallest step, is no step: against the jump's noise alone a
+    dense scan counted it, a review)."""
     o = np.argsort(x)
     x, z = np.asarray(x, float)[o], np.asarray(z, float)[o]
     n = x.size
@@ -124,7 +127,7 @@ def find_edges(x, z, count: int) -> np.ndarray:
     # a step stands out from the noise of the jump (JUMP_FACTOR × it: the largest of ~n/w independent
     # jumps of a flat scan stays below 5 of their σ) and from the profile's own waviness (5 × the
     # typical jump)
-    thr = max(JUMP_FACTOR * sj, 5 * float(np.median(jump[w: n - w + 1])))
+    thr = max(JUMP_FACTOR * sj, 5 * float(np.median(jump[w: n - w + 1])), float(min_jump))
     picked = []
     cand = np.argsort(jump)[::-1]
     for i in cand:
@@ -210,7 +213,7 @@ def calibrate(x, z, scan, heights_mm) -> ZScaleCalibration:
     for s in np.unique(scan):
         m = scan == s
         zl, tilt = level(x[m], z[m])
-        edges = find_edges(x[m], zl, heights.size)
+        edges = find_edges(x[m], zl, heights.size, min_jump=0.5 * float(heights.min()))
         # a step down is a height too: the certified heights are magnitudes
         per.append(np.abs(step_heights(x[m], zl, edges, tilt)))
     per = np.array(per)                       # scans × edges
