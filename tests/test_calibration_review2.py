@@ -103,8 +103,8 @@ def test_z_scale_finds_the_0p2um_step_under_20nm_of_point_noise():
 def test_z_scale_takes_a_small_bump_of_the_artefacts_form_for_no_step():
     """A Gaussian bump of 20–50 nm (σ 0.1–0.3 mm) on a plateau of the staircase: against the jump's
     noise alone a dense scan counted it as a fifth step and refused the calibration ("found more than
-    4 steps"; 0–1 of 5 seeds at 10001 points — a review); a step is at least half the smallest
-    certified height."""
+    4 steps"; 0–1 of 5 seeds at 10001 points — a review): the jump's noise is the threshold only where
+    10 × the points' noise leaves steps unfound."""
     from pointspro.core.calibration.zscale import calibrate
 
     for npts in (2001, 10001):
