@@ -308,3 +308,20 @@ def test_a_programmed_surface_key_without_a_value_is_named_with_the_fix():
     text = str(e.value)
     assert "key 'type:even_asphere' has no value: write `type: even_asphere`" in text
     assert text.count("Input should be") == 0
+
+
+@pytest.mark.parametrize("pixel_um, diameter_mm", [(0.2, 0.1), (0.5, 0.25)])
+def test_a_fine_pixel_maps_noise_is_no_unit_mistake(pixel_um, diameter_mm):
+    """A micro-lens measured by an optical profiler (0.2–0.5 µm pixels, 40 nm PV of form error, 30 nm of
+    noise) was refused as "heights in µm or nm read as mm": the raw map's node-to-node slope of its
+    noise reads 0.1 rad. The plausibility check takes the slope of the low-passed error over the
+    cutoff (a review of the check)."""
+    rng = np.random.default_rng(0)
+    h = pixel_um * 1e-3
+    g = np.arange(-diameter_mm / 2, diameter_mm / 2 + h / 2, h)
+    X, Y = np.meshgrid(g, g)
+    keep = np.hypot(X, Y) <= diameter_mm / 2
+    x, y = X[keep], Y[keep]
+    z = 40e-6 * ((2 * np.hypot(x, y) / diameter_mm) ** 2 - 0.5) + 30e-6 * rng.standard_normal(x.size)
+    rep = _run(PointCloud.from_xyz(x, y, z), None, diameter=diameter_mm, channel="z").report
+    assert rep["correction_pv_um"] > 0.01 and not any("unit" in w for w in rep["warnings"])
