@@ -224,3 +224,23 @@ def test_points_spread_at_random_are_left_to_the_plain_mean(n):
         r, t = 10.0 * np.sqrt(rng.random(n)), rng.random(n) * 2 * np.pi
         weighted += area_weights(r * np.cos(t), r * np.sin(t)) is not None
     assert weighted <= 2
+
+
+@pytest.mark.parametrize("case", ["rim scan", "dense centre"])
+def test_scattered_points_with_a_rim_scan_or_a_dense_centre_are_still_weighted(case):
+    """The evenness test looks inside the largest disc the hull holds: 300 scattered points with a
+    180-point rim scan (just beyond that disc) passed it and the RMS of an edge roll-off read 62–66 %
+    high on the plain mean; a rectangle with a dense centre and sparse ends −13…−18 % (a review of
+    the test). The count beyond the disc is checked against the hull's area there."""
+    for seed in range(3):
+        rng = np.random.default_rng(10 + seed)
+        if case == "rim scan":
+            r, t = 25.0 * np.sqrt(rng.random(300)), rng.random(300) * 2 * np.pi
+            tr = np.linspace(0, 2 * np.pi, 180, endpoint=False)
+            x, y = np.r_[r * np.cos(t), 25.0 * np.cos(tr)], np.r_[r * np.sin(t), 25.0 * np.sin(tr)]
+        else:
+            xe, ye = rng.uniform(-40, 40, 300), rng.uniform(-10, 10, 300)
+            keep = np.abs(xe) > 10
+            x = np.r_[rng.uniform(-10, 10, 400), xe[keep]]
+            y = np.r_[rng.uniform(-10, 10, 400), ye[keep]]
+        assert area_weights(x, y) is not None, seed
