@@ -333,7 +333,9 @@ def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients"):
     return fig
 
 
-def profiles_figure(grid, angles=(0.0, 90.0), center=(0.0, 0.0)):
+def profiles_figure(grid, angles=(0.0, 90.0), center=(0.0, 0.0), quantity="form error"):
+    """Profiles through ``center`` at ``angles`` and the radial profile of the map; ``quantity`` names
+    the values on the y axes (bspline_map on heights: "z, piston and tilt removed")."""
     from .metrics.profiles import profile, radial_profile
 
     fig = _figure(11, 4.2)
@@ -344,14 +346,14 @@ def profiles_figure(grid, angles=(0.0, 90.0), center=(0.0, 0.0)):
         ax1.plot(s, z * scale, lw=1, label=f"{a:g}°")
     span = max(np.ptp(grid.xs) if grid.xs.size else 0.0, np.ptp(grid.ys) if grid.ys.size else 0.0)
     position_axis(ax1, "x", "position along the cut", span)
-    ax1.set_ylabel(f"form error ({unit})")
+    ax1.set_ylabel(f"{quantity} ({unit})")
     ax1.legend(fontsize=8)
     ax1.set_title("profiles through the centre", fontsize=10)
     r, m, sd = radial_profile(grid, center)
     ax2.plot(r, m * scale, color="#2c6fbb", lw=1)
     ax2.fill_between(r, (m - sd) * scale, (m + sd) * scale, color="#2c6fbb", alpha=0.2, lw=0)
     position_axis(ax2, "x", "radius", span)
-    ax2.set_ylabel(f"form error ({unit})")
+    ax2.set_ylabel(f"{quantity} ({unit})")
     ax2.set_title("radial profile: ring mean ± std", fontsize=10)
     return fig
 

@@ -489,7 +489,12 @@ def test_a_height_maps_figure_shows_it_less_piston_and_tilt(monkeypatch):
     assert rep["map_rms_um"] > 10 * true_rms
     drawn = {}
     monkeypatch.setattr(figs, "grid_map_figure", lambda gr, title: drawn.update(grid=gr, title=title))
+    monkeypatch.setattr(figs, "profiles_figure",
+                        lambda gr, angles, centre, quantity: drawn.update(profiles=gr, quantity=quantity))
     monkeypatch.setattr(figs, "save_png", lambda fig, path: None)
-    BSplineMapStep().run(PointCloud.from_xyz(x, y, z), BSplineMapStep.Params(), Context()).artifacts["map.png"]("x.png")
-    assert "piston and tilt removed" in drawn["title"]
+    arts = BSplineMapStep().run(PointCloud.from_xyz(x, y, z), BSplineMapStep.Params(), Context()).artifacts
+    arts["map.png"]("x.png")
+    arts["profiles.png"]("p.png")
+    assert "piston and tilt removed" in drawn["title"] and "piston and tilt removed" in drawn["quantity"]
     assert np.nanmax(np.abs(drawn["grid"].z)) < 3e-5  # the form, not the 50 µm offset
+    assert np.nanmax(np.abs(drawn["profiles"].z)) < 3e-5  # profiles.png too (a review of the change)

@@ -152,7 +152,8 @@ class BSplineMapStep(Step):
             # an instrument's heights carry the set-up's piston and tilt (a MetroPro map: 50.7 µm of
             # offset and 75 nm of tilt over 13 nm of form): the figure shows them removed, as the
             # summary's figures are, and says so (a review: map.png was one saturated colour, its
-            # RMS 75.28 nm beside the summary's 13.33 nm). map.csv and the other files keep z.
+            # RMS 75.28 nm beside the summary's 13.33 nm), and profiles.png likewise (its raw z was a
+            # 270 nm tilt ramp on a "form error" axis). map.csv, profiles.csv and the others keep z.
             shown = _less_plane(grid)
             flat = shown.z[shown.valid]
             report["map_rms_tilt_removed_um"] = float(np.std(flat) * 1e3)
@@ -174,7 +175,8 @@ class BSplineMapStep(Step):
             "map.x3p": lambda p: grid.write_x3p(p, params.x3p_revision),
             "map.asc": lambda p: grid.write_ascii_matrix(p, unit),
             "map.png": png_artifact(grid_map_figure, shown, title=_map_title(channel, report)),
-            "profiles.png": png_artifact(profiles_figure, grid, tuple(params.profile_angles), center),
+            "profiles.png": png_artifact(profiles_figure, shown, tuple(params.profile_angles), center,
+                                         "form error" if shown is grid else "z, piston and tilt removed"),
             "profiles.csv": lambda p: _write_profiles(p, grid, params.profile_angles, center),
             "psd.png": png_artifact(psd_figure, grid),
             "psd.csv": lambda p: _write_psd(p, grid),
