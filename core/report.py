@@ -170,9 +170,11 @@ def _records(v: list) -> str:
         top = max(vals, default=0.0)
         decimals.append(None if not top else int(min(max(5 - math.floor(math.log10(top)), 0), 12)))
     # a value column beside its uncertainty's (coefficient_nm, uncertainty_nm; dz, u_dz): both in the
-    # value's unit, to the decimal place of the smallest uncertainty's two significant digits (GUM
+    # value's unit, each row to the decimal place of its own uncertainty's two significant digits (GUM
     # §7.2.6; "piston −17.698 nm" beside "5.54153 nm" — a review), trailing zeros kept
-    fixed = [False] * len(keys)
+    from .statement import _decimals
+
+    u_col = {}  # value column → its uncertainty's column
     for i, k in enumerate(map(str, keys)):
         for j, u in enumerate(map(str, keys)):
             if scales[i] is None or scales[j] is None or not (
@@ -182,13 +184,17 @@ def _records(v: list) -> str:
                 continue
             scales[j] = scales[i]
             heads[j] = f"{_label(u, 1.0)} ({heads[i].rsplit('(', 1)[1]}"
-            us = [abs(float(r.get(u))) * scales[i] for r in v if isinstance(r.get(u), (int, float))
-                  and not isinstance(r.get(u), bool) and math.isfinite(r.get(u)) and r.get(u) != 0]
-            if us:
-                from .statement import _decimals
+            u_col[i] = j
 
-                decimals[i] = decimals[j] = min(_decimals(min(us)), 15)
-                fixed[i] = fixed[j] = True
+    def row_decimals(r):
+        """(decimals, trailing zeros kept) of each column in row ``r``."""
+        out = [(d, False) for d in decimals]
+        for i, j in u_col.items():
+            u = r.get(keys[j])
+            if isinstance(u, (int, float)) and not isinstance(u, bool) and math.isfinite(u) and u != 0:
+                d = min(_decimals(abs(float(u)) * scales[i]), 15)
+                out[i] = out[j] = (d, True)
+        return out
 
     def cell(x, scale, dec, keep):
         if scale is not None and isinstance(x, (int, float)) and not isinstance(x, bool):
@@ -196,15 +202,14 @@ def _records(v: list) -> str:
                 t = f"{float(x) * scale:.{dec}f}"
                 if not keep:
                     t = t.rstrip("0").rstrip(".") if "." in t else t
-                if t.startswith("-") and not any(c in "123456789" for c in t):
-                    t = t[1:]  # −0.0 reads 0.0
+                t = _no_minus_zero(t)  # −0.0 reads 0.0
                 return "0" if t in ("-0", "") else t
             return _fmt(float(x) * scale)
         return _fmt(x)
 
     head = "".join(f"<th>{html.escape(h)}</th>" for h in heads)
     body = "".join("<tr>" + "".join(f"<td>{cell(r.get(k), s, d, f)}</td>"
-                                    for k, s, d, f in zip(keys, scales, decimals, fixed))
+                                    for k, s, (d, f) in zip(keys, scales, row_decimals(r)))
                    + "</tr>" for r in v)
     return f"<table><tr>{head}</tr>{body}</table>"
 
@@ -220,9 +225,29 @@ def _fmt_with_u(key, v, u) -> str:
     if unit in SHOWN_LENGTH_MM:
         v_mm, u_mm = float(v) * SHOWN_LENGTH_MM[unit], float(u) * SHOWN_LENGTH_MM[unit]
         scale, shown = length_unit(v_mm if v_mm else u_mm)
-        return f"{v_mm / scale:.{min(_decimals(u_mm / scale), 15)}f} {shown}"
-    text = f"{float(v):.{min(_decimals(float(u)), 15)}f}"
+        return f"{_no_minus_zero(f'{v_mm / scale:.{min(_decimals(u_mm / scale), 15)}f}')} {shown}"
+    text = _no_minus_zero(f"{float(v):.{min(_decimals(float(u)), 15)}f}")
     return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")
+
+
+def _fmt_u(key, u) -> str:
+    """A standard uncertainty under report key ``key`` to two significant digits, trailing zeros kept,
+    in the unit its size asks for ("5.0 nm", "0.000026°")."""
+    from .statement import _decimals
+    from .units import SHOWN_LENGTH_MM, length_unit, unit_of_key
+
+    unit = unit_of_key(str(key))
+    if unit in SHOWN_LENGTH_MM:
+        u_mm = float(u) * SHOWN_LENGTH_MM[unit]
+        scale, shown = length_unit(u_mm)
+        return f"{u_mm / scale:.{min(_decimals(u_mm / scale), 15)}f} {shown}"
+    text = f"{float(u):.{min(_decimals(float(u)), 15)}f}"
+    return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")
+
+
+def _no_minus_zero(text: str) -> str:
+    """"-0.00" (a value that rounds to zero) as "0.00"."""
+    return text[1:] if text.startswith("-") and not any(c in "123456789" for c in text) else text
 
 
 def _is_number(x) -> bool:
@@ -240,7 +265,8 @@ def table_html(d: dict) -> str:
             continue
         if k == "uncertainty" and unc and all(_is_number(x) for x in unc.values()):
             # standard uncertainties to two significant digits, each with its unit
-            inner = ", ".join(f"{html.escape(_label(a, b))} = {html.escape(format_keyed(str(a), b, 2))}"
+            inner = ", ".join(f"{html.escape(_label(a, b))} = "
+                              f"{html.escape(_fmt_u(a, b) if b > 0 else format_keyed(str(a), b, 2))}"
                               for a, b in unc.items())
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{inner}</td></tr>")
             continue

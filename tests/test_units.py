@@ -140,10 +140,10 @@ def test_a_column_of_lengths_reads_in_the_unit_of_its_largest_value():
     rows = [{"j": 1, "name": "piston", "coefficient_nm": 50731.8, "uncertainty_nm": 5.5},
             {"j": 2, "name": "tilt x", "coefficient_nm": -12.3456789, "uncertainty_nm": 0.25}]
     page = table_html({"coefficients": rows})
-    # the uncertainty in its coefficient's unit; every row to the decimal place of the smallest
-    # uncertainty's two significant digits (0.25 nm = 0.00025 µm), trailing zeros kept (GUM §7.2.6)
+    # the uncertainty in its coefficient's unit; each row to the decimal place of its uncertainty's two
+    # significant digits (5.5 nm = 0.0055 µm, 0.25 nm = 0.00025 µm), trailing zeros kept (GUM §7.2.6)
     assert "<th>coefficient (µm)</th>" in page and "<th>uncertainty (µm)</th>" in page
-    assert "<td>50.73180</td>" in page and "<td>-0.01235</td>" in page and "<td>0.00550</td>" in page
+    assert "<td>50.7318</td><td>0.0055</td>" in page and "<td>-0.01235</td><td>0.00025</td>" in page
     tiny = table_html({"coefficients": [*rows, {"j": 3, "name": "tilt y", "coefficient_nm": 0.0478859,
                                                  "uncertainty_nm": 0.1}]})
     assert "e-0" not in tiny and "<td>0.00005</td>" in tiny  # 0.048 nm, u 0.1 nm: not 4.78859e-05
@@ -183,10 +183,17 @@ def test_a_step_tables_values_are_given_to_their_uncertaintys_decimal_place():
     html = table_html({"alpha_deg": 0.17000067958, "dz": 12.500028525132285,
                        "uncertainty": {"alpha_deg": 2.62e-05, "dz": 4.1861e-06}, "iterations": 2})
     assert "12.5000285 mm" in html and "0.170001°" in html
-    assert "dz = 4.2 nm" in html and "alpha = 2.6e-05°" in html
+    assert "dz = 4.2 nm" in html and "alpha = 0.000026°" in html
+    # each row to its own uncertainty's decimal place (one setting per column gave "341.6963" beside
+    # "48.3000" — a review)
     rec = _records([{"j": 1, "coefficient_nm": -17.698123, "uncertainty_nm": 5.54153},
-                    {"j": 2, "coefficient_nm": 341.69625, "uncertainty_nm": 0.3259}])
-    assert "<td>-17.70</td>" in rec and "<td>5.54</td>" in rec and "<td>0.33</td>" in rec
+                    {"j": 2, "coefficient_nm": 341.69625, "uncertainty_nm": 0.3259},
+                    {"j": 3, "coefficient_nm": -12.3456, "uncertainty_nm": 51.7}])
+    assert "<td>-17.7</td><td>5.5</td>" in rec and "<td>341.70</td><td>0.33</td>" in rec
+    assert "<td>-12</td><td>52</td>" in rec
+    # a value that rounds to zero reads 0.0, not −0.0; u keeps its two digits ("5.0 nm", not "5 nm")
+    html = table_html({"dz": -1e-9, "uncertainty": {"dz": 5e-6}})
+    assert ">0.0 nm<" in html and "dz = 5.0 nm" in html
 
 
 def test_a_flat_maps_figures_read_in_nm_without_warnings():
