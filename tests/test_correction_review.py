@@ -325,3 +325,12 @@ def test_a_fine_pixel_maps_noise_is_no_unit_mistake(pixel_um, diameter_mm):
     z = 40e-6 * ((2 * np.hypot(x, y) / diameter_mm) ** 2 - 0.5) + 30e-6 * rng.standard_normal(x.size)
     rep = _run(PointCloud.from_xyz(x, y, z), None, diameter=diameter_mm, channel="z").report
     assert rep["correction_pv_um"] > 0.01 and not any("unit" in w for w in rep["warnings"])
+
+
+def test_a_programmed_surface_may_say_null_as_the_recipes_surface_may():
+    """`aperture: null` is accepted by surface_from_spec; the typo check refused it (a review)."""
+    from pointspro.plugins.correction import CorrectionParams
+
+    p = CorrectionParams.model_validate(
+        {"programmed_surface": {"type": "even_asphere", "c": 0.005, "k": 0, "aperture": None}})
+    assert p.programmed_surface["aperture"] is None

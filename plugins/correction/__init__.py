@@ -87,7 +87,7 @@ class CorrectionParams(PupilCentreParams):
                                        "(nothing written)")
     fit_tolerance_nm: float = param(1.0, unit="nm", gt=0, help="corrected_surface.yaml must match "
                                     "programmed + radial correction to this RMS over the aperture")
-    programmed_surface: dict[str, float | bool | str | list[float] | dict[int | str, float]] | None = param(
+    programmed_surface: dict[str, float | bool | str | list[float] | dict[int | str, float] | None] | None = param(
         None, help="the surface this run was cut with, in the recipe's surface syntax (a previous "
         "corrected_surface.yaml's surface); empty: the recipe's nominal")
     history_rms_um: list[float] = param(
@@ -99,12 +99,11 @@ class CorrectionParams(PupilCentreParams):
     def _no_empty_keys(cls, v):
         # `{type:even_asphere, R:-200}` (no space after the colons) is YAML for keys with no value:
         # said so, instead of four lines of the value type's union (a review)
-        if isinstance(v, dict):
+        if isinstance(v, dict):  # only such keys: `aperture: null` is a surface's own way to say none
             for key, val in v.items():
-                if val is None:
-                    hint = (f": write `{str(key).replace(':', ': ', 1)}` (a space after the colon)"
-                            if ":" in str(key) else "")
-                    raise ValueError(f"key '{key}' has no value{hint}")
+                if val is None and ":" in str(key):
+                    raise ValueError(f"key '{key}' has no value: write `{str(key).replace(':', ': ', 1)}` "
+                                     "(a space after the colon)")
         return v
 
     @field_validator("programmed_surface")
