@@ -313,6 +313,7 @@ def _run_pipeline(cloud, recipe, *, progress, log, surface, upto, allowed_dirs, 
     current = cloud
     residual_by = None  # the step that made the current residual ("step 3 'misalignment'"); None: the input
     stale = None  # (where, id, residual_by) of a step that moved the points after their residual was made
+    previous = None  # the step run last ("step 1 'manual_edit'")
     for i, rs in enumerate(steps):
         progress.check()
         sub = progress.sub(i / n, (i + 1) / n)
@@ -322,6 +323,9 @@ def _run_pipeline(cloud, recipe, *, progress, log, surface, upto, allowed_dirs, 
         sub.update(0.0, rs.step_cls.title)
         t0 = time.perf_counter()
         where = f"step {recipe.steps.index(rs) + 1} '{rs.id}'"
+        if current.n == 0:  # every point removed before it (a manual_edit of all rows, an aperture off the part)
+            raise StepError(f"{where}: no point is left to process — "
+                            + (f"{previous} removed them all" if previous else "the cloud is empty"))
         try:
             out = rs.step_cls().run(current, rs.params, ctx)
         except PointsProError as e:
@@ -331,6 +335,7 @@ def _run_pipeline(cloud, recipe, *, progress, log, surface, upto, allowed_dirs, 
         except Exception as e:  # a bug in the step or under it: this input fails alone
             raise InternalError(internal_message(where, e)) from e
         seconds = time.perf_counter() - t0
+        previous = where
         if not isinstance(out, StepResult) or not isinstance(out.cloud, PointCloud):
             raise InternalError(f"{where}: internal error: returned {type(out).__name__}, not a "
                                 "StepResult — please report")

@@ -322,3 +322,24 @@ def test_batch_refuses_true_as_a_number_in_one_line_exit_2(run_cli, tmp_path, ed
     assert code == 2, err
     assert says in err and str(recipe) in err and err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "o" / "asphere_cmm").exists()
+
+
+def test_a_step_after_every_point_was_removed_names_the_step_that_removed_them():
+    """A manual_edit that removes every row, then probe_radius: the input failed as "internal error
+    ValueError: attempt to get argmax of an empty sequence — please report" (a review)."""
+    import numpy as np
+
+    from pointspro.core import PointCloud
+    from pointspro.core.errors import StepError
+    from pointspro.core.pipeline import run_pipeline
+    from pointspro.core.recipe import parse_recipe
+
+    rec = parse_recipe({"pointspro": 1,
+                        "surface": {"type": "even_asphere", "c": 0.01, "k": 0, "aperture": 20},
+                        "steps": [{"manual_edit": {"remove_ranges": [[0, 1000]]}},
+                                  {"probe_radius": {"radius": 1.0, "side": 1}}]})
+    x = np.linspace(-5, 5, 50)
+    cloud = PointCloud.from_xyz(x, np.zeros(50), 0.005 * x**2)
+    with pytest.raises(StepError, match=r"step 2 'probe_radius': no point is left to process — "
+                                        r"step 1 'manual_edit' removed them all"):
+        run_pipeline(cloud, rec)

@@ -70,7 +70,7 @@ def check_no_fold(surface, foot: np.ndarray, side: int, radius: float) -> None:
     its centre is on +z): the ball cannot touch there and the centres do not define a surface."""
     from pointspro.core.surfaces import SurfaceOfRevolution
 
-    if not isinstance(surface, SurfaceOfRevolution):
+    if not isinstance(surface, SurfaceOfRevolution) or len(foot) == 0:
         return
     rho = np.sqrt(foot[:, 0] ** 2 + foot[:, 1] ** 2)
     km, ks = surface.principal_curvatures(rho)
