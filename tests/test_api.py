@@ -270,3 +270,23 @@ def test_a_cloud_with_nan_rows_is_refused_naming_the_first():
     ok = cloud.select(np.isfinite(cloud.xyz).all(axis=1))
     r = pp.run(recipe, ok)
     assert r.summary["rms_um"] is not None and r.cloud.n == 397
+
+
+def test_a_repeated_index_is_refused_where_a_caller_gives_one():
+    """pd.concat of two to_pandas() frames repeats `index`; manual_edit then removed every row so
+    numbered (remove: [3] took 468 of 4680 points, silently — a review)."""
+    import numpy as np
+
+    from pointspro.core import PointCloud
+    from pointspro.core.errors import InputError
+
+    xyz = np.zeros((10, 3))
+    with pytest.raises(InputError, match=r"from_numpy: the index column must name each input row once; "
+                                         r"5 repeat\(s\) \(first: 0, 2 times\)"):
+        PointCloud.from_numpy(xyz, index=np.arange(10) % 5)
+    df = PointCloud.from_numpy(xyz).to_pandas()
+    import pandas as pd
+
+    with pytest.raises(InputError, match="from_pandas: the index column"):
+        PointCloud.from_pandas(pd.concat([df, df]))
+    assert PointCloud.from_pandas(df).n == 10
