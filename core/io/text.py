@@ -324,6 +324,9 @@ def read_text(path: Path, need_xyz: bool = True, invalid: str = "error", quote: 
         names, lengths, units = _plain_columns(path, lay)
     xyz, cols = _xyz_in_mm(path, lay, data, names, lengths, units)
     meta["channel_units"] = {n: u for n, u in zip(names, units) if u and n not in ("x", "y", "z")}
+    # the file's own index (PointsPro's cloud.csv: the original input's row) numbers no line of this
+    # file; one the reader makes is the data row (the dynamic step names lines through it)
+    meta["index_in_file"] = "index" in names
     stated = {n: u for n, u in zip(names, units) if u and n in ("x", "y", "z")}
     if stated:  # x, y, z are mm once read; the units the file stated them in, for the report
         meta["xyz_units_stated"] = stated

@@ -12,8 +12,9 @@ largest peaks, the phase lag of the sensor point behind the carriage, the aliase
 known vibration (``vibrations``) and the sampling advice of 000 §3.1. Two lags: ``phase_lag_model_deg``,
 the model's lag at the frequency of the largest line of the encoder's spectrum (the loop's lag for the
 scan's dominant content: a periodogram of the whole record, which resolves a slow spindle; None, with
-``phase_lag_model_note`` saying why, when no line stands clearly above the spectrum's floor, as on a
-constant feed), and ``phase_lag_scan_deg``, the median over the scan of the Hilbert phase
+``phase_lag_model_note`` saying why, when the spectrum's largest bin is no true local maximum — a smooth
+motion with no repeating content, as a spiral on a rotationally symmetric part — or no line stands
+clearly above the spectrum's floor, as on a constant feed), and ``phase_lag_scan_deg``, the median over the scan of the Hilbert phase
 difference between Gm·xd and xd — weighted by amplitude, so it follows the scan's largest (usually
 slowest) content (0.0003° on a scan whose 12 Hz form lags 0.9°); it is not the loop's lag at any one
 frequency.
@@ -89,12 +90,18 @@ def _figure(t, z_raw, z, x, y, fs):
 
 
 def _file_lines(cloud) -> dict:
-    """sampling_rate's ``lines`` (each sample's line in a text file: the header's line + 1 + its input
-    row, ``index``) and what the rows missing between two samples are. Array positions are not lines
-    once the reader dropped a NaN row (a review: a duplicate on line 1003 was named on line 1002, and a
-    dropped NaN row read as "the sampling interval changes")."""
+    """sampling_rate's ``lines`` (each sample's line in a text file: the header's line + 1 + its data
+    row) and what the rows missing between two samples are. Array positions are not lines once the
+    reader dropped a NaN row (a review: a duplicate on line 1003 was named on line 1002, and a dropped
+    NaN row read as "the sampling interval changes"), so the row is taken from ``index`` — where the
+    text reader made it (meta ``index_in_file`` False). A file's own index column numbers no line of
+    it (PointsPro's cloud.csv carries the original input's row: a crop from row 20000 named "line
+    21003" of a 3001-line file; other files count from 1): array positions then, as before."""
+    text = cloud.meta.get("format") == "text"
     header = cloud.meta.get("header_line")
-    first = (int(header) + 1) if cloud.meta.get("format") == "text" and header else 2
+    first = (int(header) + 1) if text and header else 2
+    if not (text and cloud.meta.get("index_in_file") is False):
+        return {"lines": np.arange(cloud.n, dtype=np.int64) + first}
     dropped = int(cloud.meta.get("invalid_dropped") or 0)
     why = (f"dropped on reading for a NaN or infinite value ({dropped} row(s) of the file in all)" if dropped
            else "removed before this step")
