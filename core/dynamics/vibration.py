@@ -70,38 +70,48 @@ def dominant_peaks(f, p, count: int = 3, fmin: float = 0.0) -> list[float]:
 LINE_ABOVE_FLOOR = 100.0
 #: … and when the record holds at least this many of its periods (below, a linear trend's remainder)
 MIN_PERIODS = 3.0
+#: the trend removed before the spectrum: a polynomial of this degree in time
+TREND_DEGREE = 3
 
 
 def dominant_frequency(v, fs: float) -> tuple[float | None, str]:
     """The frequency (Hz) of the largest line of v's spectrum — a periodogram of the whole record (Hann,
-    linear trend removed), its bin 1/T, so that a spindle at 0.14–15 rpm (004 Table 1: 2.3 mHz–0.25 Hz)
+    a cubic trend removed), its bin 1/T, so that a spindle at 0.14–15 rpm (004 Table 1: 2.3 mHz–0.25 Hz)
     is resolved where Welch's 8192-sample segments at 1 kHz cut below ~0.25 Hz — interpolated between
-    bins; with the reason when there is none: a line at fewer than MIN_PERIODS periods in the record,
-    or none LINE_ABOVE_FLOOR times above the floor (a constant feed: "3.33 Hz" was quoted from its
-    rounding noise)."""
+    bins; with the reason when there is none: the largest bin from MIN_PERIODS periods in the record up
+    is no true local maximum (above the bin below it and not below the bin above), or does not stand
+    LINE_ABOVE_FLOOR times above the floor (a constant feed: "3.33 Hz" was quoted from its rounding
+    noise). A smooth motion with no repeating content (a spiral on a rotationally symmetric part, an
+    accelerating axis) leaves a steep spectrum whose largest bin is the first allowed: it read as a line
+    at exactly MIN_PERIODS/T (a review: 0.0118 Hz on a sphere's spiral, 0.15 Hz on an axis at constant
+    acceleration). The cubic trend (a linear one before) takes the part's sag off a spiral, so that a
+    1/rev line of a tilted part on it is found."""
     from scipy.signal import periodogram
 
     v = np.asarray(v, dtype=np.float64)
     n = v.size
     if n < 16:
         return None, "too few samples for a spectrum"
-    from scipy.signal import detrend
-
-    r = detrend(v)
+    P = np.polynomial.polynomial
+    s = np.linspace(-1.0, 1.0, n)  # scaled time: the cubic is well conditioned at any length
+    r = v - P.polyval(s, P.polyfit(s, v, TREND_DEGREE))
     if not np.std(r) > 1e-12 * max(float(np.max(np.abs(v))), 1.0):  # rounding: 4e-13 mm at 2 m
-        return None, ("the encoder moves at a constant feed (nothing beyond a linear trend): no dominant "
-                      "frequency to quote the model's lag at")
+        return None, ("the encoder moves at a constant feed or a smooth acceleration (nothing beyond a cubic "
+                      "trend): no dominant frequency to quote the model's lag at")
     f, p = periodogram(r, fs=fs, window="hann", detrend=False)
     k0 = max(int(np.ceil(MIN_PERIODS)), 1)  # bin k holds k periods of the record
     if p.size < k0 + 3:
         return None, "too few samples for a spectrum"
     q = p[k0:-1]
-    k = int(np.argmax(q))
+    k = int(np.argmax(q)) + k0
     floor = float(np.median(q))
-    if not q[k] > 0 or (floor > 0 and q[k] < LINE_ABOVE_FLOOR * floor):
+    if not (p[k] > p[k - 1] and p[k] >= p[k + 1]):
+        return None, ("the encoder's spectrum has no line: its power falls from the lowest frequencies "
+                      "(a smooth motion with no repeating content, as a spiral on a rotationally symmetric "
+                      "part or an accelerating axis): no dominant frequency to quote the model's lag at")
+    if not p[k] > 0 or (floor > 0 and p[k] < LINE_ABOVE_FLOOR * floor):
         return None, ("no line of the encoder's spectrum stands clearly above its floor (a motion with no "
                       "repeating content): no dominant frequency to quote the model's lag at")
-    k += k0
     a, b, c = (np.log(max(x, 1e-300)) for x in p[k - 1:k + 2])
     den = a - 2 * b + c
     shift = 0.5 * (a - c) / den if den < 0 else 0.0
