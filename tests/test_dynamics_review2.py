@@ -56,15 +56,16 @@ def test_vibration_phase_and_frequency_uncertainties_cover_their_scatter(scan):
 @pytest.mark.parametrize("scan, keys", [
     ("{type: spiral, radius: 10.0, rpm: 60, pitch: 0.5, fs: 0.001}", ("scan.fs", "fs: 1000", "0 sample")),
     ("{type: spiral, radius: 0.05, rpm: 60, pitch: 0.5, fs: 5}", ("scan.radius", "scan.pitch", "0 sample")),
-    ("{type: raster, radius: 1.0}", ("scan.spacing", "scan.lines", "36 point")),
+    ("{type: raster, radius: 0.4, lines: 2}", ("scan.spacing", "scan.lines", "2 point")),
 ], ids=["fs_as_interval", "tiny_spiral", "tiny_raster"])
 def test_simulate_refuses_a_scan_with_too_few_samples(run_cli, tmp_path, scan, keys):
     """`fs: 0.001` (a sampling interval for the rate) gave a spiral of 0 samples: a header-only CSV,
-    exit 0. Refused with exit 2, the file, the keys and the likely unit slip named; nothing written."""
-    from pointspro.core.explain.workflow import MIN_POINTS
+    exit 0. Refused with exit 2, the file, the keys and the likely unit slip named; nothing written.
+    Fewer than 3 points make no scan; a small scan (a 36-point raster) is simulated with a warning
+    (tests/test_dynamics_review3.py)."""
     from pointspro.core.simulate.scan import MIN_SAMPLES
 
-    assert MIN_SAMPLES == MIN_POINTS
+    assert MIN_SAMPLES == 3
     (tmp_path / "m.yaml").write_text("pointspro_model: 1\nsurface: {type: even_asphere, R: 150.0, k: -0.8, "
                                      f"aperture: 40.0}}\nscan: {scan}\n", encoding="utf-8")
     code, _, err = run_cli("simulate", tmp_path / "m.yaml", "--out", tmp_path / "s.csv")

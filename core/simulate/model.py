@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from ..errors import RecipeError
 from .effects import LIBRARY, ScanContext
-from .scan import ScanSpec, scan_points
+from .scan import ScanSpec, scan_points, scan_warnings
 
 
 class ProbeSpec(BaseModel):
@@ -171,13 +171,15 @@ def implausible_effects(model: ModelSpec, base_dir=None) -> list[str]:
     """Warnings for effects (the pose aside: a part may sit far off) that change the heights by more
     than a tenth of the part's own sag variation over the scan, and by over 1 µm RMS — a length
     written in the wrong unit (`amplitude: 8` for 8 nm is 8 mm; a review: simulated with exit 0 and no
-    word), or `z_scale: {scale: -1}`, which flattens the part."""
+    word), or `z_scale: {scale: -1}`, which flattens the part. First the scan's own warnings
+    (scan_warnings: fewer points than explain needs in a measurement): `pointspro simulate` prints
+    these."""
     from ..units import format_length
 
     pts = scan_points(model.scan)
     ctx = ScanContext.from_surface(model.build_surface(base_dir), pts["x"], pts["y"], pts["t"], pts["c"])
     sag = float(np.ptp(ctx.f)) if ctx.f.size else 0.0
-    out = []
+    out = scan_warnings(model.scan)
     for i, e in enumerate(model.effects, 1):
         (name, params), = e.items()
         if name == "pose":

@@ -30,16 +30,17 @@ class ScanSpec(BaseModel):
     points: int = Field(20, ge=1, le=100000, description="fiducials: points per patch")
 
 
-#: the fewest samples a raster, star or spiral may have: explain's MIN_POINTS (core/explain/workflow.py),
-#: the fewest that tell an effect from the noise. A spiral with `fs: 0.001` (a sampling interval in s
-#: written for the rate in Hz) had 0 samples: `pointspro simulate` wrote a header-only file, exit 0.
-MIN_SAMPLES = 100
+#: the fewest samples a raster, star or spiral may have: fewer make no scan. A spiral with `fs: 0.001` (a
+#: sampling interval in s written for the rate in Hz) had 0 samples: `pointspro simulate` wrote a
+#: header-only file, exit 0. A small scan is no error (a CMM's 4-spoke star of 84 points, an 11-line
+#: raster of 85 were refused for a while): below explain's MIN_POINTS, scan_warnings says so.
+MIN_SAMPLES = 3
 
 
 def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
     """x, y, t, c of the scan (and ``fiducial`` on a fiducial pattern). ValueError for a spiral of more
-    than 5,000,000 samples, and for a raster, star or spiral of fewer than MIN_SAMPLES, naming the keys
-    (and the unit slip most likely behind it)."""
+    than 5,000,000 samples, and for a raster, star or spiral of fewer than MIN_SAMPLES (none, or too
+    few to be a scan), naming the keys (and the unit slip most likely behind it)."""
     R = spec.radius
     if spec.type == "spiral":
         revs = R / spec.pitch
@@ -49,8 +50,7 @@ def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
             raise ValueError(f"the spiral has {n} samples; lower fs or raise pitch")
         if n < MIN_SAMPLES:
             raise ValueError(
-                f"scan: the spiral has {n} sample(s), fewer than the {MIN_SAMPLES} a simulated measurement "
-                f"needs: radius {R:g} mm / pitch {spec.pitch:g} mm/rev = {revs:.3g} rev at rpm {spec.rpm:g} "
+                f"scan: the spiral has {n} sample(s), fewer than the {MIN_SAMPLES} that make a scan: radius {R:g} mm / pitch {spec.pitch:g} mm/rev = {revs:.3g} rev at rpm {spec.rpm:g} "
                 f"take {T:.3g} s, sampled at fs {spec.fs:g} Hz — check the units of scan.fs (a rate in Hz: "
                 "1 kHz is `fs: 1000`, not 1, nor a sampling interval such as 0.001), scan.radius and "
                 "scan.pitch (mm) and scan.rpm (rev/min)")
@@ -93,10 +93,28 @@ def scan_points(spec: ScanSpec) -> dict[str, np.ndarray]:
     x, y = np.concatenate(xs), np.concatenate(ys)
     if x.size < MIN_SAMPLES:
         raise ValueError(
-            f"scan: the {spec.type} has {x.size} point(s), fewer than the {MIN_SAMPLES} a simulated "
-            f"measurement needs: radius {R:g} mm, spacing {spec.spacing:g} mm, lines {spec.lines} — check "
+            f"scan: the {spec.type} has {x.size} point(s), fewer than the {MIN_SAMPLES} that make a scan: "
+            f"radius {R:g} mm, spacing {spec.spacing:g} mm, lines {spec.lines} — check "
             "the units of scan.radius and scan.spacing (mm) and raise scan.lines")
     step = np.r_[0.0, np.hypot(np.diff(x), np.diff(y))]
     t = np.cumsum(step) / spec.speed
     c = np.degrees(np.arctan2(y, x)) % 360.0
     return {"x": x, "y": y, "t": t, "c": c}
+
+
+def scan_warnings(spec: ScanSpec) -> list[str]:
+    """Warnings about the scan itself (`pointspro simulate` prints them): a raster, star or spiral of
+    fewer points than `pointspro explain` needs in a measurement (core.explain.workflow.MIN_POINTS) —
+    fine for a coarse CMM scan, and as a model's own scan for explain (it evaluates the model at the
+    measured points), but this simulated file cannot be explain's measurement."""
+    from ..explain.workflow import MIN_POINTS
+
+    if spec.type == "fiducials":
+        return []
+    n = scan_points(spec)["x"].size
+    if n >= MIN_POINTS:
+        return []
+    return [f"scan: the {spec.type} has {n} point(s), fewer than the {MIN_POINTS} that `pointspro explain` "
+            "needs in a measurement to tell an effect from the noise: the simulated file can be explain's "
+            "--simulated or a model's scan, not its measurement (raise the scan's density for that: "
+            "scan.lines, a smaller scan.spacing, or scan.fs)"]
