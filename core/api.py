@@ -40,10 +40,15 @@ def read(path, **options) -> PointCloud:
 
 def write(cloud: PointCloud, path) -> Path:
     """Write ``cloud`` to ``path`` (.csv: every channel, shortest round-trip decimals, bit-exact when
-    read back; .ply: binary, float64 coordinates, integer channels as int/uint or double by range), atomically. Returns the path."""
+    read back — but a row with a NaN in any column is dropped on reading, as in any input file: a
+    cloud with NaN in a channel keeps every row in .ply; .ply: binary, float64 coordinates, integer
+    channels as int/uint or double by range), atomically. Returns the path."""
+    from .errors import InputError
     from .io import write_cloud
 
     path = Path(path)
+    if not path.parent.is_dir():  # not a traceback naming the writer's temporary file (a review)
+        raise InputError(f"{path}: the folder {path.parent} does not exist")
     write_cloud(_as_cloud(cloud), path)
     return path
 

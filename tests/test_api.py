@@ -290,3 +290,15 @@ def test_a_repeated_index_is_refused_where_a_caller_gives_one():
     with pytest.raises(InputError, match="from_pandas: the index column"):
         PointCloud.from_pandas(pd.concat([df, df]))
     assert PointCloud.from_pandas(df).n == 10
+
+
+def test_writing_into_a_missing_folder_names_it(tmp_path):
+    """pp.write into a folder that does not exist raised FileNotFoundError naming the writer's hidden
+    temporary file (a review)."""
+    import numpy as np
+
+    from pointspro.core import PointCloud, api
+    from pointspro.core.errors import InputError
+
+    with pytest.raises(InputError, match=r"the folder .*no_such_dir does not exist"):
+        api.write(PointCloud.from_numpy(np.zeros((3, 3))), tmp_path / "no_such_dir" / "c.csv")

@@ -67,12 +67,13 @@ class VolumetricStep(Step):
             Dinv = np.linalg.inv(fit.D)
             u = np.sqrt(np.einsum("kl,nlm,km->nk", Dinv, S, Dinv))
         warnings = []
-        if spec.gp_selection.get("sigma_basis") == "unknown":
-            # calibrated on 4 balls: the transform passes through them all, nothing bounds the error left
-            u[:] = np.nan
+        unknown = spec.gp_selection.get("sigma_basis") == "unknown"
+        if unknown:
+            # calibrated on 4 balls: the transform passes through them all, nothing bounds the error
+            # left. No u channels then: a column of nan drops every row of cloud.csv read back
             warnings.append("the model states no uncertainty: its fiducials determined the transform "
-                            "exactly, so the volumetric error left between them is unknown — u_x, u_y, u_z "
-                            "are nan; calibrate with more balls")
+                            "exactly, so the volumetric error left between them is unknown — no u_x, u_y, "
+                            "u_z are written; calibrate with more balls")
         elif spec.gp_selection.get("sigma_basis") == "in-sample residuals":
             warnings.append("the model's σ of the error left comes from few balls without a cross-validation "
                             "(fiducials' report: sigma_basis): u_x, u_y, u_z are a rough estimate")
@@ -85,13 +86,15 @@ class VolumetricStep(Step):
         if outside.any():
             warnings.append(f"{int(outside.sum())} point(s) lie outside the calibrated workspace "
                             f"{ws.tolist()} mm: their correction is extrapolated (flag outside_workspace)")
-        out = cloud.replace(xyz=corr, channels={"u_x": u[:, 0], "u_y": u[:, 1], "u_z": u[:, 2],
-                                                "outside_workspace": outside.astype(np.int64)},
+        chans = {"outside_workspace": outside.astype(np.int64)}
+        if not unknown:
+            chans = {"u_x": u[:, 0], "u_y": u[:, 1], "u_z": u[:, 2], **chans}
+        out = cloud.replace(xyz=corr, channels=chans,
                             # the calibrated reference frame is the one the part's (fiducial-aided) CAD is in
                             meta={"frame": "part" if params.frame == "reference" else cloud.frame,
                                   "coordinates": params.frame})
         report = {"frame": params.frame, "correction_rms_um": (np.sqrt(np.mean(e**2, axis=0)) * 1e3).tolist(),
-                  "uncertainty_max_um": (u.max(axis=0) * 1e3).tolist(), "outside_workspace": int(outside.sum()),
+                  "uncertainty_max_um": None if unknown else (u.max(axis=0) * 1e3).tolist(), "outside_workspace": int(outside.sum()),
                   "kernels": {k: v.kind for k, v in spec.gp.items()}, "warnings": warnings}
         return StepResult(out, report)
 
