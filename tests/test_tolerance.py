@@ -610,3 +610,17 @@ def test_a_star_or_a_spiral_is_no_grid():
     assert on_lattice(x, y)  # the raster layout: a grid clipped to the disk
     keep = np.random.default_rng(1).random(x.size) > 0.3  # and with dropouts
     assert on_lattice(x[keep], y[keep])
+
+
+def test_the_undecided_line_says_each_reason_once():
+    """Without an uncertainty: block, two undecided items (one over its limit) read "(no uncertainty: add
+    an uncertainty: block, or rule: simple; no uncertainty: add …; the value alone exceeds the limit)"
+    (a review)."""
+    from pointspro.core.tolerance.decision import NO_UNCERTAINTY, UNDECIDED, summary_text
+
+    items = [{"name": "rms", "value": 1.8, "limit": 0.5, "unit": "µm", "verdict": UNDECIDED,
+              "note": NO_UNCERTAINTY + "; the value alone exceeds the limit"},
+             {"name": "pv", "value": 0.4, "limit": 0.5, "unit": "µm", "verdict": UNDECIDED,
+              "note": NO_UNCERTAINTY}]
+    text = summary_text(UNDECIDED, items)
+    assert text.count("no uncertainty") == 1 and text.endswith("; the value alone exceeds the limit)")

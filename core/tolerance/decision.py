@@ -128,7 +128,13 @@ def summary_text(verdict: str, items: list[dict]) -> str:
     text = "; ".join(item_text(i) for i in deciding[:3])
     if len(deciding) > 3:
         text += f"; and {len(deciding) - 3} more"
-    notes = sorted({i["note"] for i in deciding if i.get("note")})
-    if verdict == UNDECIDED and notes:
-        text += " (" + "; ".join(notes) + ")"
+    # each clause of the items' notes once: "no uncertainty: …" stood twice beside "…; the value
+    # alone exceeds the limit" (a review)
+    clauses = []
+    for note in sorted({i["note"] for i in deciding if i.get("note")}):
+        for clause in note.split("; "):
+            if clause not in clauses:
+                clauses.append(clause)
+    if verdict == UNDECIDED and clauses:
+        text += " (" + "; ".join(clauses) + ")"
     return f"{verdict}: {text}"
