@@ -16,7 +16,9 @@ import contextvars
 import functools
 import logging
 import os
+import re
 import time
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -86,6 +88,134 @@ def output_stems(inputs: list[Path]) -> list[str]:
 
 #: the files a batch writes at the top of its output folder, beside the inputs' folders
 BATCH_FILES = ("summary.json",)
+
+
+#: the file a batch holds locked (``fcntl.flock``) in its output folder while it writes there
+LOCK_FILE = ".pointspro.lock"
+
+
+class BatchLock:
+    """The output folder held by one batch (``lock_output_folder``); ``release()`` (idempotent) gives
+    it up and removes the lock file."""
+
+    def __init__(self, path: Path, fd: int | None):
+        self.path, self.fd = path, fd
+        if fd is not None:
+            _HELD.add(self)
+
+    @property
+    def held(self) -> bool:
+        return self.fd is not None
+
+    def release(self) -> None:
+        fd, self.fd = self.fd, None
+        _HELD.discard(self)
+        if fd is None:
+            return
+        try:  # removed while still locked, and only if it is still ours (see lock_output_folder)
+            if os.path.samestat(os.fstat(fd), os.stat(self.path)):
+                os.unlink(self.path)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)  # the lock goes with the last descriptor
+
+
+#: the locks this process holds: a forked child (a writer, a Monte Carlo worker) closes its copies at
+#: once — closing a copy never releases the parent's lock, and a child left behind by a batch killed
+#: with SIGKILL would otherwise hold it on, refusing the next batch
+_HELD: "weakref.WeakSet[BatchLock]" = weakref.WeakSet()
+
+
+def _close_in_child() -> None:
+    for lock in list(_HELD):
+        fd, lock.fd = lock.fd, None
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _HELD.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_in_child)
+
+
+def lock_output_folder(out: Path) -> BatchLock:
+    """Hold the output folder ``out`` for this batch: an exclusive, non-blocking ``flock`` on
+    ``out/.pointspro.lock`` (LOCK_FILE), with this process's id written in it. A second batch writing
+    the same folder is refused — RecipeError naming the folder — before it removes or writes anything:
+    two batches sharing one --out deleted each other's temporary folders (cleanup_partials, then of
+    every name) and the last to end overwrote the other's summary.json (a review).
+
+    Held by the batch's own process only, for the whole batch: its pool's workers are spawned and
+    Dask's run elsewhere (neither inherits the descriptor, opened close-on-exec) and never ask for
+    it; a forked child closes its copy at once (``_close_in_child``). The system releases the lock when
+    the process ends, however it ends (SIGKILL too), so a lock file left behind blocks nothing; a
+    batch that ends removes it (``BatchLock.release``). A file system without locks (ENOLCK: NFS
+    without its lock daemon): the batch goes on unlocked."""
+    import fcntl
+
+    path = Path(out) / LOCK_FILE
+    for _ in range(100):
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+        except PermissionError:  # left by another user's batch that was killed: locking reads it
+            fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _lock_holder(fd)
+            os.close(fd)
+            raise RecipeError(f"{out}: another batch is writing this output folder{holder}; wait for it "
+                              "to end or choose another --out") from None
+        except OSError:
+            os.close(fd)
+            return BatchLock(path, None)
+        # the file locked is still the one at the path: a batch that ended meanwhile removed its own
+        # after this one opened it, and a third may have made a new one
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path))
+        except FileNotFoundError:
+            same = False
+        if same:
+            try:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+            except OSError:  # opened read-only: the lock holds all the same
+                pass
+            return BatchLock(path, fd)
+        os.close(fd)
+    raise RecipeError(f"{out}: cannot lock the output folder ({path} keeps being replaced)")
+
+
+def batch_running(out: Path) -> str | None:
+    """The line saying that another batch is writing the output folder ``out`` now (its lock is held),
+    else None; creates nothing (for --check-only)."""
+    import fcntl
+
+    try:
+        fd = os.open(Path(out) / LOCK_FILE, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)  # released at once, with the descriptor
+    except BlockingIOError:
+        return f"{out}: another batch is writing this output folder{_lock_holder(fd)}"
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return None
+
+
+def _lock_holder(fd: int) -> str:
+    """" (process 1234)", the id a lock file's holder wrote in it, or ""."""
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return ""
+    return f" (process {text})" if text.isdigit() else ""
 
 
 def check_output_targets(out: Path, inputs: list[Path], stems: list[str], resume: bool = False) -> None:
@@ -163,7 +293,7 @@ def write_artifact(folder: Path, name: str, art) -> None:
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
                   timings: dict | None = None, fork_csv: bool = False, cloud_format: str = "auto",
                   overrides=(), paths=None, input_sha256: str | None = None,
-                  file_sha256: dict | None = None) -> dict:
+                  file_sha256: dict | None = None, input_abspath: str | None = None) -> dict:
     """Write one input's outputs into ``folder`` atomically (all or nothing): cloud.csv, the steps'
     artifacts, form_error.png, report.json and report.html. Returns the report. Shared by the batch
     and the window's File → Export report. ``figures``: "all", "summary" (form_error.png only) or
@@ -175,16 +305,19 @@ def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figu
     the ``--set`` texts the recipe was run with, listed in report.json's ``overrides``. ``paths``: a
     ``cluster.PathMap`` that names a worker's private files as the client does, in the report.
     ``input_sha256``: the input file's digest (``input_digest``), ``file_sha256`` those of the files the
-    recipe names (``parameter_file_digests``), recorded for ``--resume``. BLAS
+    recipe names (``parameter_file_digests``), recorded for ``--resume``, as is ``input_abspath``, the
+    input's absolute path on the machine that ran the batch where ``input_path`` (as the user typed
+    it, report.json's ``input``) is not that already. BLAS
     runs one thread meanwhile (core.parallel.single_threaded_blas), as in the batch."""
     with single_threaded_blas():
         return _write_outputs(folder, input_path, recipe, result, figures=figures, timings=timings,
                               fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides,
-                              paths=paths, input_sha256=input_sha256, file_sha256=file_sha256)
+                              paths=paths, input_sha256=input_sha256, file_sha256=file_sha256,
+                              input_abspath=input_abspath)
 
 
 def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork_csv, cloud_format,
-                   overrides, paths, input_sha256, file_sha256) -> dict:
+                   overrides, paths, input_sha256, file_sha256, input_abspath) -> dict:
     from .io.gridcloud import grid_channel, grid_of, write_x3p_cloud
     from .report import SUMMARY_FIGURE, skipped_figures
 
@@ -224,6 +357,10 @@ def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork
         report["overrides"] = [str(o) for o in overrides]
     if input_sha256 is not None:  # --resume reruns an input whose content changed (is_complete)
         report["input_sha256"] = input_sha256
+    if input_abspath is not None and input_abspath != str(input_path):
+        # … and knows it named otherwise (relative, then absolute: same_input); an input named by its
+        # absolute path already says where it is
+        report["input_abspath"] = input_abspath
     if file_sha256:  # … or one of the recipe's files changed (calibration, model, mesh)
         report["parameter_files_sha256"] = file_sha256
     writer = {"csv": write_csv, "ply": write_ply_cloud, "npz": write_npz_cloud,
@@ -278,9 +415,11 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
                   surface=None, log: logging.Logger | None = None,
                   allowed_dirs=None, figures: str = "all", fork_csv: bool = False,
                   cloud_format: str = "csv", overrides=(), shown: str | None = None,
-                  paths=None) -> InputOutcome:
+                  paths=None, absolute: str | None = None) -> InputOutcome:
     """Read, run, write one input (``path``; ``shown``: its name in the report and the messages,
-    as the user typed it, when ``path`` is where a worker reads it; ``paths``: see write_outputs).
+    as the user typed it, when ``path`` is where a worker reads it; ``paths``: see write_outputs;
+    ``absolute``: its absolute path on the client, report.json's ``input_abspath`` — by default
+    ``path`` made absolute here when ``paths`` is None, i.e. read where the user named it).
     Any exception but Cancelled → a failed outcome for this input
     alone (one line naming the input and the step or stage; the traceback kept for summary.json and
     --debug); Cancelled propagates. The steps' log records carry the input's name
@@ -300,7 +439,9 @@ def process_input(path: Path, recipe: Recipe, out_dir: Path, stem: str, *,
             return _process_input(path, recipe, out_dir, stem, sink=sink, token=token, surface=surface,
                                   log=log, allowed_dirs=allowed_dirs, figures=figures, fork_csv=fork_csv,
                                   cloud_format=cloud_format, overrides=overrides,
-                                  shown=str(path) if shown is None else str(shown), paths=paths)
+                                  shown=str(path) if shown is None else str(shown), paths=paths,
+                                  absolute=os.path.abspath(path) if absolute is None and paths is None
+                                  else absolute)
     finally:
         CURRENT_INPUT.reset(token_input)
 
@@ -314,7 +455,7 @@ def log_warning(message, category, filename, lineno, file=None, line=None) -> No
 
 
 def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, allowed_dirs, figures,
-                   fork_csv, cloud_format, overrides, shown, paths) -> InputOutcome:
+                   fork_csv, cloud_format, overrides, shown, paths, absolute) -> InputOutcome:
     t0 = time.perf_counter()
     stage = "reading"
     try:
@@ -329,7 +470,8 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
         stage = "writing the outputs"
         report = write_outputs(out_dir / stem, shown, recipe, result, figures=figures,
                                fork_csv=fork_csv, cloud_format=cloud_format, overrides=overrides,
-                               paths=paths, input_sha256=digest, file_sha256=files)
+                               paths=paths, input_sha256=digest, file_sha256=files,
+                               input_abspath=absolute)
         progress.update(1.0, "written")
         return InputOutcome(shown, True, None, time.perf_counter() - t0, str(out_dir / stem),
                             report["summary"], warnings=step_warnings(result))
@@ -608,10 +750,22 @@ def replay_log(records: list[dict]) -> None:
             logger.handle(rec)
 
 
-def cleanup_partials(out_dir: Path) -> list[str]:
-    """Remove what an interrupted run leaves: temporary output folders and files (``.*.partial``) and
-    folders set aside while being replaced (``.*.old``). Returns what was removed."""
-    return remove_leftovers(sorted(Path(out_dir).glob(".*")))
+#: an atomic write's leftover beside ``<name>`` (core/io/atomic.py): ``.<name>.<token>.partial`` (a
+#: temporary folder or file) or ``.<name>.<token>.old`` (a folder set aside while being replaced),
+#: the token 8 hex digits — ``.part.b.0a1b2c3d.partial`` is part.b's, not part's
+_LEFTOVER = re.compile(r"\.(.+)\.[^.]+\.(?:partial|old)")
+
+
+def cleanup_partials(out_dir: Path, names) -> list[str]:
+    """Remove what an interrupted run left of these outputs: the temporary folders and files and the
+    folders set aside (``.<name>.<token>.partial|.old``) of each of ``names`` — the batch's inputs'
+    folder names (stems) and its own files (``BATCH_FILES``). Never another name's: a second batch
+    sharing the output folder deleted the temporary folder the first was writing, and that input
+    failed (a review); the batch's lock (``lock_output_folder``) keeps a second batch of the same
+    inputs out. Returns the names removed."""
+    names = set(names)
+    return remove_leftovers(sorted(p for p in Path(out_dir).glob(".*")
+                                   if (m := _LEFTOVER.fullmatch(p.name)) and m.group(1) in names))
 
 
 def remove_leftovers(paths) -> list[str]:
@@ -662,12 +816,26 @@ def parameter_file_digests(recipe: Recipe) -> dict[str, str | None]:
 FIGURE_MODES = ("none", "summary", "all")
 
 
+def same_input(report: dict, path) -> bool:
+    """The input of an earlier output's ``report`` is ``path``: the same name as typed, or the same
+    file however it was named — its absolute path recorded then (``input_abspath``; a report from
+    before it was recorded: its name, from here) and ``path`` resolved alike (``os.path.realpath``).
+    A review: a cron job naming the inputs by absolute paths after a manual run naming them
+    relatively ran the whole night again with --resume. ``input`` itself stays as typed then."""
+    shown = report.get("input")
+    if shown == str(path):
+        return True
+    then = report.get("input_abspath")
+    then = then if isinstance(then, str) else shown
+    return isinstance(then, str) and os.path.realpath(then) == os.path.realpath(path)
+
+
 def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
                 cloud_format: str = "auto", figures: str = "all", file_digests: dict | None = None) -> dict | None:
     """The report of a complete earlier output of this input with this recipe, else None.
 
     Output folders appear only when complete (atomic rename); the report must also name the same
-    input with the same content (its SHA-256: a file measured again under the same name, or edited,
+    input (``same_input``: named alike or resolving to the same file) with the same content (its SHA-256: a file measured again under the same name, or edited,
     is run again — before, its old numbers were reported as done), the same recipe (every
     parameter, ``--set`` overrides applied) and the same cloud file (``--cloud-format``), so a
     changed recipe or format is run again; the files its steps wrote are all still there, and the
@@ -686,7 +854,7 @@ def is_complete(out_dir: Path, stem: str, path: Path, recipe: Recipe,
         return None
     from .report import jsonable
 
-    if data.get("input") != str(path) or data.get("recipe") != jsonable(recipe.to_dict(full=True)):
+    if not same_input(data, path) or data.get("recipe") != jsonable(recipe.to_dict(full=True)):
         return None
     # the figures asked now were drawn then (a run with --figures none does not stand for one with all)
     done_mode = (data.get("figures") or {}).get("mode", "all")

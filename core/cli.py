@@ -60,7 +60,8 @@ inputs (chosen by content, not by extension; docs/formats.md):
 exit codes:
   0    all done
   1    some inputs failed (the others are complete; see summary.json)
-  2    usage, recipe or input error: one line on stderr naming the file, line, step or key
+  2    usage, recipe or input error, or the only input failed: one line on stderr naming the
+       file, line, step or key
   130  interrupted (Ctrl-C, SIGTERM): no partial output left; --resume finishes
 """
 
@@ -143,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pointspro {__version__}")
         return EXIT_OK
     if args.batch:
-        return _guard(lambda: _with_logging(args, lambda: cmd_batch(args)), args.debug)
+        return _guard(lambda: cmd_batch(args), args.debug)
     if (args.out or args.workers is not None or args.scheduler or args.resume or args.allow_path
             or args.overrides or args.cloud_format or args.ship or args.check_only):
         print("pointspro: --out, --workers, --scheduler, --ship, --check-only, --resume, --allow-path, "
@@ -246,21 +247,146 @@ def _guard(fn, debug: bool) -> int:
 
 
 def cmd_batch(args) -> int:
+    """--batch, with the ``pointspro`` loggers set (``_with_logging``). First of all SIGTERM stops it
+    as Ctrl-C does, and either one before the end is exit 130 with summary.json saying what was not
+    run (``_interrupted``) — a review: a SIGTERM in its first half second, while the pool started and
+    the recipe was read, ended it with status −15 and left the previous summary.json as if current."""
+    with _stop_on_sigterm():
+        run = _BatchRun(args)
+        try:
+            return _with_logging(args, lambda: _cmd_batch(args, run))
+        except KeyboardInterrupt:
+            return _interrupted(args, run)
+        finally:
+            run.release()
+
+
+def _cmd_batch(args, run) -> int:
     _check_batch_args(args)
+    run.args_ok = True
     recipe_path = Path(args.files[0])
     # the pool first: its workers import what the inputs need while this process reads the recipe
     # and checks the inputs (core/executors.py WARM_MODULES); stopped on any error below
-    pool = _early_pool(args)
-    if pool is None and not args.scheduler:  # the inputs run here: scipy without its docstring
-        from .lean_imports import skip_scipy_capability_notes  # tables (0.35–0.45 s of imports)
-
-        skip_scipy_capability_notes()
+    pool = None
     try:
-        return _batch(args, recipe_path, pool)
+        pool = _early_pool(args)
+        if pool is None and not args.scheduler:  # the inputs run here: scipy without its docstring
+            from .lean_imports import skip_scipy_capability_notes  # tables (0.35–0.45 s of imports)
+
+            skip_scipy_capability_notes()
+        return _batch(args, recipe_path, pool, run)
     finally:
         if pool is not None:
             pool.terminate()
             pool.join()
+
+
+class _BatchRun:
+    """How far a batch got, for its interruption (``_interrupted``): the output folder's lock once
+    held (core.batch.lock_output_folder), the stems, the inputs' entries reported so far."""
+
+    def __init__(self, args):
+        import time
+
+        self.t0 = time.perf_counter()
+        self.lock = None
+        self.stems: list[str] | None = None
+        self.results: dict[str, dict] = {}
+        self.workers = args.workers or 1
+        self.args_ok = False  # _check_batch_args passed
+
+    def hold(self, out: Path) -> None:
+        from .batch import lock_output_folder
+
+        with _signals_held():  # a lock taken is a lock recorded (released on the way out)
+            self.lock = lock_output_folder(out)
+
+    def release(self) -> None:
+        if self.lock is not None:
+            with _signals_held():
+                self.lock.release()
+
+
+def _signals_held():
+    """A context in which SIGINT and SIGTERM wait (blocked; they act when it ends)."""
+    import contextlib
+    import signal
+
+    @contextlib.contextmanager
+    def ctx():
+        try:
+            saved = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        except (AttributeError, OSError, ValueError):  # no such call here
+            yield
+            return
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, saved)
+
+    return ctx()
+
+
+def _stop_on_sigterm():
+    """A context in which SIGTERM raises KeyboardInterrupt in this process, as Ctrl-C does (Python's
+    own SIGINT handler): the batch stops, exit 130, summary.json says what was not run. Not where the
+    batch was started with SIGTERM ignored (it stays ignored, as core/io/background.py's forked
+    writers keep it), nor off the main thread; the handler before is restored on the way out. A
+    forked writer sets SIGTERM back to its default first thing (``_die_on_interrupt``); the pool's
+    workers are spawned, with the default handler."""
+    import contextlib
+    import signal
+    import threading
+
+    def on_sigterm(signum, frame):
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def ctx():
+        previous = None
+        if threading.current_thread() is threading.main_thread() \
+                and signal.getsignal(signal.SIGTERM) is not signal.SIG_IGN:
+            previous = signal.signal(signal.SIGTERM, on_sigterm)
+        try:
+            yield
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
+
+    return ctx()
+
+
+def _interrupted(args, run: _BatchRun) -> int:
+    """Ctrl-C or SIGTERM outside the inputs' run (``_drain`` handles those): while the pool started,
+    the recipe was read, the outputs were planned or the summary written. Exit 130 with the closing
+    line; summary.json says so — the inputs reported so far as they were, the others "not run" —
+    where the batch may write it: an output folder that exists, is a batch's (check_output_targets)
+    and that no other batch is writing (its lock, taken here if it was not yet). Not --check-only."""
+    import time
+
+    from .batch import check_output_targets, cleanup_partials, output_stems
+    from .summary import entry, table, write_summary
+
+    if args.check_only or not run.args_ok:
+        raise KeyboardInterrupt  # "pointspro: interrupted", 130 (_guard); nothing to write
+    inputs = [Path(f) for f in args.files[1:]]
+    out = Path(args.out)
+    entries = [run.results.get(str(p)) or entry(str(p), "not run") for p in inputs]
+    try:
+        if not (run.lock is not None and run.lock.held):
+            run.release()
+            if not out.is_dir():
+                raise RecipeError("no output folder: nothing to say there")
+            run.stems = output_stems(inputs)
+            check_output_targets(out, inputs, run.stems, resume=True)  # summary.json is a batch's
+            run.hold(out)
+        cleanup_partials(out, [*run.stems, "summary.json"])
+        write_summary(out, Path(args.files[0]), entries, workers=run.workers, scheduler=args.scheduler,
+                      seconds=time.perf_counter() - run.t0, interrupted=True)
+    except (PointsProError, OSError):
+        pass  # not ours to write, or another batch is writing it: the line below says enough
+    print(table(entries), file=sys.stderr)
+    return _batch_exit_code(entries, True)
 
 
 def _early_pool(args):
@@ -274,7 +400,7 @@ def _early_pool(args):
     return executors.start_pool(n, args.figures)
 
 
-def _batch(args, recipe_path: Path, pool) -> int:
+def _batch(args, recipe_path: Path, pool, run: _BatchRun) -> int:
     import time
 
     from .batch import check_output_folder, check_output_targets, load_batch_recipe, output_stems
@@ -301,9 +427,16 @@ def _batch(args, recipe_path: Path, pool) -> int:
     check_output_targets(out, inputs, stems, resume=args.resume)  # before the folder is made: a refusal leaves nothing
     made = not out.exists()
     check_output_folder(out)
+    if not args.check_only:
+        run.stems = stems
+        try:  # no other batch writes this folder from here to the end (refused: one line, exit 2)
+            run.hold(out)
+        except BaseException:
+            _remove_if_made_empty(out, made)
+            raise
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
     t0 = time.perf_counter()
-    workers = args.workers or _cores()
+    workers = run.workers = args.workers or _cores()
 
     try:  # a cluster that does not answer, or --check-only: no empty --out folder left behind
         session = _cluster_session(args, recipe_path, recipe, inputs, out, workers)  # --scheduler
@@ -316,11 +449,13 @@ def _batch(args, recipe_path: Path, pool) -> int:
             finally:
                 _remove_if_made_empty(out, made)
     except BaseException:
+        run.release()  # its lock file goes too: nothing left
         _remove_if_made_empty(out, made)
         raise
     try:
         results, jobs = _plan_jobs(inputs, stems, out, recipe, args.resume, args.cloud_format or "auto",
                                    args.figures)
+        run.results = results  # what an interruption from here on reports (_interrupted)
         # the steps' ctx.resolve applies `allowed` here and in every worker (sent with each job)
         runner = _choose_runner(args, recipe_path, recipe, surface, jobs, out, workers, allowed, session,
                                 pool)
@@ -332,7 +467,7 @@ def _batch(args, recipe_path: Path, pool) -> int:
 
             progress = BatchProgress(len(jobs))
         try:
-            interrupted = _drain(runner, _reporter(results, args, progress), out)
+            interrupted = _drain(runner, _reporter(results, args, progress), out, stems)
         finally:
             if progress is not None:
                 progress.close()
@@ -467,21 +602,28 @@ def _check_surface_needed(recipe, recipe_path: Path, surface) -> None:
 
 def _check_only(args, recipe, inputs: list[Path], out: Path, session) -> int:
     """--check-only: the pre-flight alone (on the cluster it already ran in _cluster_session; here
-    on this machine). Exit 0 when ready, 2 with one line per problem."""
+    on this machine), and whether another batch is writing --out now. Exit 0 when ready, 2 with one
+    line per problem."""
     from . import cluster
+    from .batch import batch_running
     from .errors import PointsProError
 
     if session is not None:
         n = len(session.client.scheduler_info().get("workers", {}))
         session.close()
         where = f"{n} worker(s) at {args.scheduler}"
+        problems = []
     else:
-        problems = cluster.preflight(cluster.expectations(recipe, {}, inputs, out, False))
-        for line in problems[:-1]:
-            print(f"pointspro: this machine: {line}", file=sys.stderr)
-        if problems:
-            raise PointsProError(f"this machine: {problems[-1]}")
+        problems = [f"this machine: {line}"
+                    for line in cluster.preflight(cluster.expectations(recipe, {}, inputs, out, False))]
         where = "this machine"
+    live = batch_running(out)  # the run would be refused (core.batch.lock_output_folder)
+    if live:
+        problems.append(live)
+    for line in problems[:-1]:
+        print(f"pointspro: {line}", file=sys.stderr)
+    if problems:
+        raise PointsProError(problems[-1])
     from . import __version__
 
     print(f"pointspro: ready on {where}: PointsPro {__version__}, the recipe's {len(recipe.steps)} "
@@ -550,7 +692,8 @@ def _cores() -> int:
 def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: bool,
                cloud_format: str = "csv", figures: str = "all", dry: bool = False):
     """(results of the inputs already complete, jobs (path, stem) left to run). With ``resume``,
-    what a killed run left behind is removed first and complete outputs (same recipe, same cloud
+    what a killed run of these inputs left behind is removed first (the batch holds the folder's
+    lock: no live batch is writing them) and complete outputs (same recipe, same cloud
     format) are skipped; a folder run again must be replaceable (core.batch.check_replaceable).
     ``dry`` (--check-only): nothing is removed."""
     from .batch import cleanup_partials, is_complete, parameter_file_digests
@@ -560,7 +703,7 @@ def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: 
     jobs = []
     files = None
     if resume and not dry:
-        cleanup_partials(out)  # what a killed run left behind
+        cleanup_partials(out, [*stems, "summary.json"])  # what a killed run of these inputs left behind
         files = parameter_file_digests(recipe)  # once for the batch, not per input (a 200 MB mesh: 0.15 s)
     for path, stem in zip(inputs, stems):
         done = is_complete(out, stem, path, recipe, cloud_format, figures, files) if resume else None
@@ -644,6 +787,9 @@ def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, wo
     options = {"cloud_format": args.cloud_format or "auto", "overrides": list(args.overrides),
                "log_level": logging.getLogger("pointspro").getEffectiveLevel()}
     if session is not None:  # --scheduler: the recipe travels as data, the paths as absolute ones
+        import os
+
+        options["cwd"] = os.getcwd()  # --ship: the inputs' absolute paths for --resume (cluster_job)
         return executors.run_dask(session, session.bundle, jobs, out, allowed, args.figures, options,
                                   ship=args.ship)
     if min(workers, len(jobs)) > 1:
@@ -656,26 +802,20 @@ def _choose_runner(args, recipe_path: Path, recipe, surface, jobs, out: Path, wo
     return executors.run_sequential(recipe, surface, jobs, out, factory, allowed, args.figures, options)
 
 
-def _drain(runner, report, out: Path) -> bool:
-    """Report each outcome as it comes; SIGTERM stops like Ctrl-C: the workers are stopped and
-    their partial outputs removed. True when interrupted."""
-    import signal
-
+def _drain(runner, report, out: Path, stems) -> bool:
+    """Report each outcome as it comes; SIGTERM stops like Ctrl-C (``_stop_on_sigterm``): the workers
+    are stopped and the partial outputs of the batch's inputs (``stems``) removed. True when
+    interrupted."""
     from .batch import cleanup_partials
 
-    def on_sigterm(signum, frame):  # SIGTERM stops the batch like Ctrl-C does
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, on_sigterm)
-    try:
-        for oc in runner:
-            report(oc)
-    except KeyboardInterrupt:
-        runner.close()  # stops the workers
-        cleanup_partials(out)
-        return True
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    with _stop_on_sigterm():
+        try:
+            for oc in runner:
+                report(oc)
+        except KeyboardInterrupt:
+            runner.close()  # stops the workers
+            cleanup_partials(out, [*stems, "summary.json"])
+            return True
     return False
 
 

@@ -194,6 +194,8 @@ def cluster_job(bundle: dict, path: str, shown: str, out_dir: str, stem: str, al
     """One input on a Dask worker. ``path``: the input's absolute path (shared-folder mode) or its
     file name (``data``, --ship: its bytes); ``shown``: its name as the user typed it. Returns the
     InputOutcome; with --ship a tuple (outcome, {relative name: bytes} of its output folder).
+    ``options["cwd"]``: the client's working folder (--ship: the input's absolute path recorded
+    for --resume is the client's).
     ``cancel_event``: the name of a Dask Event the client sets on Ctrl-C — the input then stops at
     its next progress update and leaves no temporary folder."""
     from .batch import capture_log, failed_outcome, process_input
@@ -217,6 +219,10 @@ def cluster_job(bundle: dict, path: str, shown: str, out_dir: str, stem: str, al
                     read.write_bytes(data)
                     out = work / "out"
                     out.mkdir()
+                # report.json's input_abspath, as the client's own run records it: the client's
+                # absolute path (shared folders), or --ship: its name made absolute in its folder
+                absolute = str(read) if not ship else (
+                    os.path.normpath(os.path.join(options["cwd"], shown)) if options.get("cwd") else None)
                 pmap = pmap.then([(str(read), shown)])
                 allowed = [Path(d) for d in allowed_dirs] + [Path(bundle_folder(bundle))] \
                     if allowed_dirs is not None else None
@@ -224,7 +230,7 @@ def cluster_job(bundle: dict, path: str, shown: str, out_dir: str, stem: str, al
                 oc = process_input(read, recipe, out, stem, surface=surface, figures=figures,
                                    allowed_dirs=allowed, cloud_format=options.get("cloud_format", "csv"),
                                    overrides=tuple(bundle["overrides"]), shown=shown, token=token,
-                                   paths=pmap)
+                                   paths=pmap, absolute=absolute)
                 oc.error, oc.traceback = pmap.text(oc.error), pmap.text(oc.traceback)
                 if ship and oc.ok:
                     folder = out / stem
@@ -275,14 +281,12 @@ def write_shipped(out_dir: Path, stem: str, files: dict) -> None:
 
 
 def cleanup_stems(out_dir: Path, stems) -> list[str]:
-    """Remove the temporary folders (``.<stem>.*.partial``, ``.old``) a lost worker left for these
-    stems; a worker that died mid-input cannot remove its own."""
-    from .batch import remove_leftovers
+    """Remove the temporary folders (``.<stem>.<8 hex>.partial``, ``.old``) a lost worker left for these
+    stems; a worker that died mid-input cannot remove its own (``batch.cleanup_partials``: these
+    stems' alone, not those of an input whose name starts the same)."""
+    from .batch import cleanup_partials
 
-    gone = []
-    for stem in stems:
-        gone += remove_leftovers(p for p in Path(out_dir).glob(f".{stem}.*") if p.name.count(".") >= 3)
-    return gone
+    return cleanup_partials(out_dir, stems)
 
 
 # --- pre-flight --------------------------------------------------------------------------------------
