@@ -353,6 +353,8 @@ def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork
                                      "every channel as text")
     elif asked == "auto":
         report["cloud_file_note"] = f"cloud.csv: {why}"
+    else:  # every report says why its cloud file is what it is (a review: the key was missing here)
+        report["cloud_file_note"] = f"{cloud_name}: asked by --cloud-format {asked}"
     if overrides:
         report["overrides"] = [str(o) for o in overrides]
     if input_sha256 is not None:  # --resume reruns an input whose content changed (is_complete)

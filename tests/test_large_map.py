@@ -312,3 +312,11 @@ def test_threaded_spline_moments_are_bit_identical(order, monkeypatch):
     one = bs._cell_moments(x, y, z, None, -5.0, -4.0, 1.0, 10, 8, threads=1)
     for threads in (2, 3, 8):
         assert np.array_equal(bs._cell_moments(x, y, z, None, -5.0, -4.0, 1.0, 10, 8, threads=threads), one)
+
+
+def test_a_cloud_format_asked_for_is_said_so(tmp_path):
+    """With --cloud-format ply the report had no cloud_file_note (the README says every report names
+    its cloud file and why; a review)."""
+    data = _grid_ply(tmp_path / "s.ply", 60, 6, jitter=1e-3)
+    rep = _batch(tmp_path, data, ZRECIPE, tmp_path / "o", "--cloud-format", "ply")
+    assert rep["cloud_file"] == "cloud.ply" and rep["cloud_file_note"] == "cloud.ply: asked by --cloud-format ply"
