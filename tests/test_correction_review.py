@@ -259,8 +259,9 @@ def test_an_error_map_in_nm_read_as_mm_is_refused_naming_the_unit():
     keep = np.hypot(X, Y) <= 20.0
     x, y = X[keep], Y[keep]
     bump_mm = 1e-4 * np.exp(-(x**2 + y**2) / (2 * 4.0**2))  # 100 nm
-    with pytest.raises(StepError, match=r"rad.*read as mm.*z \[nm\]"):
-        _run(PointCloud.from_xyz(x, y, bump_mm * 1e6), None, diameter=40.0, cutoff_mm=2.0, channel="z")
+    for cutoff in (2.0, 40.0):  # a cutoff as wide as the part too (a big tool: the check was skipped)
+        with pytest.raises(StepError, match=r"rad.*read as mm.*z \[nm\]"):
+            _run(PointCloud.from_xyz(x, y, bump_mm * 1e6), None, diameter=40.0, cutoff_mm=cutoff, channel="z")
     rep = _run(PointCloud.from_xyz(x, y, bump_mm * 1e3), None, diameter=40.0, cutoff_mm=2.0,
                channel="z").report  # in µm, read as mm: 0.1 mm deep
     assert any("µm PV" in w and "unit" in w for w in rep["warnings"])

@@ -167,7 +167,12 @@ def _check_plausible(F, h: float, cutoff: float, channel: str) -> None:
     E = F
     if not np.isfinite(E).any():
         return
-    k = max(1, int(round(cutoff / h)))
+    # over the cutoff, but never more than a quarter of the aperture's width in nodes: a cutoff as wide
+    # as the aperture (a big polishing tool: 2 × tool_radius_mm) left no pair of nodes inside it and
+    # the check was skipped (a 400 nm map in nm read as mm passed with 3e5 µm of correction — a review)
+    rows, cols = np.nonzero(np.isfinite(E))
+    width = min(np.ptp(rows), np.ptp(cols)) + 1
+    k = max(1, min(int(round(cutoff / h)), width // 4))
     gx = (E[:, k:] - E[:, :-k]) / (k * h)
     gy = (E[k:, :] - E[:-k, :]) / (k * h)
     slope = np.concatenate([np.abs(gx[np.isfinite(gx)]), np.abs(gy[np.isfinite(gy)])])
