@@ -36,9 +36,11 @@ def _unique_index(index, where: str) -> None:
     idx = np.asarray(index)
     uniq, counts = np.unique(idx, return_counts=True)
     if uniq.size < idx.size:
-        first = uniq[counts > 1][0].item()
+        repeated = uniq[counts > 1]
+        first = idx[np.isin(idx, repeated)][0].item()  # the first in row order
+        times = int(counts[np.searchsorted(uniq, first)])
         raise InputError(f"{where}: the index column must name each input row once; {idx.size - uniq.size} "
-                         f"repeat(s) (first: {first!r}, {int(counts[counts > 1][0])} times) — "
+                         f"repeat(s) (first: {first!r}, {times} times) — "
                          "renumber it (df['index'] = range(len(df))) or drop it")
 
 
@@ -97,6 +99,7 @@ class PointCloud:
     @classmethod
     def from_xyz(cls, x, y, z, **channels) -> "PointCloud":
         """A cloud from three coordinate arrays (mm) and channels as keyword arrays."""
+        _unique_index(channels.get("index"), "from_xyz")
         return cls(np.column_stack([np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)]),
                    channels)
 

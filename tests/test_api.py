@@ -290,6 +290,9 @@ def test_a_repeated_index_is_refused_where_a_caller_gives_one():
     with pytest.raises(InputError, match="from_pandas: the index column"):
         PointCloud.from_pandas(pd.concat([df, df]))
     assert PointCloud.from_pandas(df).n == 10
+    # from_xyz too; the first repeat in row order (a review)
+    with pytest.raises(InputError, match=r"from_xyz: .*first: 9, 2 times"):
+        PointCloud.from_xyz(np.zeros(5), np.zeros(5), np.zeros(5), index=np.array([9, 9, 1, 2, 1]))
 
 
 def test_writing_into_a_missing_folder_names_it(tmp_path):
