@@ -244,3 +244,21 @@ def test_scattered_points_with_a_rim_scan_or_a_dense_centre_are_still_weighted(c
             x = np.r_[rng.uniform(-10, 10, 400), xe[keep]]
             y = np.r_[rng.uniform(-10, 10, 400), ye[keep]]
         assert area_weights(x, y) is not None, seed
+
+
+@pytest.mark.parametrize("region", ["annulus", "small rectangle"])
+def test_random_points_on_an_annulus_or_a_narrow_part_keep_the_plain_mean(region):
+    """300 random points on a 10–25 mm annulus were weighted in 17 of 20 draws (the bore failed the
+    disc's test) and their RMS read 20 % low; 100 on an 80 × 20 mm part (~20 in the largest disc the
+    hull holds) in 14 of 20, 24 % low (a review). The ring r0 … ρ is tested; too few in it, the whole
+    hull's area."""
+    weighted = 0
+    for seed in range(20):
+        rng = np.random.default_rng(900 + seed)
+        if region == "annulus":
+            r, t = np.sqrt(rng.uniform(100.0, 625.0, 300)), rng.random(300) * 2 * np.pi
+            x, y = r * np.cos(t), r * np.sin(t)
+        else:
+            x, y = rng.uniform(-40, 40, 100), rng.uniform(-10, 10, 100)
+        weighted += area_weights(x, y) is not None
+    assert weighted <= 1

@@ -47,8 +47,9 @@ pixel maps (points on a lattice holding at least MAP_OCCUPANCY of its nodes in t
 valid pixels are its measured area, dropouts or not — interferometer practice; a sparse subset of a
 lattice, a fine patch in a coarse raster, is weighted), those core.metrics.sampling.uniform_sampling
 recognises (rasters, ≥ 2,500 even points),
-those whose radii inside the largest disc the hull holds follow that disc's area (a
-Kolmogorov–Smirnov test at 0.1 %, _radially_even: 80–500 points spread at random — a CMM's
+those whose radii inside the largest disc the hull holds (the ring r0 … ρ where the points have a
+bore) follow its area and whose count beyond it the hull's area there (a Kolmogorov–Smirnov test at
+0.1 % and a binomial one, _radially_even; the whole hull's area where too few lie in the disc: 80–500 points spread at random — a CMM's
 scattered sampling — were weighted from their noisy density and read the RMS 5–14 % low, a review),
 and those whose four radial quarters come out with mean weights within EVEN_RATIO of each other (a
 small raster off its lattice after probe compensation; a star's or a spiral's quarters differ
@@ -176,22 +177,48 @@ def _radially_even(r, hull, c, r_max: float, hull_area: float) -> bool:
     if not full[1]:
         return False
     rho = float(grid[np.argmin(full) - 1]) if not full.all() else r_max
+    # a bore (an annular part: no point within r0 of the centre) is no unmeasured area: the disc is
+    # then the ring r0 … ρ, where even points have N(r) ∝ r² − r0² (random points on a 10–25 mm
+    # annulus were weighted in 17 of 20 draws and their RMS read 20 % low — a review)
+    r0 = float(r.min())
+    r0 = r0 if r0 > 0.05 * rho else 0.0
     inner = np.sort(r[r <= rho])
     m = inner.size
-    if m < 20:
-        return False
     n = r.size
-    p_out = min(max(1.0 - np.pi * rho * rho / hull_area, 0.0), 1.0) if hull_area > 0 else 0.0
+    if m < 20 or rho <= r0:  # too few inside the disc to test: the radii over the whole hull instead
+        return _even_over_hull(r, grid, hull, c)
+    ring = np.pi * (rho * rho - r0 * r0)
+    p_out = min(max((hull_area - np.pi * rho * rho) / (hull_area - np.pi * r0 * r0), 0.0), 1.0) \
+        if hull_area > ring else 0.0
     if 0.0 < p_out < 1.0:
         z = (n - m - n * p_out) / np.sqrt(n * p_out * (1.0 - p_out))
         if not -OUTSIDE_Z_LOW <= z <= OUTSIDE_Z:
             return False
     elif n - m > 0:
         return False
-    F = (inner / rho) ** 2
+    F = (inner * inner - r0 * r0) / (rho * rho - r0 * r0)
+    return _ks_distance(F) < KS_EVEN / np.sqrt(m)
+
+
+def _ks_distance(F) -> float:
+    """The one-sample Kolmogorov–Smirnov distance of sorted values whose model CDF is ``F``."""
+    m = F.size
     i = np.arange(m)
-    D = max(float(np.max((i + 1) / m - F)), float(np.max(F - i / m)))
-    return D < KS_EVEN / np.sqrt(m)
+    return max(float(np.max((i + 1) / m - F)), float(np.max(F - i / m)))
+
+
+def _even_over_hull(r, grid, hull, c) -> bool:
+    """The KS test of all radii against the hull's area within each radius, A(r)/A — where too few
+    points lie in the largest disc the hull holds (100 random points on an 80 × 20 mm part: ~20 in
+    it; they were weighted in 14 of 20 draws, RMS 24 % low — a review). Biased towards "uneven" by
+    the random hull's shortfall at its rim (10–15 % of the area at 80 points), so a close call is
+    weighted, as before this test."""
+    dA = 2.0 * np.pi * grid * _share_in_hull(hull, c, grid)
+    A = np.concatenate([[0.0], np.cumsum(0.5 * (dA[1:] + dA[:-1]) * np.diff(grid))])
+    if not A[-1] > 0:
+        return False
+    F = np.interp(np.sort(r), grid, A / A[-1])
+    return _ks_distance(F) < KS_EVEN / np.sqrt(r.size)
 
 
 def weighted_rms(v, w) -> float:
