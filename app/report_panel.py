@@ -70,7 +70,7 @@ class ReportPanel(QtWidgets.QWidget):
         self.view.setOpenExternalLinks(True)
         self.view.setLineWrapMode(QtWidgets.QTextEdit.NoWrap)  # a table scrolls sideways, never wraps
         self.view.document().setDefaultStyleSheet(
-            "th{white-space:nowrap;text-align:left;padding-right:8px} td{white-space:nowrap;padding-right:8px}")
+            "th{text-align:left;padding-right:8px} td{white-space:nowrap;padding-right:8px}")
         split.addWidget(self.view)
         split.setStretchFactor(0, 0)
         split.setStretchFactor(1, 1)
@@ -118,7 +118,13 @@ class ReportPanel(QtWidgets.QWidget):
         if r is None:
             return ""
         if row <= 0:
-            from pointspro.core.statement import figure_rows, pupil_text, verdict_banner_html, weighting_text
+            from pointspro.core.statement import (
+                PVR_DEFINITION,
+                figure_rows,
+                pupil_text,
+                verdict_banner_html,
+                weighting_text,
+            )
 
             s = r.summary()
             # in the unit their size asks for; with an uncertainty value ± U95, noise bias removed
@@ -128,7 +134,9 @@ class ReportPanel(QtWidgets.QWidget):
             if s.get("figures_of"):  # what the figures are of, and PVr's pupil (as report.html)
                 pupil = s.get("pupil") or {}
                 page += (f"<p style='color:#555'>Figures of the {html.escape(s['figures_of'])}"
-                         + html.escape(pupil_text(pupil)) + html.escape(weighting_text(s)) + ".</p>")
+                         + html.escape(pupil_text(pupil))
+                         + (html.escape(PVR_DEFINITION) if s.get("pvr_um") is not None else "")
+                         + html.escape(weighting_text(s)) + ".</p>")
             page += table_html({"points in": s["points_in"], "points out": s["points_out"], **figures})
             if s.get("uncertainty"):
                 from pointspro.core.report import uncertainty_html

@@ -459,14 +459,16 @@ class MainWindow(QtWidgets.QMainWindow):
         predicted after it, and Export… (app/correction_dialog.py). Needs a run that formed a
         residual; the parameters start from a `correction` step of the recipe when there is one."""
         res = self.last_report
-        if res is None or "residual" not in res.cloud.channels:
+        values = next((s.params.model_dump(mode="json", exclude_defaults=True)
+                       for s in self.session.recipe.steps if s.id == "correction"), {})
+        # heights that are the error (an instrument's error map, `channel: z`) need no residual (a
+        # review: a run that had just made the correction was refused here)
+        if res is None or ("residual" not in res.cloud.channels and values.get("channel") != "z"):
             self.log("export correction: run the pipeline first (a step that forms a residual, e.g. "
-                     "misalignment)")
+                     "misalignment; or a correction step with channel: z for heights that are the error)")
             return None
         from .correction_dialog import CorrectionDialog
 
-        values = next((s.params.model_dump(mode="json", exclude_defaults=True)
-                       for s in self.session.recipe.steps if s.id == "correction"), {})
         dlg = CorrectionDialog(res.cloud, getattr(res, "surface", None), values, self)
         dlg.setModal(False)
         dlg.show()

@@ -284,6 +284,9 @@ def table_html(d: dict) -> str:
         if isinstance(v, dict) and v and all(not isinstance(x, (dict, list)) for x in v.values()):
             inner = ", ".join(f"{html.escape(_label(a, b))} = {_fmt_keyed(a, b)}" for a, b in v.items())
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{inner}</td></tr>")
+        elif isinstance(v, dict):  # nested (a correction's radial program): its own table, units and
+            # all, not raw JSON with 16-digit floats (a review); an empty one as a dash
+            rows.append(f"<tr><th>{html.escape(k)}</th><td>{table_html(v) if v else '—'}</td></tr>")
         else:
             cls = ' class="num"' if isinstance(v, (int, float)) else ""
             label = _label(k, v)
@@ -325,10 +328,11 @@ def render_html(report: dict, folder=None) -> str:
     if summary:
         what = s.get("figures_of") or "residual"
         pupil = s.get("pupil") or {}
-        from .statement import pupil_text, weighting_text
+        from .statement import PVR_DEFINITION, pupil_text, weighting_text
 
         note = (f"<p class='muted'>Figures of the {html.escape(what)}" + html.escape(pupil_text(pupil))
                 + (f" — {html.escape(str(pupil.get('centre_from', '')))}" if pupil else "")
+                + (html.escape(PVR_DEFINITION) if s.get("pvr_um") is not None else "")
                 + html.escape(weighting_text(s)) + ".</p>")
         parts += ["<h2>Form error</h2>", note, table_html(summary), _img(folder, "form_error.png")]
     if s.get("uncertainty"):

@@ -15,8 +15,11 @@ import math
 
 #: the summary's figures with a readable name and the unit of their key
 SUMMARY_FIGURES = (("rms_um", "RMS", "µm"), ("pv_um", "PV", "µm"),
-                   ("pvr_um", "PVr (Evans: Zernike Z1–Z36 PV + 3·RMS of the rest)", "µm"),
+                   ("pvr_um", "PVr (Evans)", "µm"),
                    ("slope_rms_urad", "slope RMS (tilt removed)", "µrad"))
+
+#: what PVr is, said once beside the figures (the table's label was too long for the window's panel)
+PVR_DEFINITION = "; PVr (Evans) = PV of the Z1–Z36 Zernike fit + 3·RMS of the rest"
 
 #: verdicts (core.tolerance, ISO 14253-1) and their banner colours
 VERDICT_COLOURS = {"conforms": "#1b7f3b", "does not conform": "#b3261e", "undecided": "#a45200"}

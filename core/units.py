@@ -170,6 +170,8 @@ def format_keyed(name: str, v: float, digits: int = 6) -> str:
     appended ("0.168275°", "3.8695 µrad"); a key with no unit, the number alone (counts, ratios)."""
     unit = unit_of_key(name)
     if unit in SHOWN_LENGTH_MM:
+        if v == 0:  # a zero in its key's own unit ("0 µm"), not "0 mm" (a review)
+            return f"0 {unit}"
         return format_length(float(v) * SHOWN_LENGTH_MM[unit], digits)
     text = f"{v:.{digits}g}" if isinstance(v, float) else str(v)
     return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")

@@ -214,3 +214,16 @@ def test_a_flat_maps_figures_read_in_nm_without_warnings():
         mfig = grid_map_figure(grid)
     cbar = mfig.axes[-1]
     assert cbar.get_ylabel() == "nm" and cbar.get_ylim() == (-1.0, 1.0)
+
+
+def test_a_reports_nested_tables_and_zeros_keep_their_units():
+    """A correction's removal read "min_depth = 0 mm, bias = 0 mm" (µm keys), its radial program raw
+    JSON with 16-digit floats, its empty `skipped` "{}" (a review of the window)."""
+    from pointspro.core.report import table_html
+
+    html = table_html({"removal": {"min_depth_um": 0.0, "bias_um": -0.0, "max_depth_um": 0.3457},
+                       "radial": {"non_symmetric_rms_um": 0.5270702927522589, "r_range_mm": [0.0, 25.0]},
+                       "skipped": {}})
+    assert "min_depth = 0 µm, bias = 0 µm, max_depth = 345.7 nm" in html
+    assert "527.07 nm" in html and "0.5270702927522589" not in html
+    assert "<th>skipped</th><td>—</td>" in html

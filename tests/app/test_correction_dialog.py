@@ -69,3 +69,27 @@ def test_export_correction_previews_and_writes(qtbot, tmp_path):
     assert dlg.export(tmp_path) is None and "holds other files" in dlg.message.text()
     assert (out / "notes.txt").read_text(encoding="utf-8") == "mine"
     assert not list(tmp_path.glob(".*partial"))
+
+
+def test_export_correction_takes_heights_that_are_the_error(qtbot):
+    """A recipe `correction: {channel: z}` on an instrument's error map makes no residual: Export
+    correction… refused the run that had just made the correction ("run the pipeline first", a
+    review of the window). It opens with channel z; a run without either is still refused."""
+    from pointspro.app.main import build_window
+    from pointspro.core.recipe import parse_recipe
+
+    win = build_window([])
+    qtbot.addWidget(win)
+    run = _last_run()
+    from pointspro.core import PointCloud
+
+    heights = PointCloud.from_xyz(run.cloud.x, run.cloud.y, run.cloud["residual"])  # the error map
+    win.last_report = SimpleNamespace(cloud=heights, surface=None, artifacts={})
+    assert win.export_correction() is None
+    assert "channel: z" in win.log_widget.toPlainText()
+    win.session.recipe = parse_recipe({"pointspro": 1, "steps": [{"correction": {"channel": "z", "diameter": 40}}]})
+    dlg = win.export_correction()
+    assert dlg is not None
+    qtbot.waitUntil(lambda: dlg.result is not None or bool(dlg.message.text()), timeout=60000)
+    qtbot.waitUntil(lambda: not dlg.worker.busy, timeout=10000)
+    assert dlg.result is not None, dlg.message.text()
