@@ -81,7 +81,7 @@ def with_uncertainty(value: float | None, U: float | None, unit: str = "µm", k:
     if value is None or not math.isfinite(value):
         return "—"
     if U is None or not math.isfinite(U):
-        value = float(f"{value:.4g}")  # the unit of the value as shown: 0.99996 µm is "1.000 µm"
+        value = float(f"{value:.4g}")  # the unit of the value as shown: 0.99996 µm is "1 µm"
     scale = 1.0
     if unit == "µm":  # the unit of the larger of the two: "0.46 ± 1.00 µm", not "463 ± 1002 nm"
         scale, unit = _unit_for(max(abs(value), abs(U)) if U is not None and math.isfinite(U) else value
