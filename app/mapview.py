@@ -192,9 +192,12 @@ class MapView(QtWidgets.QWidget):
                 self.ext = _extent(cloud.x if keep is None else cloud.x[keep],
                                    cloud.y if keep is None else cloud.y[keep])
             if not same:  # never finer than an instrument grid's pixel (a white grid over the map)
-                from pointspro.core.figures import default_bins
+                from pointspro.core.figures import default_bins, raster_pitch
 
-                self._bins = default_bins(n, self.ext[1] - self.ext[0], cloud.meta.get("pixel_mm"))
+                pixel = cloud.meta.get("pixel_mm")
+                if pixel is None:  # a CSV raster: its pitch from its coordinates (white stripes, a review)
+                    pixel = raster_pitch(cloud.x, cloud.y)
+                self._bins = default_bins(n, self.ext[1] - self.ext[0], pixel)
             self._k = _bin_of(cloud.x, cloud.y, self.ext, self._bins)
             self._count(keep)
         img, ext = self._image(), self.ext

@@ -215,6 +215,21 @@ def default_bins(n: int, span_mm: float | None = None, pixel_mm=None) -> int:
     return bins
 
 
+def raster_pitch(x, y, head: int = 200_000) -> float | None:
+    """The larger of the smallest steps between distinct x and distinct y of the first ``head`` points:
+    a raster's pitch (a CSV raster has no reader's pixel_mm: its map was drawn with empty bins between
+    its rows, white stripes — a review); scattered points give a step far below any bin (no effect)."""
+    steps = []
+    for a in (np.asarray(x[:head], dtype=np.float64), np.asarray(y[:head], dtype=np.float64)):
+        u = np.unique(a[np.isfinite(a)])
+        d = np.diff(u)
+        d = d[d > 1e-9 * max(float(np.ptp(u)) if u.size else 0.0, 1e-300)]
+        if not d.size:
+            return None
+        steps.append(float(d.min()))
+    return max(steps)
+
+
 def binned_image(x, y, v, bins=None, ext=None, return_bins: bool = True):
     """Mean of v in square bins: the image of a scattered map (fast for millions of points). By
     default ~1.2 √N bins across (16…400), so sparse patterns still read as a surface. Returns
@@ -283,6 +298,8 @@ def scattered_map(x, y, r_mm, title="Form error", pixel_mm=None):
     fig = _figure()
     ax = fig.add_subplot()
     bins = None
+    if pixel_mm is None and len(x):
+        pixel_mm = raster_pitch(x, y)
     if pixel_mm is not None and len(x):
         bins = default_bins(len(x), max(np.ptp(x), np.ptp(y)), pixel_mm)
     img, ext = _binned(x, y, np.asarray(r_mm), bins)

@@ -227,3 +227,23 @@ def test_a_reports_nested_tables_and_zeros_keep_their_units():
     assert "min_depth = 0 µm, bias = 0 µm, max_depth = 345.7 nm" in html
     assert "527.07 nm" in html and "0.5270702927522589" not in html
     assert "<th>skipped</th><td>—</td>" in html
+
+
+def test_a_csv_rasters_map_has_no_empty_stripes():
+    """A 0.5 mm x, y, z raster read from CSV (no reader's pixel_mm) was binned 85 across its 40 mm:
+    500 empty bins inside it, white stripes in the window's map and the report's figures (a review).
+    Its pitch from its coordinates caps the bins; scattered points are binned as before."""
+    from pointspro.core.figures import binned_image, default_bins, raster_pitch
+
+    g = np.arange(-20, 20.001, 0.5)
+    X, Y = np.meshgrid(g, g)
+    keep = np.hypot(X, Y) <= 20
+    x, y = X[keep], Y[keep]
+    bins = default_bins(x.size, np.ptp(x), raster_pitch(x, y))
+    img, _, _ = binned_image(x, y, np.ones_like(x), bins=bins)
+    c = np.linspace(-20, 20, bins)
+    inside = np.hypot(*np.meshgrid(c, c)) < 18
+    assert not np.isnan(img[inside]).any()
+    rng = np.random.default_rng(0)
+    xs, ys = rng.uniform(-20, 20, 5000), rng.uniform(-20, 20, 5000)
+    assert default_bins(5000, 40.0, raster_pitch(xs, ys)) == default_bins(5000)
