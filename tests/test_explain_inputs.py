@@ -305,3 +305,14 @@ def test_explain_html_gives_a_found_effects_values_to_their_uncertaintys_decimal
     assert text["frequency_hz"] == "23.300123 Hz ± 0.000059 Hz"
     assert text["amplitude"] == "8.01 nm ± 0.20 nm"
     assert text["phase_deg"].startswith("70.12") and "± 0.49" in text["phase_deg"]
+
+
+def test_a_z_scale_no_machine_has_is_said_to_be_a_unit_slip():
+    """Heights in µm beside x, y in mm (no header): explain named z_scale 999 with a squareness of 148″
+    and no word (a review). A found scale beyond 1 % says what it most likely is."""
+    from pointspro.core.explain.workflow import unit_slip_warnings
+
+    (w,) = unit_slip_warnings([{"effect": "z_scale", "params": {"scale": 999.0}}])
+    assert "1000 × the model's" in w and "another unit" in w and "z [um]" in w
+    assert unit_slip_warnings([{"effect": "z_scale", "params": {"scale": 2e-4}}]) == []
+    assert unit_slip_warnings([{"effect": "squareness", "params": {"eb0c_arcsec": 3.0}}]) == []

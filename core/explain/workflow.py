@@ -126,6 +126,7 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     # the points' areas for the reported gap RMS (a star or a spiral crowds its centre); None: even
     w = area_weights_of(meas)
     found, effects = found_effects(res, effects, w)
+    warnings += unit_slip_warnings(found)
     ambiguous = ambiguities(res, sigma)
     updated = None
     if model is not None:
@@ -153,6 +154,25 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     }
     _write(Path(out_dir), report, updated, effects, ctx, gap, after, found, res["order"], w)
     return report
+
+
+#: a z scale found this far from 1 is no scale error a machine has (ppm to a few 0.1 %): heights in
+#: another unit than x and y
+UNIT_SLIP_SCALE = 0.01
+
+
+def unit_slip_warnings(found) -> list[str]:
+    """A z_scale of 999 (heights in µm beside x, y in mm, no header) was named with a squareness of 148″
+    and no word (a review): say what it most likely is."""
+    out = []
+    for f in found:
+        k = (f.get("params") or {}).get("scale") if f.get("effect") == "z_scale" else None
+        if isinstance(k, (int, float)) and abs(k) > UNIT_SLIP_SCALE:
+            ratio = 1.0 + k
+            out.append(f"the heights read {ratio:.6g} × the model's (a z_scale of {k:.6g}); no machine's "
+                       "z scale is that far off — are the heights in another unit than x and y? State it in the "
+                       "header (`z [um]`, docs/formats.md)")
+    return out
 
 
 def clock_of(cloud, path) -> tuple[np.ndarray | None, np.ndarray | None]:
