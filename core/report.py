@@ -182,8 +182,15 @@ def _records(v: list) -> str:
                 continue
             if unit_of_key(u) != unit_of_key(k):
                 continue
-            scales[j] = scales[i]
-            heads[j] = f"{_label(u, 1.0)} ({heads[i].rsplit('(', 1)[1]}"
+            # both in the unit the uncertainties ask for: a 50.7 µm piston set "µm" for every
+            # coefficient, which then read "-0.000566 ± 0.000019" (a review); in nm "-0.566 ± 0.019"
+            unit = unit_of_key(k)
+            shown = column_unit([r.get(u) * SHOWN_LENGTH_MM[unit] for r in v
+                                 if isinstance(r.get(u), (int, float)) and not isinstance(r.get(u), bool)],
+                                default=unit)
+            scales[i] = scales[j] = SHOWN_LENGTH_MM[unit] / SHOWN_LENGTH_MM[shown]
+            heads[i] = f"{_label(k, 1.0)} ({shown})"
+            heads[j] = f"{_label(u, 1.0)} ({shown})"
             u_col[i] = j
 
     def row_decimals(r):

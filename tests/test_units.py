@@ -132,21 +132,26 @@ def test_format_length_of_absurd_sizes_stays_short():
 
 
 def test_a_column_of_lengths_reads_in_the_unit_of_its_largest_value():
-    """Zernike coefficients of a part with 50 µm of piston read "50.7318" under "coefficient (µm)",
-    not 50731.8 nm; a column of a few nm stays in nm; report.json keeps coefficient_nm."""
+    """A column of lengths reads in the unit of its largest value ("50.7318" under "coefficient (µm)",
+    not 50731.8 nm) — or, beside its uncertainty, in the uncertainties' unit; a column of a few nm
+    stays in nm; report.json keeps coefficient_nm."""
     from pointspro.core.report import table_html
     from pointspro.core.units import column_unit
 
     rows = [{"j": 1, "name": "piston", "coefficient_nm": 50731.8, "uncertainty_nm": 5.5},
             {"j": 2, "name": "tilt x", "coefficient_nm": -12.3456789, "uncertainty_nm": 0.25}]
     page = table_html({"coefficients": rows})
-    # the uncertainty in its coefficient's unit; each row to the decimal place of its uncertainty's two
-    # significant digits (5.5 nm = 0.0055 µm, 0.25 nm = 0.00025 µm), trailing zeros kept (GUM §7.2.6)
-    assert "<th>coefficient (µm)</th>" in page and "<th>uncertainty (µm)</th>" in page
-    assert "<td>50.7318</td><td>0.0055</td>" in page and "<td>-0.01235</td><td>0.00025</td>" in page
+    # beside an uncertainty, value and uncertainty in the unit the uncertainties ask for (a 50.7 µm
+    # piston set µm for every coefficient: "-0.000566 ± 0.000019" — a review), each row to the decimal
+    # place of its uncertainty's two significant digits, trailing zeros kept (GUM §7.2.6)
+    assert "<th>coefficient (nm)</th>" in page and "<th>uncertainty (nm)</th>" in page
+    assert "<td>50731.8</td><td>5.5</td>" in page and "<td>-12.35</td><td>0.25</td>" in page
     tiny = table_html({"coefficients": [*rows, {"j": 3, "name": "tilt y", "coefficient_nm": 0.0478859,
                                                  "uncertainty_nm": 0.1}]})
-    assert "e-0" not in tiny and "<td>0.00005</td>" in tiny  # 0.048 nm, u 0.1 nm: not 4.78859e-05
+    assert "e-0" not in tiny and "<td>0.05</td><td>0.10</td>" in tiny  # not 4.78859e-05
+    # a column without uncertainties: the unit of its largest value (50731.8 nm reads 50.7318 µm)
+    big = table_html({"coefficients": [{"j": 1, "coefficient_nm": 50731.8}, {"j": 2, "coefficient_nm": -12.3}]})
+    assert "<th>coefficient (µm)</th>" in big and "<td>50.7318</td>" in big
     small = table_html({"coefficients": [{"j": 4, "coefficient_nm": 3.2}, {"j": 5, "coefficient_nm": -0.4}]})
     assert "<th>coefficient (nm)</th>" in small and "<td>3.2</td>" in small
     assert column_unit([0.0, float("nan")], default="nm") == "nm"
