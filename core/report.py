@@ -240,16 +240,7 @@ def _fmt_with_u(key, v, u) -> str:
 def _fmt_u(key, u) -> str:
     """A standard uncertainty under report key ``key`` to two significant digits, trailing zeros kept,
     in the unit its size asks for ("5.0 nm", "0.000026°")."""
-    from .statement import _decimals
-    from .units import SHOWN_LENGTH_MM, length_unit, unit_of_key
-
-    unit = unit_of_key(str(key))
-    if unit in SHOWN_LENGTH_MM:
-        u_mm = float(u) * SHOWN_LENGTH_MM[unit]
-        scale, shown = length_unit(u_mm)
-        return f"{u_mm / scale:.{min(_decimals(u_mm / scale), 15)}f} {shown}"
-    text = f"{float(u):.{min(_decimals(float(u)), 15)}f}"
-    return text + ("" if not unit else unit if unit in ("°", "″") else f" {unit}")
+    return _fmt_with_u(key, u, u)
 
 
 def _no_minus_zero(text: str) -> str:

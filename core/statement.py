@@ -41,6 +41,7 @@ def _decimals(u: float) -> int:
     """Decimal places that show ``u`` with two significant digits."""
     if not (u > 0 and math.isfinite(u)):
         return 3
+    u = float(f"{u:.2g}")  # as rounded: 9.96 is "10", not "10.0" (three digits — a review)
     return max(0, 1 - int(math.floor(math.log10(u))))
 
 

@@ -187,3 +187,8 @@ def test_pupil_centre_at_roundings_distance_from_zero_reads_zero():
 
     text = pupil_text({"centre_mm": [-3.55271e-14, 1.5], "norm_radius_mm": 10.0})
     assert text == "; PVr's pupil: centre (0 mm, 1.5 mm), radius 10 mm"
+
+
+def test_an_uncertainty_that_rounds_up_to_a_power_of_ten_keeps_two_digits():
+    """u = 9.96 nm read "10.0 nm" (three significant digits; a review): rounded first, it is "10"."""
+    assert with_uncertainty(0.12345, 0.00996) == "123 ± 10 nm (k = 2)"
