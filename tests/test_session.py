@@ -257,3 +257,19 @@ def test_a_deletion_after_a_run_is_fitted_without_the_points_and_restore_keeps_t
     ids = [st.id for st in s.recipe.steps]
     assert ids.count("manual_edit") == 1 and s.recipe.steps[0].params.note == "probe slipped off the edge"
     assert s.shown.n == s.input_cloud.n - 2  # the recipe's own two rows stay removed in the view
+
+
+def test_undo_after_a_run_undoes_the_edit_before_it(session):
+    """Run, delete, run, Ctrl+Z: the first Undo undid the second run (nothing visible changed, the
+    Report turned stale), the deletion took a second one (a review of the window)."""
+    session.run()
+    n0 = session.shown.n
+    k = session.delete(session.select_rectangle(-100, 100, -100, 100), "centre")
+    assert k > 0
+    session.run()
+    assert session.shown.n == n0 - k
+    session.undo()
+    assert session.shown.n == n0 and not any(
+        "manual_edit" in s and s["manual_edit"].get("note") == "centre" for s in session.steps)
+    session.redo()
+    assert session.shown.n == n0 - k

@@ -201,8 +201,10 @@ class Session:
         return run_pipeline(cloud, recipe, progress=progress, upto=upto)
 
     def accept(self, result) -> None:
-        """Show a computed result (undoable)."""
-        self.history.push(self._snapshot())
+        """Show a computed result. Not an undo step: Ctrl+Z right after a run undid the run — nothing
+        on screen changed but the Report turned stale, and the deletion it was meant to undo took a
+        second Ctrl+Z (a review). Undo goes back to the edit before it; the run's result then is stale
+        and says so, as after any edit."""
         self.last_result = result
         self._set_view(result.cloud, None)
         self.events.ran(result)
