@@ -18,7 +18,10 @@ vibration's frequency counts as one), then the lower ΔBIC — a quadratic field
 one-parameter tip radius is not preferred to it; the others are reported as `ambiguous_with`, with
 the measurement that would separate them. A vibration that is an integer multiple of the spindle
 frequency on a scan whose spindle turns at constant speed is synchronous — a spindle error motion of
-that order as much as a vibration — and is reported ambiguous with one.
+that order as much as a vibration — and is reported ambiguous with one. Once all effects are in, each
+vibration line within a quarter cycle over the record of k × the spindle frequency is judged again
+against the axial harmonic k (_synchronous_lines): below 33 upr the spindle error is named when it fits
+as well; a line kept as a vibration is always reported synchronous.
 Noise: σ from second differences along the scan, σ = 1.4826·MAD(Δ²g)/√6, which a smooth gap does not
 inflate but a strong vibration does; it is therefore estimated again on the residual once the found
 effects are removed, and the selection repeated with it (its ties depend on σ) until it settles.
@@ -42,7 +45,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special, stats
 
-from ..simulate.effects import LIBRARY, ScanContext, Vibration, _Harmonics, resolved_harmonics
+from ..simulate.effects import (
+    LIBRARY,
+    SPINDLE_HARMONICS,
+    ScanContext,
+    Vibration,
+    _Harmonics,
+    resolved_harmonics,
+)
 
 ALPHA = 0.01
 BIC_STRONG = -10.0
@@ -555,24 +565,88 @@ def _ambiguous_with(s: _Search, named: Candidate, tie: list[Candidate], sigma: f
             continue
         out.append({"effect": gr.effect, "harmonic": gr.harmonic, "ssr_excess": float(o.ssr - named.ssr),
                     "candidate": gr.name})
-    if me.effect == "vibration" and s.spindle_hz:
-        k = int(round(me.frequency / s.spindle_hz))
-        T = float(np.ptp(s.ctx.t))
-        if k >= 1 and abs(me.frequency - k * s.spindle_hz) * T < 0.25 and \
-                not any(a["effect"] == "spindle_axial" for a in out):
-            eff = LIBRARY["spindle_axial"]
-            gr = _group(f"spindle_axial[{k}]~sync", "spindle_axial", eff.harmonic_params(k),
-                        eff.harmonic_columns(s.ctx, k), harmonic=k)
-            if gr is not None:
-                if gr.name not in s.D.index:
-                    s.D.add(gr.name, gr.cols)
-                ssr, _ = s.D.ssr(s.cols + s.D.index[gr.name])
-                o = Candidate(gr.name, ssr, 0.0, 1.0, 0.0, 1.0, 2)
-                if ssr - named.ssr < _tie_threshold(sigma, named, o):
-                    out.append({"effect": "spindle_axial", "harmonic": k, "ssr_excess": float(ssr - named.ssr),
-                                "note": f"the vibration is at {k} × the spindle frequency: synchronous"})
-                    # beyond the spindle band: reported, never swapped in (_refine)
+    k = _sync_harmonic(s, me.frequency) if me.effect == "vibration" else None
+    if k is not None and not any(a["effect"] == "spindle_axial" for a in out):
+        gr = _axial_group(s, k)
+        if gr is not None:
+            ssr, _ = s.D.ssr(s.cols + s.D.index[gr.name])
+            o = Candidate(gr.name, ssr, 0.0, 1.0, 0.0, 1.0, 2)
+            if ssr - named.ssr < _tie_threshold(sigma, named, o):
+                out.append({"effect": "spindle_axial", "harmonic": k, "ssr_excess": float(ssr - named.ssr),
+                            "note": f"the vibration is at {k} × the spindle frequency: synchronous"})
+                # judged again once all effects are in, and swapped in below 33 upr (_synchronous_lines)
     return out
+
+
+#: a vibration within this many cycles over the record of k × the spindle frequency is synchronous:
+#: the scan cannot resolve it from the spindle's harmonic k
+SYNC_CYCLES = 0.25
+
+
+def _sync_harmonic(s: _Search, frequency: float | None) -> int | None:
+    """k when ``frequency`` lies within SYNC_CYCLES/T (T the record's duration) of k × the spindle
+    frequency on a scan whose spindle turns at constant speed, else None."""
+    if not s.spindle_hz or frequency is None:
+        return None
+    k = int(round(frequency / s.spindle_hz))
+    T = float(np.ptp(s.ctx.t))
+    return k if k >= 1 and abs(frequency - k * s.spindle_hz) * T < SYNC_CYCLES else None
+
+
+def _axial_group(s: _Search, k: int) -> Group | None:
+    """The spindle's axial harmonic k as a candidate: the library's when the scan resolves it, else its
+    columns built here (added to the design)."""
+    if f"spindle_axial[{k}]" in s.by_name:
+        return s.by_name[f"spindle_axial[{k}]"]
+    name = f"spindle_axial[{k}]~sync"
+    if name not in s.by_name:
+        eff = LIBRARY["spindle_axial"]
+        gr = _group(name, "spindle_axial", eff.harmonic_params(k), eff.harmonic_columns(s.ctx, k), harmonic=k)
+        if gr is None:
+            return None
+        s.by_name[name] = gr
+    if name not in s.D.index:
+        s.D.add(name, s.by_name[name].cols)
+    return s.by_name[name]
+
+
+def _synchronous_lines(s: _Search, sigma: float) -> None:
+    """Once all effects are in: each vibration line within SYNC_CYCLES/T of k × the spindle frequency
+    is judged again against the spindle's axial harmonic k, the other chosen effects in both fits. At
+    its stage the line's frequency was refined freely within half a bin, and a line detuned by a small
+    fraction of a cycle over the record also takes part of an effect found later (an axial and a tilt
+    harmonic 6 on a spiral: a line at 6.004 × the spindle frequency beat spindle_axial[6] and left the
+    tilt at half its value, z ≈ −37 — an independent review). Below 33 upr the spindle error is named
+    when it fits as well (the tie rule of _choose: fewer parameters) or better, the vibration reported
+    ambiguous with it; a line kept as a vibration is always reported synchronous with the harmonic."""
+    piston = list(s.D.index["_piston"])
+    changed = False
+    for i, st in enumerate(s.stages):
+        if st.effect != "vibration":
+            continue
+        k = _sync_harmonic(s, s.by_name[st.candidate].frequency)
+        ax = _axial_group(s, k) if k is not None else None
+        if ax is None:
+            continue
+        others = piston + [c for j, o in enumerate(s.stages) if j != i for c in s.D.index[o.candidate]]
+        vib = s.by_name[st.candidate]
+        cv = Candidate(vib.name, s.D.ssr(others + s.D.index[vib.name])[0], 0.0, 0.0, 0.0, 1.0, vib.n_params)
+        ca = Candidate(ax.name, s.D.ssr(others + s.D.index[ax.name])[0], 0.0, 0.0, 0.0, 1.0, ax.n_params)
+        tie = abs(ca.ssr - cv.ssr) < _tie_threshold(sigma, cv, ca)
+        taken = any(o.effect == "spindle_axial" and o.harmonic == k for o in s.stages)
+        note = f"the vibration is at {k} × the spindle frequency: synchronous"
+        if k <= SPINDLE_HARMONICS and not taken and (tie or ca.ssr < cv.ssr):
+            kept = [a for a in st.ambiguous_with if a["effect"] not in ("spindle_axial", "vibration")]
+            st.ambiguous_with = kept + [{"effect": "vibration", "harmonic": k, "ssr_excess": float(min(cv.ssr - ca.ssr, 0.0)),
+                                         "note": f"a vibration at {k} × the spindle frequency is a synchronous line"}]
+            st.candidate, st.effect, st.harmonic = ax.name, ax.effect, k
+            changed = True
+        elif not any(a["effect"] == "spindle_axial" for a in st.ambiguous_with):
+            st.ambiguous_with = st.ambiguous_with + [{"effect": "spindle_axial", "harmonic": k,
+                                                      "ssr_excess": float(ca.ssr - cv.ssr), "note": note,
+                                                      "tie": bool(tie)}]
+    if changed:
+        _restate_evidence(s)
 
 
 def _add(s: _Search, best: Candidate, ambiguous: list[dict], n_candidates: int) -> None:
@@ -663,6 +737,7 @@ def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
             break
         _add(s, named, _ambiguous_with(s, named, tie, sigma), len(names))
     _refine(s, sigma)
+    _synchronous_lines(s, sigma)
     return s
 
 

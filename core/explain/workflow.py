@@ -463,10 +463,15 @@ def ambiguities(res: dict, sigma: float) -> list[dict]:
                     continue
                 what = f" at {a['harmonic']} undulations per revolution" if a.get("harmonic") else ""
                 note = f"; {a['note']}" if a.get("note") else ""
-                out.append({"effects": [f["effect"], a["effect"]],
-                            "why": f"on this scan path the two signatures{what} fit the gap equally well "
-                                   f"(their fits differ by {abs(a['ssr_excess']) / max(sigma, 1e-300) ** 2:.3g} σ² "
-                                   f"in the sum of squares, below the χ² threshold){note}",
+                d = abs(a['ssr_excess']) / max(sigma, 1e-300) ** 2
+                why = (f"on this scan path the two signatures{what} fit the gap equally well (their fits "
+                       f"differ by {d:.3g} σ² in the sum of squares, below the χ² threshold){note}")
+                if a.get("tie") is False:  # a vibration kept, its line synchronous (select._synchronous_lines)
+                    why = (f"the vibration's line is within a quarter cycle over the record of {a['harmonic']} × "
+                           f"the spindle frequency, closer than the record resolves in frequency: a synchronous line, as a "
+                           f"spindle error of {a['harmonic']} undulations per revolution would give (a steady "
+                           f"one fits {d:.3g} σ² worse in the sum of squares)")
+                out.append({"effects": [f["effect"], a["effect"]], "why": why,
                             "separate_by": separate_by(f["effect"], a["effect"])})
     return out
 
