@@ -134,6 +134,14 @@ def explain(measured: Path, out_dir: Path, model_path: Path | None = None, simul
     after = gap_after(meas, res, updated, model_path, ctx)
     regs = regions(meas.x, meas.y, after - after.mean(), sigma)
     structure = bool(regs) or res["rms"] > 1.25 * sigma
+    if structure and found:
+        # structure the library does not hold can be partly taken up by its effects (a 4 mm ripple read
+        # as three vibrations 0.02 Hz apart and spindle tilt harmonics — a review): say so beside
+        # the effects named, which model.updated.yaml holds
+        warnings.append("the gap is not explained: structure above the noise is left "
+                        f"({len(regs)} region(s)), and the effects named beside it "
+                        f"({', '.join(found_name(f) for f in found)}) may be fitting part of it — check them "
+                        "before using model.updated.yaml")
     report = {
         "verdict": verdict(structure, ambiguous, found), "gap_before": _stats(gap, w), "gap_after": _stats(after, w),
         "noise_um": sigma * 1e3, "noise_um_of_gap": res["sigma_gap"] * 1e3, "found": found, "ambiguous_with": ambiguous,
