@@ -114,8 +114,9 @@ def find_edges(x, z, count: int) -> np.ndarray:
 
     win = sliding_window_view(z, w)
     med = np.median(win, axis=1)
-    jump = np.zeros(n)
-    jump[w: n - w + 1] = np.abs(med[w:] - med[: n - 2 * w + 1])
+    signed = np.zeros(n)  # the jump between the medians either side of each sample, signed
+    signed[w: n - w + 1] = med[w:] - med[: n - 2 * w + 1]
+    jump = np.abs(signed)
     d = np.diff(z)
     noise = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2) + 1e-15
     # the jump is a difference of two medians of w points: its noise is √2 · 1.2533 σ/√w for
@@ -124,16 +125,13 @@ def find_edges(x, z, count: int) -> np.ndarray:
     # points make the medians noisier than that and their point-to-point σ smaller, so the jumps' own
     # robust spread counts too (the steps touch 2w of the n − 2w jumps each: the MAD hardly sees them)
     sj = jump_noise(noise, w)
-    signed = med[w:] - med[: n - 2 * w + 1]
-    sj = max(sj, 1.4826 * float(np.median(np.abs(signed - np.median(signed)))))
+    inner = signed[w: n - w + 1]
+    sj = max(sj, 1.4826 * float(np.median(np.abs(inner - np.median(inner)))))
     # a step stands out from the profile's own waviness (5 × the typical jump) and from the points'
     # noise (10 ×), or where that leaves steps unfound from the noise of the jump (JUMP_FACTOR × it: the
     # largest of ~n/w independent jumps of a flat scan stays below 5 of their σ)
     typical = 5 * float(np.median(jump[w: n - w + 1]))
     cand = np.argsort(jump)[::-1]
-
-    signed = np.zeros(n)
-    signed[w: n - w + 1] = med[w:] - med[: n - 2 * w + 1]
 
     def bumps(out):
         """The candidates that are a flank of a bump or a groove of the artefact's form: within 10
