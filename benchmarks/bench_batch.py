@@ -43,21 +43,27 @@ def make_input(path: Path, points: int) -> None:
 def run(args, files, out, extra, env=None) -> float:
     cmd = [sys.executable, "-m", "pointspro.core.cli", "--batch", str(ROOT / "resources/example/recipe.yaml"),
            *map(str, files), "--out", str(out), "--quiet", *extra]
+    wall0 = time.time()
     t0 = time.perf_counter()
     res = subprocess.run(cmd, capture_output=True, text=True, env=None if env is None else os.environ | env)
     dt = time.perf_counter() - t0
     if res.returncode != 0:
         raise SystemExit(res.stderr)
-    per_input = sorted(e["seconds"] for e in json.loads((out / "summary.json").read_text())["inputs"])
-    return Run(dt, per_input)
+    inputs = json.loads((out / "summary.json").read_text())["inputs"]
+    # each input's output folder is renamed into place as its last act (core/io/atomic.py): its
+    # ctime is when the input ended, and that less its own seconds is when a worker took it up
+    ends = [os.stat(out / Path(e["input"]).stem).st_ctime - wall0 for e in inputs]
+    starts = [end - e["seconds"] for end, e in zip(ends, inputs)]
+    return Run(dt, sorted(e["seconds"] for e in inputs), min(starts), max(ends))
 
 
 class Run(float):
     """A run's wall seconds, with each input's own seconds (summary.json) beside them."""
 
-    def __new__(cls, wall: float, per_input: list[float]):
+    def __new__(cls, wall: float, per_input: list[float], first_start: float, last_end: float):
         r = super().__new__(cls, wall)
         r.per_input = per_input
+        r.first_start, r.last_end = first_start, last_end
         return r
 
 
@@ -101,11 +107,15 @@ def main():
     for label, t, w in rows:  # efficiency: speed-up per worker (1 = perfect scaling)
         print(f"| {label} | {t:.1f} | {args.inputs / t:.2f} | {t1 / t:.2f}× | {t1 / t / w:.0%} |")
     # where the wall time goes beyond the inputs' own: the ideal is the inputs' seconds spread evenly
-    print("\n| run | an input's seconds: min / median / max | sum / workers | wall − that |\n|---|---|---:|---:|")
+    # the timeline: until the first input starts (the batch's and its workers' start-up), the inputs,
+    # and after the last one ends (summary.json, the pool's shutdown, the interpreter's exit)
+    print("\n| run | an input's seconds: min / median / max | sum / workers | wall − that "
+          "| first input began | last input ended | batch returned |\n|---|---|---:|---:|---:|---:|---:|")
     for label, t, w in rows:
         p = t.per_input
         even = sum(p) / w
-        print(f"| {label} | {p[0]:.2f} / {p[len(p) // 2]:.2f} / {p[-1]:.2f} | {even:.1f} | {t - even:.1f} |")
+        print(f"| {label} | {p[0]:.2f} / {p[len(p) // 2]:.2f} / {p[-1]:.2f} | {even:.1f} | {t - even:.1f} "
+              f"| {t.first_start:.2f} s | {t.last_end:.2f} s | {float(t):.2f} s |")
     if td is not None:
         print(f"\nDask overhead per input against the process pool: {(td - min(tns)) / args.inputs * 1e3:+.0f} ms "
               f"(cluster start-up included)")
