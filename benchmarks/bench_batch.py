@@ -75,6 +75,9 @@ def main():
     ap.add_argument("--repeat", type=int, default=1,
                     help="run the N-worker batch this many times (each listed: a short run varies)")
     ap.add_argument("--no-dask", action="store_true", help="skip the Dask LocalCluster run")
+    ap.add_argument("--no-baseline", action="store_true",
+                    help="skip the one-core run (a night's 200 inputs on one core take ~10 min): "
+                         "wall time and inputs/s of the N-worker runs only")
     ap.add_argument("--no-shared", action="store_true",
                     help="skip the one-worker run that shares its figures out on the free cores")
     args = ap.parse_args()
@@ -90,14 +93,14 @@ def main():
     n_pts = sum(1 for _ in open(first)) - 1
     # the baseline on one core: a lone batch process otherwise draws an input's figures on the free
     # cores too (core/io/background.py share_out), which is not the scaling asked about
-    t1 = run(args, files, tmp / "w1", ["--workers", "1"], {"OMP_NUM_THREADS": "1"})
-    t1s = None if args.no_shared else run(args, files, tmp / "w1s", ["--workers", "1"])
+    t1 = None if args.no_baseline else run(args, files, tmp / "w1", ["--workers", "1"], {"OMP_NUM_THREADS": "1"})
+    t1s = None if args.no_shared or args.no_baseline else run(args, files, tmp / "w1s", ["--workers", "1"])
     tns = [run(args, files, tmp / f"wn{i}", ["--workers", str(args.workers)]) for i in range(max(1, args.repeat))]
     td = None if args.no_dask else run(args, files, tmp / "dask",
                                        ["--scheduler", "local", "--workers", str(args.workers)])
     print(f"{args.inputs} inputs of {n_pts:,} points, example recipe, {args.workers} workers\n")
     print("| run | seconds | inputs/s | speed-up | efficiency |\n|---|---:|---:|---:|---:|")
-    rows = [("--workers 1, one core (OMP_NUM_THREADS=1)", t1, 1)]
+    rows = [] if t1 is None else [("--workers 1, one core (OMP_NUM_THREADS=1)", t1, 1)]
     if t1s is not None:
         rows.append(("--workers 1, its figures shared out on the free cores", t1s, 1))
     for i, tn in enumerate(tns):
@@ -105,7 +108,8 @@ def main():
     if td is not None:
         rows.append((f"--scheduler local (LocalCluster, {args.workers} processes)", td, args.workers))
     for label, t, w in rows:  # efficiency: speed-up per worker (1 = perfect scaling)
-        print(f"| {label} | {t:.1f} | {args.inputs / t:.2f} | {t1 / t:.2f}× | {t1 / t / w:.0%} |")
+        ratio = "— | —" if t1 is None else f"{t1 / t:.2f}× | {t1 / t / w:.0%}"
+        print(f"| {label} | {t:.1f} | {args.inputs / t:.2f} | {ratio} |")
     # where the wall time goes beyond the inputs' own: the ideal is the inputs' seconds spread evenly
     # the timeline: until the first input starts (the batch's and its workers' start-up), the inputs,
     # and after the last one ends (summary.json, the pool's shutdown, the interpreter's exit)
