@@ -25,7 +25,7 @@ from typing import Callable
 
 from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
-from .io.atomic import why_not_replace
+from .io.atomic import InputPlaces, why_not_replace
 from .io.background import BackgroundWrite, share_out
 from .io.formats import write_ply_cloud
 from .io.npz import write_npz_cloud
@@ -246,11 +246,12 @@ def check_output_targets(out: Path, inputs: list[Path], stems: list[str], resume
             if not ours:
                 raise RecipeError(f"{out / name}: exists and is not a PointsPro batch summary; the batch "
                                   "would replace it — move it or choose another --out")
+    places = InputPlaces(inputs)  # resolved once, not once per output folder (N², issue 17)
     for p, stem in zip(inputs, stems):
         if stem in BATCH_FILES:
             raise RecipeError(f"{p}: its output folder would be the batch's own {out / stem}; rename "
                               "the input")
-        check_replaceable(out / stem, inputs, p, extra=not resume)
+        check_replaceable(out / stem, places, p, extra=not resume)
 
 
 def check_replaceable(folder: Path, inputs, of, extra: bool = True) -> None:

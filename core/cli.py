@@ -713,9 +713,11 @@ def _plan_jobs(inputs: list[Path], stems: list[str], out: Path, recipe, resume: 
             jobs.append((path, stem))
     if resume:  # a folder run again is replaced whole: never over a file the user added to it
         from .batch import check_replaceable
+        from .io.atomic import InputPlaces
 
+        places = InputPlaces(inputs)  # resolved once (core/io/atomic.py)
         for path, stem in jobs:
-            check_replaceable(out / stem, inputs, path)
+            check_replaceable(out / stem, places, path)
     return results, jobs
 
 
