@@ -388,6 +388,18 @@ def test_npz_bad_arrays(tmp_path, edit, pattern):
         read_cloud(p)
 
 
+def test_npz_reads_back_in_the_frame_it_states(tmp_path):
+    """A batch's cloud.npz after `misalignment` is in the part frame and says so; it read back as
+    "measuring" (as every other file) until 2026-11-27. A frame that is neither is refused, named."""
+    assert read_cloud(_npz(tmp_path / "m.npz")).frame == "measuring"
+    assert read_cloud(_npz(tmp_path / "p.npz", lambda a, m: m.update(frame="part"))).frame == "part"
+    p = _npz(tmp_path / "w.npz", lambda a, m: m.update(frame="world"))
+    with pytest.raises(InputError, match=r"w.npz: pointspro_meta's frame 'world' is not one of "
+                                         r"measuring, part") as e:
+        read_cloud(p)
+    _one_line(e, p)
+
+
 def test_npz_nan_rows_are_dropped_and_counted(tmp_path):
     from pointspro.core.io.npz import read_npz
 

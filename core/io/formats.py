@@ -202,8 +202,8 @@ def foreign_kind(head: bytes) -> str | None:
 
 
 def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> PointCloud:
-    """Read a measurement file into a PointCloud (frame `measuring`, `index` = row of the input,
-    or pixel number of a map). ``options`` / keywords: the reader options of the module doc."""
+    """Read a measurement file into a PointCloud (frame `measuring`, a PointsPro .npz the frame it
+    states; `index` = row of the input, or pixel number of a map). ``options`` / keywords: the reader options of the module doc."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: file not found")
@@ -268,7 +268,9 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
         raise InputError(f"{path}: reader option wavelength_nm is for maps whose heights are in fringes "
                          f"or waves (Zygo .datx); the {what} file states its heights in a length unit "
                          f"({meta.get('instrument_unit') or 'mm'}) — remove the option")
-    meta = {**meta, "source": str(path), "frame": "measuring", "units": "mm"}
+    # every file is in the measuring frame but a PointsPro .npz, which states its own (core/io/npz.py)
+    frame = meta.get("frame", "measuring") if meta.get("format") == "npz" else "measuring"
+    meta = {**meta, "source": str(path), "frame": frame, "units": "mm"}
     meta.setdefault("invalid_dropped", 0)
     try:
         return PointCloud(xyz, cols, meta)

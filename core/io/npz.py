@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cloud import FRAMES
 from ..errors import InputError
 from .atomic import atomic_path
 
@@ -87,7 +88,12 @@ def read_npz(path: Path, invalid: str = "drop"):
             raise InputError(f"{path}: array '{name}' has {len(a)} values where 'x' has {n} — the "
                              "columns differ in length")
     xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")]).astype(np.float64)
-    out_meta = {"format": "npz", "invalid_dropped": 0}
+    frame = meta.get("frame", "measuring")
+    if frame not in FRAMES:
+        raise InputError(f"{path}: {META_KEY}'s frame {frame!r} is not one of {', '.join(FRAMES)}")
+    # the frame the cloud was written in: a batch's cloud after `misalignment` is in the part frame
+    # (read back as "measuring" until 2026-11-27, as text and PLY clouds, which state no frame)
+    out_meta = {"format": "npz", "invalid_dropped": 0, "frame": frame}
     ok = np.isfinite(xyz).all(axis=1)
     if not ok.all():
         row = int(np.flatnonzero(~ok)[0])
