@@ -967,6 +967,13 @@ def cmd_explain(args) -> int:
     print(f"{out}: verdict {rep['verdict']}; found {names}; gap {format_length(rep['gap_before']['rms_um'] * 1e-3, 4)}"
           f" → {format_length(rep['gap_after']['rms_um'] * 1e-3, 4)} RMS "
           f"(noise {format_length(rep['noise_um'] * 1e-3, 3)})")
+    from .explain.workflow import region_words
+
+    regs = rep["unexplained"].get("regions") or []
+    for reg in regs[:3]:  # the strongest; every one is in explain.json and explain.html
+        print(f"  unexplained: {region_words(reg)}")
+    if len(regs) > 3:
+        print(f"  … and {len(regs) - 3} more region(s) in {out / 'explain.json'}")
     if rep["unexplained"].get("note"):
         print(f"  note: {rep['unexplained']['note']}")
     return EXIT_OK

@@ -106,7 +106,20 @@ def test_a_local_bump_is_unexplained_and_located(tmp_path):
     assert rep["verdict"] == "unexplained"
     reg = rep["unexplained"]["regions"][0]
     assert np.hypot(reg["x"] - 8, reg["y"] + 5) < 2.0 and 1.0 < reg["radius"] < 6.0
-    assert reg["mean_um"] > 0
+    assert reg["mean_um"] > 0 and reg["shape"] == "patch"
+
+
+def test_the_command_says_where_the_unexplained_structure_is(tmp_path, run_cli):
+    """`pointspro explain` printed the verdict and the gap only: where the unexplained structure lies
+    (a zone at r = 12 mm: a ring, with its radii) was in explain.json alone."""
+    m = model(BASE_EFFECTS)
+    measure(tmp_path, m, lambda s: 2e-5 * np.exp(-((np.hypot(s["x"], s["y"]) - 12) ** 2) / 2.0))
+    write_model(tmp_path / "base.yaml", m)
+    code, out, _ = run_cli("explain", "--model", tmp_path / "base.yaml", "--measured", tmp_path / "meas.csv",
+                           "--out", tmp_path / "o", "--bootstrap", "0")
+    assert code == 0 and "verdict unexplained" in out
+    ring = re.search(r"unexplained: ring r = ([\d.]+)–([\d.]+) mm about \(", out)
+    assert ring and float(ring[1]) < 12 < float(ring[2]), out
 
 
 def test_correlated_noise_names_nothing_and_says_why_it_reads_as_structure(tmp_path):

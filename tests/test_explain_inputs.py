@@ -195,6 +195,34 @@ def test_a_wide_bump_is_located_apart_from_the_ring_its_piston_leaves():
     assert top["mean_um"] > 0.02 and np.hypot(top["x"], top["y"] - 10) < 1.0 and top["radius"] < 10
 
 
+def _disc(n=40_000, radius=20.0, seed=4):
+    rng = np.random.default_rng(seed)
+    r, t = radius * np.sqrt(rng.random(n)), rng.uniform(0, 2 * np.pi, n)
+    return r * np.cos(t), r * np.sin(t), rng
+
+
+def test_a_zone_is_located_as_a_ring_not_at_the_centre():
+    """A 20 nm zone at r = 12 mm (σ 1 mm) was located "at (0.01, 0.09), radius 9.4 mm", where nothing
+    is: a region that goes round its own centre is a ring with its inner and outer radius; a bump and
+    an arc (a crescent, whose centre of mass lies off it too) stay patches."""
+    from pointspro.core.explain.workflow import region_words, regions
+
+    x, y, rng = _disc()
+    noise = rng.normal(0, 2e-6, x.size)
+    zone = 2e-5 * np.exp(-((np.hypot(x, y) - 12) ** 2) / (2 * 1.0**2)) + noise
+    top = regions(x, y, zone - zone.mean(), 2e-6)[0]
+    assert top["shape"] == "ring" and top["mean_um"] > 0.005
+    assert 8.5 < top["inner_radius"] < 12 < top["outer_radius"] < 15.5 and np.hypot(top["x"], top["y"]) < 0.5
+    assert region_words(top).startswith("ring r = ") and "about (" in region_words(top)
+    bump = 4e-5 * np.exp(-((x - 8) ** 2 + (y + 5) ** 2) / (2 * 1.5**2)) + noise
+    top = regions(x, y, bump - bump.mean(), 2e-6)[0]
+    assert top["shape"] == "patch" and "inner_radius" not in top and np.hypot(top["x"] - 8, top["y"] + 5) < 0.5
+    assert region_words(top).startswith("at (7.99, -5.02) mm, radius 4 mm, mean +")
+    arc = np.where((np.arctan2(y, x) > 0) & (np.arctan2(y, x) < 2.0), zone - noise, 0.0) + noise
+    top = regions(x, y, arc - arc.mean(), 2e-6)[0]
+    assert top["shape"] == "patch" and top["mean_um"] > 0.005
+
+
 @pytest.mark.parametrize("crop", ["radius", "time"])
 def test_a_measurement_covering_less_than_the_model_s_scan_keeps_the_model_s_parameters(tmp_path, crop):
     """Straightness is normalised by the scan's rim radius and thermal drift by its duration: they were

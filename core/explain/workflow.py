@@ -24,7 +24,8 @@ def _stats(v, w=None) -> dict:
 
 def regions(x, y, r, sigma, cells=24) -> list[dict]:
     """Clusters of cells whose mean residual is significant (|mean| > 5 σ/√n), each with its centre and
-    the radius of a disk of the same area (mm)."""
+    the radius of a disk of the same area (mm); ``shape`` "ring" with ``inner_radius`` and
+    ``outer_radius`` about that centre where the cluster goes round it (``_ring``), else "patch"."""
     from scipy import ndimage
 
     x0, x1, y0, y1 = x.min(), x.max(), y.min(), y.max()
@@ -51,9 +52,40 @@ def regions(x, y, r, sigma, cells=24) -> list[dict]:
             w = np.abs(r[pts])
             cx = float(np.average(x[pts], weights=w + 1e-300))
             cy = float(np.average(y[pts], weights=w + 1e-300))
-            out.append({"x": cx, "y": cy, "radius": float(np.sqrt(cellsi.size * h * h / np.pi)),
-                        "mean_um": float(np.mean(r[pts]) * 1e3)})
+            reg = {"x": cx, "y": cy, "radius": float(np.sqrt(cellsi.size * h * h / np.pi)),
+                   "mean_um": float(np.mean(r[pts]) * 1e3), "shape": "patch"}
+            reg.update(_ring(x[pts] - cx, y[pts] - cy, h))
+            out.append(reg)
     return sorted(out, key=lambda d: -abs(d["mean_um"]))
+
+
+def _ring(dx, dy, h: float) -> dict:
+    """A region that encloses a hole around its own centre — a zone of a turned or polished part —
+    as a ring: its inner and outer radius about that centre (mm). Its centre alone (with the radius of
+    a disc of the same area) placed a 20 nm zone at r = 12 mm "at the centre, radius 9.4 mm", where
+    nothing is; a patch (a bump, a dig) has points at its centre and is left as it is. A ring: no
+    point within two cells of the centre, and the points all round it (every eighth of the turn)."""
+    d = np.hypot(dx, dy)
+    if d.size < 16 or d.min() < 2.0 * h:
+        return {}
+    octant = ((np.arctan2(dy, dx) + np.pi) / (np.pi / 4)).astype(int) % 8
+    if np.unique(octant).size < 8:
+        return {}  # an arc or a crescent: its centre of mass lies off it, but it is no zone
+    return {"shape": "ring", "inner_radius": float(np.percentile(d, 1)),
+            "outer_radius": float(np.percentile(d, 99))}
+
+
+def region_words(reg: dict) -> str:
+    """A region as a person reads it: "ring r = 9.53–14.2 mm about (0.01, 0.09) mm, mean +9.87 nm" or
+    "at (7.83, -4.88) mm, radius 3.7 mm, mean +11.4 nm"."""
+    from ..units import format_length
+
+    mean = format_length(reg["mean_um"] * 1e-3, 3)
+    mean = mean if mean.startswith("-") else "+" + mean
+    if reg.get("shape") == "ring":
+        return (f"ring r = {reg['inner_radius']:.3g}–{reg['outer_radius']:.3g} mm about "
+                f"({reg['x']:.2f}, {reg['y']:.2f}) mm, mean {mean}")
+    return f"at ({reg['x']:.2f}, {reg['y']:.2f}) mm, radius {reg['radius']:.2g} mm, mean {mean}"
 
 
 def _merge(effects: list[dict], name: str, params: dict) -> list[dict]:
