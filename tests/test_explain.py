@@ -120,6 +120,8 @@ def test_the_command_says_where_the_unexplained_structure_is(tmp_path, run_cli):
     assert code == 0 and "verdict unexplained" in out
     ring = re.search(r"unexplained: ring r = ([\d.]+)–([\d.]+) mm about \(", out)
     assert ring and float(ring[1]) < 12 < float(ring[2]), out
+    page = (tmp_path / "o" / "explain.html").read_text(encoding="utf-8")  # the window shows this page
+    assert f"<li>ring r = {ring[1]}–{ring[2]} mm about (" in page
 
 
 def test_correlated_noise_names_nothing_and_says_why_it_reads_as_structure(tmp_path):

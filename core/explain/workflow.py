@@ -659,7 +659,9 @@ def _html(report: dict, folder: Path) -> str:
             parts.append(f"<p class='warn'>{html.escape(' / '.join(a['effects']))}: {html.escape(a['why'])}. "
                          f"Separate them by: {html.escape(a['separate_by'])}.</p>")
     if report["unexplained"]["regions"]:
-        parts.append("<h2>Unexplained regions</h2>" + "".join(_table(r) for r in report["unexplained"]["regions"]))
+        # one line each, as `pointspro explain` prints them (every number is in explain.json)
+        parts.append("<h2>Unexplained regions</h2><ul>" + "".join(
+            f"<li>{html.escape(region_words(r))}</li>" for r in report["unexplained"]["regions"]) + "</ul>")
     if report["unexplained"].get("note"):
         parts.append(f"<p class='warn'>{html.escape(report['unexplained']['note'])}.</p>")
     parts.append("<h2>Checks</h2>" + _table(report["checks"]) + "</body></html>\n")
