@@ -15,36 +15,46 @@ from PySide6 import QtCore, QtWidgets
 
 from .worker import Worker
 
+#: explain.html in the dock: a heading's size, no page margins
+DOCK_CSS = "body{margin:0;max-width:none} p.title{font-size:11pt;font-weight:bold;margin:0 0 4px 0} " \
+           "h2{font-size:10pt;margin-top:8px}"
+
 
 class ExplainPanel(QtWidgets.QWidget):
     log = QtCore.Signal(str)
+    result_shown = QtCore.Signal()  # the window gives the dock room to read it (MainWindow)
 
     def __init__(self, session, parent=None):
         super().__init__(parent)
         self.session = session
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(2, 2, 2, 2)
-        form = QtWidgets.QFormLayout()
+        # two rows, not a four-row form: the panel shares a ~190 px dock under the 3D view with the log
+        # and the report, and the form left the result ~50–70 px at 1280 × 800 (a review)
+        row = QtWidgets.QHBoxLayout()
         self.kind = QtWidgets.QComboBox()
         self.kind.addItems(["model (YAML)", "simulated cloud"])
         self.kind.setToolTip("what the measurement is compared with: a model evaluated at the measured "
                              "positions, or a simulated cloud (matched by row or by position)")
-        form.addRow("Compare with", self.kind)
-        row = QtWidgets.QHBoxLayout()
+        row.addWidget(QtWidgets.QLabel("Compare with"))
+        row.addWidget(self.kind)
         self.path = QtWidgets.QLineEdit()
         self.path.setPlaceholderText("model.yaml or simulated cloud")
+        self.path.setMinimumWidth(80)
         browse = QtWidgets.QPushButton("…")
+        browse.setToolTip("choose the file")
+        browse.setMaximumWidth(32)
         browse.clicked.connect(self._browse)
         row.addWidget(self.path, 1)
         row.addWidget(browse)
-        form.addRow("File", row)
+        lay.addLayout(row)
+        row = QtWidgets.QHBoxLayout()
         self.bootstrap = QtWidgets.QSpinBox()
         self.bootstrap.setRange(0, 200)
         self.bootstrap.setValue(10)
         self.bootstrap.setToolTip("bootstrap resamples for the stability of each found effect")
-        form.addRow("Bootstrap", self.bootstrap)
-        lay.addLayout(form)
-        row = QtWidgets.QHBoxLayout()
+        row.addWidget(QtWidgets.QLabel("Bootstrap"))
+        row.addWidget(self.bootstrap)
         self.run = QtWidgets.QPushButton("Explain the gap")
         self.run.clicked.connect(self.start)
         self.save = QtWidgets.QPushButton("Save updated model…")
@@ -52,6 +62,7 @@ class ExplainPanel(QtWidgets.QWidget):
         self.save.clicked.connect(self._save_model)
         row.addWidget(self.run)
         row.addWidget(self.save)
+        row.addStretch(1)
         lay.addLayout(row)
         self.view = QtWidgets.QTextBrowser()
         self.view.setHtml("<p style='color:#777'>Open a measurement, choose the model of its simulation "
@@ -101,7 +112,13 @@ class ExplainPanel(QtWidgets.QWidget):
         self.report = report
         self.run.setEnabled(True)
         self.save.setEnabled(True)
-        self.view.setHtml((self.folder / "explain.html").read_text(encoding="utf-8"))
+        page = (self.folder / "explain.html").read_text(encoding="utf-8")
+        # the page's title and margins are a browser page's: in a dock its h1 took two lines of a
+        # 250 px view; a rule after the page's own style wins (the saved explain.html is unchanged).
+        # Qt draws an <h1> at its own heading size whatever CSS says: the title is a bold paragraph.
+        page = page.replace("<h1>", "<p class='title'>").replace("</h1>", "</p>")
+        self.view.setHtml(page.replace("</head>", f"<style>{DOCK_CSS}</style></head>", 1))
+        self.result_shown.emit()
         from pointspro.core.explain.workflow import found_name
 
         names = ", ".join(found_name(f) for f in report["found"]) or "nothing"

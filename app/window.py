@@ -119,6 +119,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.report_dock = self._dock("Report", self.report, QtCore.Qt.BottomDockWidgetArea)
         self.explain = ExplainPanel(self.session)
         self.explain.log.connect(self.log)
+        self.explain.result_shown.connect(self._room_for_explain)
         self.explain_dock = self._dock("Explain", self.explain, QtCore.Qt.BottomDockWidgetArea)
         self.tabifyDockWidget(log_dock, self.report_dock)
         self.tabifyDockWidget(self.report_dock, self.explain_dock)
@@ -559,6 +560,14 @@ class MainWindow(QtWidgets.QMainWindow):
         if not self._sized:  # dock sizes only take once the window has its size
             self._sized = True
             QtCore.QTimer.singleShot(0, self._size_docks)
+
+    def _room_for_explain(self):
+        """A result in the Explain dock gets ~45 % of the window's height (it had ~190 px, the form
+        and ~70 px of result, at 1280 × 800); never shrunk, the user's own size is kept."""
+        want = int(0.45 * self.height())
+        if self.explain_dock.isVisible() and not self.explain_dock.isFloating() \
+                and self.explain_dock.height() < want:
+            self.resizeDocks([self.explain_dock], [want], QtCore.Qt.Vertical)
 
     def _size_docks(self):
         self.resizeDocks([self._log_dock], [190], QtCore.Qt.Vertical)

@@ -656,3 +656,40 @@ def test_a_restore_that_fails_keeps_the_unsaved_session(qtbot, tmp_path):
     (tmp_path / "moved.csv").rename(tmp_path / "c.csv")
     w2.restore_autosave()
     assert w2.session.steps == [{"aperture": {"diameter": 80}}] and not unsaved_session_path().exists()
+
+
+def test_an_explain_result_gets_room_to_be_read(qtbot, tmp_path, monkeypatch):
+    """At 1280 × 800 the Explain dock (tabbed with the log and the report, ~190 px) left its result
+    ~50–70 px under a four-row form and the page's own 1.5 em title. The form is two rows, a result
+    gives the dock ~45 % of the window's height (never shrunk), and the title is a bold line."""
+    from PySide6 import QtCore
+
+    import pointspro.core.explain.workflow as wf
+
+    def fake(measured, out, model, sim, bootstrap=10, measured_cloud=None):
+        out.mkdir(parents=True)
+        (out / "explain.html").write_text("<!doctype html><html><head><style>h1{font-size:1.5em}</style>"
+                                          "</head><body><h1>Explain: where simulation and measurement "
+                                          "disagree</h1><p>Verdict</p></body></html>", encoding="utf-8")
+        return {"verdict": "explained", "found": [], "gap_before": {"rms_um": 0.01},
+                "gap_after": {"rms_um": 0.002}}
+    monkeypatch.setattr(wf, "explain", fake)
+    win = _window(qtbot, [EXAMPLE / "asphere_cmm.csv"])
+    win.show()
+    qtbot.waitExposed(win)
+    win.explain_dock.raise_()
+    qtbot.waitUntil(lambda: win.explain_dock.isVisible(), timeout=5000)
+    win.explain.path.setText(str(EXAMPLE / "spiral_model.yaml"))
+    assert win.explain.start()
+    qtbot.waitUntil(lambda: not win.explain.worker.busy, timeout=60_000)
+    qtbot.waitUntil(lambda: win.explain_dock.height() >= 0.4 * win.height(), timeout=5000)
+    assert win.explain.view.height() >= 200  # was 70 (a screenshot at 1280 × 800)
+    assert "<h1" not in win.explain.view.toHtml() and "Explain: where simulation" in win.explain.view.toPlainText()
+    # the user's own, larger size is kept
+    win.resizeDocks([win.explain_dock], [int(0.6 * win.height())], QtCore.Qt.Vertical)
+    qtbot.waitUntil(lambda: win.explain_dock.height() >= 0.55 * win.height(), timeout=5000)
+    tall = win.explain_dock.height()
+    win.explain._done({"verdict": "explained", "found": [], "gap_before": {"rms_um": 0.01},
+                       "gap_after": {"rms_um": 0.002}})
+    qtbot.wait(50)
+    assert win.explain_dock.height() >= tall - 2
