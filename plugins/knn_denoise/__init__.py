@@ -56,7 +56,8 @@ class KnnDenoiseParams(Params):
                        "threshold_sigma MAD of the nearest neighbours")
     window: float = param(10.0, unit="mm", gt=0, help="a: half-side of the 2a × 2a neighbourhood "
                           "(about the sampling spacing, 10–15 mm on CMM rasters)")
-    spacing: float = param(1.0, unit="mm", gt=0, help="interpolation grid spacing")
+    spacing: float = param(1.0, unit="mm", gt=0, help="paper: interpolation grid spacing, at most the "
+                           "window (the other methods do not use it)")
     remove: Union[Literal["auto"], int] = param(
         "auto", help="number of points to remove (largest ω first), or auto: a robust threshold")
     threshold_sigma: float | None = param(
@@ -77,8 +78,13 @@ class KnnDenoiseParams(Params):
             raise ValueError("remove must be ≥ 0 or auto")
         if self.method in ("statistical", "hampel") and self.remove != "auto":
             raise ValueError(f"the {self.method} filter decides by itself: use remove: auto")
-        if self.spacing > self.window:
-            raise ValueError("spacing must not exceed window (the window would hold one node)")
+        # only where the grid is used (paper) or a spacing was given: robust has no grid, and a window
+        # below the default 1 mm (a 10 mm part's 0.2 mm raster) was refused for a value nobody set. A
+        # given default counts as not given (a report's full recipe writes every parameter out)
+        given = "spacing" in self.model_fields_set and self.spacing != type(self).model_fields["spacing"].default
+        if self.spacing > self.window and (self.method == "paper" or given):
+            hint = "" if given else f" (spacing is {self.spacing:g} mm by default)"
+            raise ValueError(f"spacing must not exceed window (the window would hold one node){hint}")
         return self
 
     def sigma(self) -> float:
