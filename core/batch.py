@@ -484,11 +484,27 @@ def _process_input(path, recipe, out_dir, stem, *, sink, token, surface, log, al
         return failed_outcome(shown, stage, e, time.perf_counter() - t0, paths)
 
 
+def read_warning(cloud) -> str | None:
+    """The rows the reader dropped for a NaN or infinite value, with the columns that held them: a
+    point is dropped whole, whichever column it was (docs/formats.md); None when none were."""
+    meta = getattr(cloud, "meta", None) or {}
+    n = meta.get("invalid_dropped") or 0
+    if not n:
+        return None
+    cols = meta.get("invalid_columns") or {}
+    where = (" in " + ", ".join(f"{c} ({k})" for c, k in cols.items())) if cols else ""
+    first = f", the first at line {meta['invalid_first_line']}" if meta.get("invalid_first_line") else ""
+    return (f"{n:,} row(s) dropped on reading, each point whole: a NaN or infinite value{where}{first}"
+            " — the recipe's input: {invalid: error} refuses such a file instead")
+
+
 def step_warnings(result) -> list[str]:
-    """Each step's report warnings, "'step_id': text", in the order the steps ran, then the
-    uncertainty's ("'uncertainty': text")."""
-    out = [f"'{rec.id}': {w}" for rec in result.steps
-           for w in (rec.report.get("warnings") or []) if isinstance(w, str)]
+    """The reader's dropped rows ("'read': text"), then each step's report warnings, "'step_id':
+    text", in the order the steps ran, then the uncertainty's ("'uncertainty': text")."""
+    dropped = read_warning(result.input_cloud)
+    out = [f"'read': {dropped}"] if dropped else []
+    out += [f"'{rec.id}': {w}" for rec in result.steps
+            for w in (rec.report.get("warnings") or []) if isinstance(w, str)]
     block = result.summary().get("uncertainty") if result.uncertainty is not None else None
     meta = (block or {}).get("_meta") or {}
     return out + [f"'uncertainty': {w}" for w in meta.get("warnings") or [] if isinstance(w, str)]

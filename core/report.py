@@ -69,7 +69,7 @@ def build_report(input_path: str, recipe, result, figures: str = "all", skipped=
 #: unit and pixel, the grid, and how many invalid pixels or rows were dropped on reading
 _INPUT_KEYS = ("format", "instrument_format", "instrument_reader", "instrument_unit", "pixel_mm",
                "grid", "channel", "delimiter", "decimal_comma", "header_line", "channel_units",
-               "xyz_units_stated", "invalid_dropped")
+               "xyz_units_stated", "invalid_dropped", "invalid_columns", "invalid_first_line")
 
 
 def input_description(cloud) -> dict:
