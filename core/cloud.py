@@ -74,10 +74,18 @@ class PointCloud:
             a = np.asarray(arr)
             if a.shape != (n,):
                 raise ValueError(f"channel {name!r} has shape {a.shape}, expected ({n},)")
+            # int64 holds every integer channel: a uint64 of 2⁶³ or more (or a float beyond ±2⁶³)
+            # wrapped to a negative number with no word (a review)
+            if a.dtype.kind == "u" and a.size and int(a.max()) >= 2**63:
+                raise ValueError(f"channel {name!r} holds {int(a.max())}, beyond the 64-bit signed "
+                                 "integers (2⁶³ − 1) it is kept in")
             if name in INTEGER_CHANNELS:
                 if a.dtype.kind == "f":
                     if not np.all(np.isfinite(a)) or np.any(a != np.round(a)):
                         raise ValueError(f"channel {name!r} must hold integers")
+                    if a.size and not np.all(np.abs(a) < 2.0**63):
+                        raise ValueError(f"channel {name!r} holds {float(np.max(np.abs(a)))!r}, beyond the "
+                                         "64-bit signed integers it is kept in")
                 a = a.astype(np.int64, copy=False)
             elif a.dtype.kind in "iub":
                 a = a.astype(np.float64) if a.dtype.kind == "b" else a.astype(np.int64, copy=False)

@@ -305,3 +305,17 @@ def test_writing_into_a_missing_folder_names_it(tmp_path):
 
     with pytest.raises(InputError, match=r"the folder .*no_such_dir does not exist"):
         api.write(PointCloud.from_numpy(np.zeros((3, 3))), tmp_path / "no_such_dir" / "c.csv")
+
+
+def test_integers_beyond_int64_are_refused_not_wrapped():
+    """A uint64 channel of 2⁶³ or more (or an integer channel given as floats beyond ±2⁶³) became a
+    negative int64 with no word (a review); it is refused, naming the channel and the value."""
+    from pointspro.core.cloud import PointCloud
+
+    g = np.zeros(3)
+    with pytest.raises(ValueError, match=r"channel 'flag' holds 18446744073709551615, beyond the 64-bit"):
+        PointCloud.from_xyz(g, g, g, flag=np.array([1, 2, 2**64 - 1], dtype=np.uint64))
+    with pytest.raises(ValueError, match=r"channel 'index' holds 1e\+19, beyond the 64-bit"):
+        PointCloud.from_xyz(g, g, g, index=np.array([1.0, 2.0, 1e19]))
+    kept = PointCloud.from_xyz(g, g, g, flag=np.array([1, 2, 2**63 - 1], dtype=np.uint64))
+    assert kept["flag"].dtype == np.int64 and int(kept["flag"][2]) == 2**63 - 1
