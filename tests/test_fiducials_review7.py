@@ -9,8 +9,10 @@ import pytest
 from pointspro.core import PointCloud
 from pointspro.core.calibration.fiducial_sim import machine_frame, smooth_field
 from pointspro.core.calibration.fiducials import OUTLIER_SIGMA, ball_points, held_out_outliers
+from pointspro.core.errors import StepError
 from pointspro.core.step import Context
 from pointspro.plugins.fiducials import FiducialsStep, fit_centres
+from pointspro.plugins.volumetric import VolumetricStep
 
 EXT = np.array([200.0, 40.0, 50.0])
 LOW = np.array([-100.0, -20.0, 0.0])
@@ -94,3 +96,69 @@ def test_a_blunder_does_not_name_its_neighbours():
         meas, sm = centres(pts, ids)
         o = held_out_outliers(given, meas, np.hypot(sm, 0.2e-3))
         assert [i for i, _, _ in o] == [0], (seed, o)
+
+
+# ---- 2. workpiece points far from every ball ------------------------------------------------------
+
+def apply(tmp_path, res, W):
+    (tmp_path / "m.json").write_text(res.artifacts["volumetric_model.json"])
+    return VolumetricStep().run(PointCloud(machine_frame(W)), VolumetricStep.Params(model="m.json", frame="reference"),
+                                Context(base_dir=tmp_path))
+
+
+def test_points_between_two_planes_of_balls_are_warned_of(tmp_path):
+    # the review's layout: 12 balls on z = 0, 12 on z = 50; the workpiece fills the box between.
+    # measured (seeds 0, 2): 41 % and 40 % of the points > 2 × the 11 mm spacing from every ball;
+    # their 2u coverage 0.77 and 0.70 (0.85, 0.75 near a ball)
+    rng = np.random.default_rng(10_000)
+    ref = LOW + rng.uniform(0, 1, (24, 3)) * EXT
+    ref[:, 2] = np.where(np.arange(24) % 2, 50.0, 0.0)
+    given, pts, ids, _ = simulate(0, layout=ref)
+    res = run_step(tmp_path, given, pts, ids)
+    W = ref.min(0) + rng.uniform(0, 1, (2000, 3)) * np.ptp(ref, axis=0)
+    out = apply(tmp_path, res, W)
+    gap = out.report["far_from_balls"]
+    assert 0.25 < gap["share"] < 0.6 and 8 < gap["spacing_mm"] < 16
+    (w,) = [w for w in out.report["warnings"] if "typical spacing" in w]
+    assert "% of the points" in w and "gap the balls do not sample" in w and "mm" in w
+
+
+def test_a_random_layout_with_its_workpiece_inside_is_not_warned_of(tmp_path):
+    # seed 1 of the review's random layout: 0.1 % of the points beyond 2 × the spacing (GAP_SHARE 5 %)
+    given, pts, ids, _ = simulate(1)
+    res = run_step(tmp_path, given, pts, ids)
+    rng = np.random.default_rng(5)
+    W = given.min(0) + rng.uniform(0, 1, (2000, 3)) * np.ptp(given, axis=0)
+    out = apply(tmp_path, res, W)
+    assert out.report["far_from_balls"]["share"] < 0.05
+    assert not [w for w in out.report["warnings"] if "typical spacing" in w]
+
+
+# ---- 3. nearly collinear balls -------------------------------------------------------------------
+
+@pytest.mark.parametrize("off_um", [0.0, 1.0, 5.0])
+def test_nearly_collinear_balls_are_said_to_be(tmp_path, off_um):
+    # the review: 1 µm off a line read "the measured centres are the reference scaled by 0.98…1.18 — give
+    # both in mm"
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 1, 10)[:, None]
+    ref = np.array([-100, -20, 0]) + t * [200, 40, 50] + rng.normal(0, off_um * 1e-3, (10, 3))
+    pts, ids = ball_points(machine_frame(ref) + rng.normal(0, 3e-4, ref.shape), noise=2e-4)
+    with pytest.raises(StepError, match="collinear") as ei:
+        run_step(tmp_path, ref, pts, ids)
+    assert "in mm" not in str(ei.value)
+    if off_um:
+        assert "nearly collinear" in str(ei.value) and "undetermined across that line" in str(ei.value)
+
+
+# ---- 4. two balls under one id -------------------------------------------------------------------
+
+def test_two_balls_under_one_id_are_said_to_be(tmp_path):
+    # the review: "not on a sphere … a free sphere fits them with diameter 1.02e+04 mm … check `diameter`"
+    rng = np.random.default_rng(0)
+    ref = LOW + rng.uniform(0, 1, (12, 3)) * EXT
+    pts, ids = ball_points(machine_frame(ref), noise=2e-4)
+    ids = np.where(ids == 12, 11, ids)
+    with pytest.raises(StepError, match=r"fiducial 11: its 40 points form 2 clusters") as ei:
+        run_step(tmp_path, ref, pts, ids)
+    assert "diameter" in str(ei.value) and "own id" in str(ei.value) and "check `diameter`" not in str(ei.value)

@@ -58,6 +58,22 @@ def fit_centres(cloud, diameter):
         f = fit_sphere(p, None if diameter is None else diameter / 2)
         rms = float(np.sqrt(np.mean(f.residuals**2)))
         if rms > 0.01 * (diameter or 10.0):
+            # a review: two balls measured under one id read "a free sphere fits them with diameter 1.02e+04 mm
+            # — check `diameter`". Single-linkage clusters cut at 0.4 × the diameter (a probed patch's points
+            # lie ~1.5 mm apart; two balls' top patches, 6 mm wide, ≥ 4 mm apart), named when their centroids
+            # stand more than ~a diameter apart (two balls' centres are at least one apart)
+            from scipy.cluster.hierarchy import fcluster, linkage
+
+            dia = diameter or 10.0
+            if len(p) > 1:
+                lab = fcluster(linkage(p, "single"), t=0.4 * dia, criterion="distance")
+                k = int(lab.max())
+                cen = np.array([p[lab == j].mean(axis=0) for j in range(1, k + 1)])
+                gap = float(np.max(np.linalg.norm(cen[:, None] - cen[None], axis=-1)))
+                if k > 1 and gap > 0.95 * dia:
+                    raise StepError(f"fiducial {i}: its {len(p)} points form {k} clusters up to {gap:.4g} mm apart "
+                                    f"(more than a ball's diameter, {dia:g} mm) — {k} balls measured under one "
+                                    "id? Give each ball its own id in the `fiducial` channel")
             hint = ""
             if diameter is not None:
                 # a review: Ø12.7 mm balls under the default 9.997 mm read only "not on a sphere"
