@@ -539,6 +539,35 @@ def _collinear(s: _Search, name: str) -> bool:
     return bool(np.max(uncentred_vif(s.D.gram(cols))) > VIF_LIMIT)
 
 
+#: an effect whose fitted part (RMS, piston aside) is more than this many times the gap's own RMS is
+#: cancelled by another: two look-alikes entered with absurd, opposite values (a review: thermal drift
+#: + straightness on a raster over a rotational asphere read z_scale 0.0099 and a tip radius of
+#: −1.96 mm, each ~300 × the 5.3 nm gap, VIF 1.7e6 — below VIF_LIMIT). Effects that explain the gap
+#: are at most about its size. (Each part against its own share of the fit would be √VIF for one
+#: column: 10 there is VIF 100, and a true drift had VIF 98.)
+CANCEL_LIMIT = 10.0
+
+
+def _cancels(s: _Search, cols: list[int]) -> bool:
+    """Whether any chosen candidate in the fit on ``cols`` (the piston first) has a fitted part above
+    CANCEL_LIMIT × the gap's RMS (both about their means), from the Gram matrix."""
+    D = s.D
+    piston = D.index["_piston"][0]
+    G = D.gram(cols)
+    beta = np.linalg.lstsq(G, D.b[cols], rcond=1e-12)[0]
+    N = D.g.size
+    gap2 = D.gg - D.b[piston] ** 2 / N
+    at = {c: j for j, c in enumerate(cols)}
+    names = [nm for nm, ix in D.index.items() if nm != "_piston" and ix and ix[0] in at and all(c in at for c in ix)]
+    for nm in names:
+        j = [at[c] for c in D.index[nm]]
+        m = G[at[piston], j] / N  # the columns' means (the piston is a column of ones)
+        part2 = float(beta[j] @ (G[np.ix_(j, j)] - N * np.outer(m, m)) @ beta[j])
+        if part2 > CANCEL_LIMIT ** 2 * max(gap2, 1e-300):
+            return True
+    return False
+
+
 def _tie_threshold(sigma: float, a: Candidate, b: Candidate) -> float:
     return sigma * sigma * stats.chi2.ppf(0.999, max(a.n_params, b.n_params))
 
@@ -697,6 +726,88 @@ def _refine(s: _Search, sigma: float) -> None:
     _restate_evidence(s)
 
 
+def _physical_set(s: _Search, i: int, sigma: float) -> tuple[list[str], float, float, list[list[str]]] | None:
+    """For the catch-all named at stage i: sets of two or three physical candidates, each of which
+    enters beside the other stages alone, with no more parameters in all than the catch-all; of those
+    that fit as well as the catch-all (the χ² tie threshold of the larger parameter count), in which
+    every member still enters beside the others (the stage's test, Bonferroni over the physical
+    candidates) and none cancels another (_cancels), the one of fewest parameters, then lowest SSR.
+    Returns its candidates' names, its SSR, the catch-all's SSR and the other such sets that fit as well
+    as it (names, SSR); else None."""
+    from itertools import combinations
+
+    st = s.stages[i]
+    catch = s.by_name[st.candidate]
+    piston = list(s.D.index["_piston"])
+    others = piston + [c for j, o in enumerate(s.stages) if j != i for c in s.D.index[o.candidate]]
+    taken = {o.candidate for j, o in enumerate(s.stages) if j != i}
+    pool = [g for g in s.groups if not g.catch_all and g.name in s.D.index and g.name not in taken]
+    ssr0 = s.D.ssr(others)[0]
+    ssr_catch = s.D.ssr(others + s.D.index[catch.name])[0]
+    single = [g for g in pool if g.n_params < catch.n_params and enters(candidate(s.D, others, g, ssr0, len(pool)))]
+    fits = []
+    for k in (2, 3):
+        for combo in combinations(single, k):
+            n = sum(g.n_params for g in combo)
+            if n > catch.n_params:
+                continue
+            cols = others + [c for g in combo for c in s.D.index[g.name]]
+            ssr = s.D.ssr(cols)[0]
+            if not ssr - ssr_catch < sigma * sigma * stats.chi2.ppf(0.999, catch.n_params):
+                continue
+            each = all(enters(candidate(s.D, [c for c in cols if c not in set(s.D.index[g.name])], g,
+                                        s.D.ssr([c for c in cols if c not in set(s.D.index[g.name])])[0], len(pool)))
+                       for g in combo)
+            if each and not _cancels(s, cols):
+                fits.append((n, ssr, [g.name for g in combo]))
+    if not fits:
+        return None
+    fits.sort(key=lambda f: (f[0], f[1]))
+    n, ssr, named = fits[0]
+    # the other sets that fit as well as this one (not only as well as the catch-all)
+    rivals = [(f[2], f[1]) for f in fits[1:] if f[1] - ssr < sigma * sigma * stats.chi2.ppf(0.999, max(n, f[0]))]
+    return named, ssr, ssr_catch, rivals
+
+
+def _catch_all_sets(s: _Search, sigma: float) -> None:
+    """A catch-all still named after _refine is judged against several physical effects together: its
+    field can hold two of them at once (a review: z_scale + a tip radius on an anamorphic asphere,
+    x²/Rx + y²/Ry and x²/Rx² + y²/Ry² — the 5-parameter volumetric was named alone, 6 of 6 cases).
+    Where a set of physical effects with no more parameters fits as well (_physical_set), the set is
+    named in the catch-all's place, each member reported ambiguous with the catch-all, and with the
+    member that takes its place in another set that fits as well (one swapped)."""
+    i = 0
+    changed = False
+    while i < len(s.stages):
+        st = s.stages[i]
+        got = _physical_set(s, i, sigma) if s.by_name[st.candidate].catch_all else None
+        if got is None:
+            i += 1
+            continue
+        chosen, ssr, ssr_catch, rivals = got
+        names = [s.by_name[c].effect for c in chosen]
+        new = []
+        for c in chosen:
+            gr = s.by_name[c]
+            amb = [{"effect": st.effect, "harmonic": None, "ssr_excess": float(ssr_catch - ssr),
+                    "note": f"{' + '.join(names)} together fit as well as {st.effect}"}]
+            for r, ssr_r in rivals:  # another set that fits as well, with this member swapped for another
+                rest = set(r) - set(chosen)
+                if set(chosen) - set(r) == {c} and len(rest) == 1:
+                    o = s.by_name[rest.pop()]
+                    if o.effect not in names and all(a["effect"] != o.effect for a in amb):
+                        amb.append({"effect": o.effect, "harmonic": o.harmonic, "ssr_excess": float(ssr_r - ssr),
+                                    "note": f"in place of {gr.effect} beside the others"})
+            amb += [a for a in st.ambiguous_with if a["effect"] not in names and "candidate" not in a]
+            new.append(Stage(gr.effect, 0.0, 0.0, 0.0, 0.0, 0.0, amb, candidate=gr.name, harmonic=gr.harmonic,
+                             n_candidates=st.n_candidates))
+        s.stages[i:i + 1] = new
+        i += len(new)
+        changed = True
+    if changed:
+        _restate_evidence(s)
+
+
 def _restate_evidence(s: _Search) -> None:
     """Each stage's evidence (F, p, ΔBIC against the stages before it) computed again in their order,
     and the fit on them all — after _refine swapped a choice, or _correlated_noise_gate dropped a stage."""
@@ -726,7 +837,8 @@ def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
         if not entering:
             break
         named, tie = _choose(s, entering, sigma)
-        while _collinear(s, named.effect):  # cannot be estimated beside the chosen: never enters
+        # cannot be estimated beside the chosen, or cancels one of them: never enters
+        while _collinear(s, named.effect) or _cancels(s, s.cols + s.D.index[named.effect]):
             entering = [c for c in entering if c is not named]
             if not entering:
                 break
@@ -737,6 +849,7 @@ def forward_search(s: _Search, sigma: float, max_effects: int) -> _Search:
             break
         _add(s, named, _ambiguous_with(s, named, tie, sigma), len(names))
     _refine(s, sigma)
+    _catch_all_sets(s, sigma)
     _synchronous_lines(s, sigma)
     return s
 
