@@ -115,3 +115,15 @@ def test_heavy_tails_are_reported_instead_of_the_gaussian_rate():
         assert rep["false_positive_rate"] is None, seed
         assert [m for m in rep["warnings"] if "heavier than Gaussian" in m], seed
         assert rep["tail_shell_share"] > 10 * rep["tail_shell_share_normal"], seed
+
+
+def test_a_window_of_few_spacings_is_warned_of():
+    """Review 7: at a = 2.5 mean spacings digs of 20 / 30 points were found 0.72 / 0.01 (1.00 at 4 ×):
+    the report says so below 3 spacings (of the bounding box), not at 4."""
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(-20, 20, 16000), rng.uniform(-20, 20, 16000)  # mean spacing 0.32 mm
+    d = rng.normal(0, 20e-6, len(x))
+    small = run(PointCloud.from_xyz(x, y, d), window=0.8).report["warnings"]
+    assert [m for m in small if "mean point spacings" in m and "a ≥ 1.3 mm" in m], small
+    assert not [m for m in run(PointCloud.from_xyz(x, y, d), window=1.3).report["warnings"]
+                if "mean point spacings" in m]
