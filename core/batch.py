@@ -489,7 +489,10 @@ def read_warning(cloud) -> str | None:
     point is dropped whole, whichever column it was (docs/formats.md); None when none were."""
     meta = getattr(cloud, "meta", None) or {}
     n = meta.get("invalid_dropped") or 0
-    if not n:
+    # the readers of rows (x y z text, PointsPro .npz, PCD/PTS), where the option `invalid` applies; an
+    # instrument map's masked pixels (outside the aperture, every interferometer file) are no news (a
+    # review: opd, sur and x3p maps were warned of, with advice that does not apply to them)
+    if not n or not ("invalid_columns" in meta or meta.get("format") in ("npz", "pcd", "pts")):
         return None
     cols = meta.get("invalid_columns") or {}
     where = (" in " + ", ".join(f"{c} ({k})" for c, k in cols.items())) if cols else ""

@@ -83,7 +83,7 @@ class PointCloud:
                 if a.dtype.kind == "f":
                     if not np.all(np.isfinite(a)) or np.any(a != np.round(a)):
                         raise ValueError(f"channel {name!r} must hold integers")
-                    if a.size and not np.all(np.abs(a) < 2.0**63):
+                    if a.size and not np.all((a >= -(2.0**63)) & (a < 2.0**63)):
                         raise ValueError(f"channel {name!r} holds {float(np.max(np.abs(a)))!r}, beyond the "
                                          "64-bit signed integers it is kept in")
                 a = a.astype(np.int64, copy=False)

@@ -317,5 +317,6 @@ def test_integers_beyond_int64_are_refused_not_wrapped():
         PointCloud.from_xyz(g, g, g, flag=np.array([1, 2, 2**64 - 1], dtype=np.uint64))
     with pytest.raises(ValueError, match=r"channel 'index' holds 1e\+19, beyond the 64-bit"):
         PointCloud.from_xyz(g, g, g, index=np.array([1.0, 2.0, 1e19]))
+    assert int(PointCloud.from_xyz(g, g, g, line=np.array([1.0, 2.0, -(2.0**63)]))["line"][2]) == -(2**63)
     kept = PointCloud.from_xyz(g, g, g, flag=np.array([1, 2, 2**63 - 1], dtype=np.uint64))
     assert kept["flag"].dtype == np.int64 and int(kept["flag"][2]) == 2**63 - 1

@@ -392,6 +392,7 @@ def test_npz_reads_back_in_the_frame_it_states(tmp_path):
     """A batch's cloud.npz after `misalignment` is in the part frame and says so; it read back as
     "measuring" (as every other file) until 2026-11-27. A frame that is neither is refused, named."""
     assert read_cloud(_npz(tmp_path / "m.npz")).frame == "measuring"
+    assert read_cloud(_npz(tmp_path / "n.npz", lambda a, m: m.update(frame=None))).frame == "measuring"
     assert read_cloud(_npz(tmp_path / "p.npz", lambda a, m: m.update(frame="part"))).frame == "part"
     p = _npz(tmp_path / "w.npz", lambda a, m: m.update(frame="world"))
     with pytest.raises(InputError, match=r"w.npz: pointspro_meta's frame 'world' is not one of "

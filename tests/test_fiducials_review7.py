@@ -162,3 +162,36 @@ def test_two_balls_under_one_id_are_said_to_be(tmp_path):
     with pytest.raises(StepError, match=r"fiducial 11: its 40 points form 2 clusters") as ei:
         run_step(tmp_path, ref, pts, ids)
     assert "diameter" in str(ei.value) and "own id" in str(ei.value) and "check `diameter`" not in str(ei.value)
+
+
+def _probed(centres, radius, directions):
+    return np.vstack([c + radius * directions for c in centres]), np.repeat(np.arange(1, len(centres) + 1),
+                                                                             len(directions))
+
+
+@pytest.mark.parametrize("points", [5, 9])
+def test_a_wrong_diameter_with_sparse_probing_is_named_as_such(points):
+    """A review of the cluster test: a Ø12.7 ball probed the usual way (4 points on the equator and
+    the pole, or 9) under the default 9.997 mm read "5 balls measured under one id?"; the clusters are
+    looked for only when a free sphere does not fit either, and a cluster needs 3 points."""
+    eq = np.array([[1.0, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]])
+    a = np.deg2rad([45.0, 135, 225, 315])
+    mid = np.column_stack([np.cos(a) * np.sqrt(0.5), np.sin(a) * np.sqrt(0.5), np.full(4, np.sqrt(0.5))])
+    d = np.vstack([eq, [[0, 0, 1.0]]] + ([mid] if points == 9 else []))
+    pts, ids = _probed(np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]]), 6.35, d)
+    with pytest.raises(StepError, match=r"fiducial 1: the points are not on a sphere .* a free sphere fits "
+                                        r"them with diameter 12\.7 mm, not the 9\.997 mm given"):
+        fit_centres(PointCloud.from_xyz(*pts.T, fiducial=ids), 9.997)
+    assert len(fit_centres(PointCloud.from_xyz(*pts.T, fiducial=ids), 12.7)) == 4
+
+
+def test_one_far_off_point_is_no_second_ball():
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(30, 3))
+    u[:, 2] = np.abs(u[:, 2])
+    d = u / np.linalg.norm(u, axis=1)[:, None]
+    pts, ids = _probed(np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]]), 5.0, d)
+    pts[3] += [0.0, 0.0, 12.0]  # a mis-probed point 12 mm above ball 1
+    with pytest.raises(StepError, match=r"fiducial 1: the points are not on a sphere") as ei:
+        fit_centres(PointCloud.from_xyz(*pts.T, fiducial=ids), 10.0)
+    assert "under one id" not in str(ei.value)

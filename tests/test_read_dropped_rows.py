@@ -66,3 +66,27 @@ def test_the_batch_warns_and_the_report_says_which_columns(tmp_path, run_cli):
     rep = json.loads((tmp_path / "o" / "part" / "report.json").read_text(encoding="utf-8"))
     assert rep["input_file"]["invalid_dropped"] == n_bad
     assert rep["input_file"]["invalid_columns"] == {"quality": n_bad}
+
+
+def test_an_instrument_map_s_masked_pixels_are_no_warning():
+    """A review of the warning: every interferometer map with pixels masked outside its aperture (opd-1:
+    116 of 640 × 480) was warned of, with advice (`invalid: error`) that does not apply to maps."""
+    c = read_cloud(Path(__file__).resolve().parent / "data" / "realdata" / "opd-1.opd")
+    assert c.meta["invalid_dropped"] > 0 and read_warning(c) is None
+
+
+def test_a_point_file_s_dropped_rows_are_warned_of_without_columns(tmp_path):
+    from pointspro.core.cloud import PointCloud
+    from pointspro.core.io.npz import write_npz_cloud
+
+    g = np.linspace(0.0, 1.0, 20)
+    z = g.copy()
+    z[4] = np.nan
+    write_npz_cloud(PointCloud.from_xyz(g, g, np.nan_to_num(z)), tmp_path / "c.npz")
+    with np.load(tmp_path / "c.npz") as f:
+        arrays = dict(f)
+    arrays["z"] = z
+    np.savez(tmp_path / "c.npz", **arrays)
+    c = read_cloud(tmp_path / "c.npz")
+    assert read_warning(c) == ("1 row(s) dropped on reading, each point whole: a NaN or infinite value — the "
+                               "recipe's input: {invalid: error} refuses such a file instead")

@@ -88,7 +88,7 @@ def read_npz(path: Path, invalid: str = "drop"):
             raise InputError(f"{path}: array '{name}' has {len(a)} values where 'x' has {n} — the "
                              "columns differ in length")
     xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")]).astype(np.float64)
-    frame = meta.get("frame", "measuring")
+    frame = meta.get("frame") or "measuring"  # none stated: the measuring frame, as every file
     if frame not in FRAMES:
         raise InputError(f"{path}: {META_KEY}'s frame {frame!r} is not one of {', '.join(FRAMES)}")
     # the frame the cloud was written in: a batch's cloud after `misalignment` is in the part frame

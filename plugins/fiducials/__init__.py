@@ -57,7 +57,9 @@ def fit_centres(cloud, diameter):
             raise StepError(f"fiducial {i}: {len(p)} points — a ball needs at least 5")
         f = fit_sphere(p, None if diameter is None else diameter / 2)
         rms = float(np.sqrt(np.mean(f.residuals**2)))
-        if rms > 0.01 * (diameter or 10.0):
+        free = fit_sphere(p, None) if rms > 0.01 * (diameter or 10.0) and diameter is not None else None
+        free_fits = free is not None and np.sqrt(np.mean(free.residuals**2)) < 0.2 * rms
+        if rms > 0.01 * (diameter or 10.0) and not free_fits:
             # a review: two balls measured under one id read "a free sphere fits them with diameter 1.02e+04 mm
             # — check `diameter`". Single-linkage clusters cut at 0.4 × the diameter (a probed patch's points
             # lie ~1.5 mm apart; two balls' top patches, 6 mm wide, ≥ 4 mm apart), named when their centroids
@@ -67,19 +69,23 @@ def fit_centres(cloud, diameter):
             dia = diameter or 10.0
             if len(p) > 1:
                 lab = fcluster(linkage(p, "single"), t=0.4 * dia, criterion="distance")
-                k = int(lab.max())
-                cen = np.array([p[lab == j].mean(axis=0) for j in range(1, k + 1)])
+                # clusters of 3 points or more: one far-off mis-probed point is no second ball
+                big = [j for j in range(1, int(lab.max()) + 1) if np.count_nonzero(lab == j) >= 3]
+                k = len(big)
+                cen = np.array([p[lab == j].mean(axis=0) for j in big]) if big else np.zeros((1, 3))
                 gap = float(np.max(np.linalg.norm(cen[:, None] - cen[None], axis=-1)))
                 if k > 1 and gap > 0.95 * dia:
                     raise StepError(f"fiducial {i}: its {len(p)} points form {k} clusters up to {gap:.4g} mm apart "
                                     f"(more than a ball's diameter, {dia:g} mm) — {k} balls measured under one "
                                     "id? Give each ball its own id in the `fiducial` channel")
+        if rms > 0.01 * (diameter or 10.0):
             hint = ""
-            if diameter is not None:
-                # a review: Ø12.7 mm balls under the default 9.997 mm read only "not on a sphere"
-                free = fit_sphere(p, None)
+            if free is not None:
+                # a review: Ø12.7 mm balls under the default 9.997 mm read only "not on a sphere"; the
+                # clusters above are not looked for when a free sphere fits (5 points of one Ø12.7 ball
+                # read "5 balls measured under one id?" — a review of the cluster test)
                 d_free = 2 * float(free.params["radius"])
-                if np.sqrt(np.mean(free.residuals**2)) < 0.2 * rms and abs(d_free - diameter) > 0.01 * diameter:
+                if free_fits and abs(d_free - diameter) > 0.01 * diameter:
                     hint = (f" — a free sphere fits them with diameter {d_free:.4g} mm, not the {diameter:g} mm "
                             "given: check `diameter` (empty: fitted freely)")
             raise StepError(f"fiducial {i}: the points are not on a sphere (fit RMS {rms * 1e3:.3g} µm){hint}")
