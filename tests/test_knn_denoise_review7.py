@@ -119,11 +119,68 @@ def test_heavy_tails_are_reported_instead_of_the_gaussian_rate():
 
 def test_a_window_of_few_spacings_is_warned_of():
     """Review 7: at a = 2.5 mean spacings digs of 20 / 30 points were found 0.72 / 0.01 (1.00 at 4 ×):
-    the report says so below 3 spacings (of the bounding box), not at 4."""
+    the report says so below 3 spacings (from the local density, robust.local_spacing), not at 4."""
     rng = np.random.default_rng(1)
     x, y = rng.uniform(-20, 20, 16000), rng.uniform(-20, 20, 16000)  # mean spacing 0.32 mm
     d = rng.normal(0, 20e-6, len(x))
     small = run(PointCloud.from_xyz(x, y, d), window=0.8).report["warnings"]
-    assert [m for m in small if "mean point spacings" in m and "a ≥ 1.3 mm" in m], small
+    assert [m for m in small if "2.5 point spacings (0.314 mm)" in m and "a ≥ 1.3 mm" in m], small
     assert not [m for m in run(PointCloud.from_xyz(x, y, d), window=1.3).report["warnings"]
-                if "mean point spacings" in m]
+                if "point spacings" in m]
+
+
+def _pitted(sigma, depth, kind, seed=7, R=25.0, n=60_000, size=30):
+    """16 smooth defects of ``size`` points on a square raster (a review's generator): Gaussian pits or
+    bumps, or conical pits, ``depth`` mm, on noise of ``sigma`` mm."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    s = np.sqrt(np.pi * R * R / n)
+    x, y = disc_raster(R, s)
+    d = rng.normal(0, sigma, len(x)) if sigma else np.zeros(len(x))
+    tree = cKDTree(np.column_stack([x, y]))
+    truth = np.zeros(len(x), bool)
+    for cx in (-12.0, -4.0, 4.0, 12.0):
+        for cy in (-12.0, -4.0, 4.0, 12.0):
+            _, nb = tree.query([cx + rng.uniform(-1, 1) * s, cy + rng.uniform(-1, 1) * s], k=size)
+            rr = np.hypot(x[nb] - cx, y[nb] - cy)
+            rr = rr / (rr.max() + 1e-12)
+            prof = {"pit": np.exp(-2 * rr**2), "bump": -np.exp(-2 * rr**2), "cone": 1 - 0.8 * rr}[kind]
+            d[nb] -= depth * prof
+            truth[nb] = True
+    return x, y, d, truth, 4 * s
+
+
+@pytest.mark.parametrize("kind", ["pit", "bump", "cone"])
+@pytest.mark.parametrize("depth", [200e-6, 1e-3])
+def test_smooth_defects_on_low_noise_are_found(kind, depth):
+    """A review of the noise-free rule's first version: on 1 nm noise the floor sets the threshold too,
+    and 30-point Gaussian pits and bumps 200 nm – 1 µm deep were found 0 of 480 (480 before), conical
+    pits 30 of 480 — they taper like form. The rule now acts on noise-free data only."""
+    x, y, d, truth, a = _pitted(1e-6, depth, kind)
+    res = run(PointCloud.from_xyz(x, y, d), window=a)
+    kept = np.isin(np.arange(len(x)), res.cloud["index"])
+    assert np.count_nonzero(truth & ~kept) >= 0.95 * truth.sum() and np.count_nonzero(~truth & ~kept) == 0
+    assert res.report["kept_as_form"] == 0
+
+
+def test_noise_free_cones_are_kept_as_form_and_said():
+    """On noise-free data a conical pit cannot be told from a cone tip's form: kept, counted and warned."""
+    x, y, d, truth, a = _pitted(0.0, 200e-6, "cone")
+    res = run(PointCloud.from_xyz(x, y, d), window=a)
+    assert res.report["kept_as_form"] > 0
+    assert any("kept as form" in w for w in res.report["warnings"])
+
+
+def test_the_window_warning_judges_the_spacing_where_the_points_are():
+    """The spacing was the bounding box's √(area / n): on an annulus (0.9–1 R) a window of 4 local
+    spacings read 1.5, and a disc with one stray point at 5 R read 1.2 (a review)."""
+    rng = np.random.default_rng(3)
+    x, y = disc_raster(25.0, 0.36)
+    ring = np.hypot(x, y) >= 22.5
+    for xs, ys in ((x[ring], y[ring]), (np.r_[x, 125.0], np.r_[y, 0.0])):
+        d = rng.normal(0, 2e-5, len(xs))
+        res = run(PointCloud.from_xyz(xs, ys, d), window=4 * 0.36)
+        assert not any("point spacings" in w for w in res.report["warnings"]), res.report["warnings"]
+    res = run(PointCloud.from_xyz(x, y, rng.normal(0, 2e-5, len(x))), window=2 * 0.36)
+    assert any("window a = 0.72 mm is 2 point spacings" in w for w in res.report["warnings"])

@@ -300,7 +300,7 @@ def remove_robust(x, y, d, params: KnnDenoiseParams, progress) -> Removal:
     pos = np.flatnonzero(bad)
     entries = {"robust_sigma_um": r.sigma_global * 1e3, "threshold_sigma": params.sigma(),
                "floor_um": params.floor * 1e3, "false_positive_rate": claimed_rate(params.sigma()),
-               "grown": r.grown, "unjudged": r.unjudged}
+               "grown": r.grown, "unjudged": r.unjudged, "kept_as_form": r.kept_as_form}
     warnings = []
     k = params.sigma()
     sg = r.sigma_global
@@ -311,7 +311,8 @@ def remove_robust(x, y, d, params: KnnDenoiseParams, progress) -> Removal:
         # what keeps noise-free data whole, so it is not lowered here — the report says it
         warnings.append(f"the floor ({params.floor * 1e6:.3g} nm), not the noise (robust σ "
                         f"{sg * 1e6:.3g} nm), sets the threshold: deviations below the floor are not looked "
-                        f"for; floor: {6 * sg:.2g} would look for spikes at 6 σ of this noise (and may take "
+                        f"for; floor: {6 * sg:.2g} (mm, {6 * sg * 1e6:.2g} nm) would look for spikes at 6 σ "
+                        "of this noise (and may take "
                         "form error of noise-free regions with them)")
     # the claimed rate holds for Gaussian noise only: measure the tail where the noise sets the threshold,
     # the share of unflagged points in the shell 0.7–1 × threshold_sigma σ(P) against the normal's
@@ -322,9 +323,11 @@ def remove_robust(x, y, d, params: KnnDenoiseParams, progress) -> Removal:
     lo = TAIL_SHELL * k
     shell = int(np.count_nonzero(judged & (zs >= lo) & (zs < k)))
     expected = float(judged.sum()) * (claimed_rate(lo) - claimed_rate(k))
-    if judged.any():
-        entries["tail_shell_share"] = shell / float(judged.sum())
-        entries["tail_shell_share_normal"] = expected / float(judged.sum())
+    # the shell's share of the judged points, and the normal's; null where none is judged (the floor
+    # sets every threshold): the keys are always there (a review)
+    entries["tail_shell_sigma"] = [lo, float(k)]
+    entries["tail_shell_share"] = shell / float(judged.sum()) if judged.any() else None
+    entries["tail_shell_share_normal"] = expected / float(judged.sum()) if judged.any() else None
     if shell >= 20 and shell > TAIL_HEAVY * expected:
         entries["false_positive_rate"] = None
         warnings.append(f"the noise's tails are heavier than Gaussian: {shell} points lie between "
@@ -332,12 +335,17 @@ def remove_robust(x, y, d, params: KnnDenoiseParams, progress) -> Removal:
                         f"false-positive rate is not {claimed_rate(k):.2g}; points of the tail beyond "
                         f"{k:g} σ are removed as outliers (raise threshold_sigma to keep them)")
     # review 7: at a = 2.5 mean spacings digs of 20 / 30 points were found 0.72 / 0.01 (1.00 at 4)
-    area = max(float(np.ptp(x) * np.ptp(y)), 1e-300)
-    mean_spacing = np.sqrt(area / len(x))  # of the bounding box: 1.13 × a disc's own
-    if params.window < SMALL_WINDOW * mean_spacing:
-        warnings.append(f"window a = {params.window:g} mm is {params.window / mean_spacing:.2g} mean point "
-                        f"spacings ({mean_spacing:.3g} mm): a dig of 20 or more points fills much of the "
-                        f"window and may be missed — a ≥ {4 * mean_spacing:.2g} mm finds them")
+    from .robust import local_spacing
+
+    spacing = local_spacing(x, y)  # from the local density: an annulus or a stray point misled the box's
+    if params.window < SMALL_WINDOW * spacing:
+        warnings.append(f"window a = {params.window:g} mm is {params.window / spacing:.2g} point "
+                        f"spacings ({spacing:.3g} mm): a dig of 20 or more points fills much of the "
+                        f"window and may be missed — a ≥ {4 * spacing:.2g} mm finds them")
+    if r.kept_as_form:
+        warnings.append(f"{r.kept_as_form} point(s) that stand out were kept as form: on noise-free data a "
+                        "deviation that ramps into its surroundings (a cone tip, a crease, a roll-off) is "
+                        "taken for form, not a defect (kept_as_form)")
     if r.unjudged:
         warnings.append(f"{r.unjudged} points had fewer than 3 others in their window and were not judged")
     return Removal(keep, pos.tolist(), score[pos].tolist(), score[keep], threshold, r.rounds, entries, warnings)
