@@ -127,6 +127,10 @@ def test_a_window_of_few_spacings_is_warned_of():
     assert [m for m in small if "2.5 point spacings (0.314 mm)" in m and "a ≥ 1.3 mm" in m], small
     assert not [m for m in run(PointCloud.from_xyz(x, y, d), window=1.3).report["warnings"]
                 if "point spacings" in m]
+    # a CMM's sparse pattern (paper 002: a = the spacing; its outliers are single points): no warning —
+    # the example's 4,680-point star read "0.98 point spacings … a ≥ 61 mm finds them" at every run
+    sparse = run(PointCloud.from_xyz(x[:4000], y[:4000], d[:4000]), window=0.8).report["warnings"]
+    assert not [m for m in sparse if "point spacings" in m], sparse
 
 
 def _pitted(sigma, depth, kind, seed=7, R=25.0, n=60_000, size=30):

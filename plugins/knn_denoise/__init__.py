@@ -44,7 +44,10 @@ from .omega import OmegaGrid
 from .peers import hampel, knn_mean_distance, statistical_open3d
 
 MAX_ROUNDS = 50
-SMALL_WINDOW = 3.0  # robust: a window below this many mean spacings (of the bounding box) is warned of
+SMALL_WINDOW = 3.0  # robust: a window below this many point spacings (robust.local_spacing) is warned of …
+DENSE_POINTS = 10_000  # … on a dense scan: digs of 20+ points are its defects; a CMM's sparse pattern
+# (the example: 4,680 points of a star, a = the spacing as paper 002 sets it) has one-point outliers, and
+# "a ≥ 61 mm" would be wrong advice there, printed at every run
 TAIL_SHELL = 0.7   # robust: the tail is measured between this fraction of threshold_sigma and threshold_sigma
 TAIL_HEAVY = 4.0   # … and called heavy beyond this many times the normal's share (and at least 20 points)
 # a candidate is removed in this round when its ω is at least this fraction of the largest ω near it
@@ -338,7 +341,7 @@ def remove_robust(x, y, d, params: KnnDenoiseParams, progress) -> Removal:
     from .robust import local_spacing
 
     spacing = local_spacing(x, y)  # from the local density: an annulus or a stray point misled the box's
-    if params.window < SMALL_WINDOW * spacing:
+    if params.window < SMALL_WINDOW * spacing and len(x) >= DENSE_POINTS:
         warnings.append(f"window a = {params.window:g} mm is {params.window / spacing:.2g} point "
                         f"spacings ({spacing:.3g} mm): a dig of 20 or more points fills much of the "
                         f"window and may be missed — a ≥ {4 * spacing:.2g} mm finds them")
