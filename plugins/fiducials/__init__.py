@@ -57,9 +57,10 @@ def fit_centres(cloud, diameter):
             raise StepError(f"fiducial {i}: {len(p)} points — a ball needs at least 5")
         f = fit_sphere(p, None if diameter is None else diameter / 2)
         rms = float(np.sqrt(np.mean(f.residuals**2)))
-        free = fit_sphere(p, None) if rms > 0.01 * (diameter or 10.0) and diameter is not None else None
+        off_sphere = rms > 0.01 * (diameter or 10.0)
+        free = fit_sphere(p, None) if off_sphere and diameter is not None else None
         free_fits = free is not None and np.sqrt(np.mean(free.residuals**2)) < 0.2 * rms
-        if rms > 0.01 * (diameter or 10.0) and not free_fits:
+        if off_sphere and not free_fits:
             # a review: two balls measured under one id read "a free sphere fits them with diameter 1.02e+04 mm
             # — check `diameter`". Single-linkage clusters cut at 0.4 × the diameter (a probed patch's points
             # lie ~1.5 mm apart; two balls' top patches, 6 mm wide, ≥ 4 mm apart), named when their centroids
@@ -78,7 +79,7 @@ def fit_centres(cloud, diameter):
                     raise StepError(f"fiducial {i}: its {len(p)} points form {k} clusters up to {gap:.4g} mm apart "
                                     f"(more than a ball's diameter, {dia:g} mm) — {k} balls measured under one "
                                     "id? Give each ball its own id in the `fiducial` channel")
-        if rms > 0.01 * (diameter or 10.0):
+        if off_sphere:
             hint = ""
             if free is not None:
                 # a review: Ø12.7 mm balls under the default 9.997 mm read only "not on a sphere"; the
