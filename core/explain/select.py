@@ -755,10 +755,7 @@ def _physical_set(s: _Search, i: int, sigma: float) -> tuple[list[str], float, f
             ssr = s.D.ssr(cols)[0]
             if not ssr - ssr_catch < sigma * sigma * stats.chi2.ppf(0.999, catch.n_params):
                 continue
-            each = all(enters(candidate(s.D, [c for c in cols if c not in set(s.D.index[g.name])], g,
-                                        s.D.ssr([c for c in cols if c not in set(s.D.index[g.name])])[0], len(pool)))
-                       for g in combo)
-            if each and not _cancels(s, cols):
+            if all(_enters_beside(s, cols, g, len(pool)) for g in combo) and not _cancels(s, cols):
                 fits.append((n, ssr, [g.name for g in combo]))
     if not fits:
         return None
@@ -767,6 +764,14 @@ def _physical_set(s: _Search, i: int, sigma: float) -> tuple[list[str], float, f
     # the other sets that fit as well as this one (not only as well as the catch-all)
     rivals = [(f[2], f[1]) for f in fits[1:] if f[1] - ssr < sigma * sigma * stats.chi2.ppf(0.999, max(n, f[0]))]
     return named, ssr, ssr_catch, rivals
+
+
+def _enters_beside(s: _Search, cols: list[int], g, family: int) -> bool:
+    """Whether candidate ``g`` passes the stage's entry test beside the rest of ``cols`` (its own columns
+    taken out)."""
+    own = set(s.D.index[g.name])
+    rest = [c for c in cols if c not in own]
+    return enters(candidate(s.D, rest, g, s.D.ssr(rest)[0], family))
 
 
 def _catch_all_sets(s: _Search, sigma: float) -> None:
