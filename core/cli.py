@@ -382,7 +382,8 @@ def _interrupted(args, run: _BatchRun) -> int:
             run.hold(out)
         cleanup_partials(out, [*run.stems, "summary.json"])
         write_summary(out, Path(args.files[0]), entries, workers=run.workers, scheduler=args.scheduler,
-                      seconds=time.perf_counter() - run.t0, interrupted=True)
+                      seconds=time.perf_counter() - run.t0, interrupted=True, figures=args.figures,
+                      overrides=list(args.overrides))
     except (PointsProError, OSError):
         pass  # not ours to write, or another batch is writing it: the line below says enough
     print(table(entries), file=sys.stderr)
@@ -477,7 +478,8 @@ def _batch(args, recipe_path: Path, pool, run: _BatchRun) -> int:
 
     entries = [results.get(str(p)) or entry(str(p), "not run") for p in inputs]
     write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
-                  scheduler=args.scheduler, seconds=time.perf_counter() - t0, interrupted=interrupted)
+                  scheduler=args.scheduler, seconds=time.perf_counter() - t0, interrupted=interrupted,
+                  figures=args.figures, overrides=list(args.overrides))
     if not args.quiet or interrupted:
         print(table(entries), file=sys.stdout if not interrupted else sys.stderr)
     return _batch_exit_code(entries, interrupted)

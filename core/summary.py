@@ -31,12 +31,16 @@ def _rms_unc(s: dict) -> dict:
 
 
 def write_summary(out_dir, recipe_path, entries: list[dict], *, workers: int, scheduler: str | None,
-                  seconds: float, interrupted: bool) -> dict:
+                  seconds: float, interrupted: bool, figures: str | None = None,
+                  overrides: list[str] | None = None) -> dict:
+    """summary.json: the batch's options (``figures``: the --figures asked; ``overrides``: the --set
+    texts, so a night's summary says how its inputs were run), counts and one entry per input."""
     counts: dict = {}
     for e in entries:
         counts[e["status"]] = counts.get(e["status"], 0) + 1
     data = {"pointspro": __version__, "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "recipe": str(recipe_path), "workers": workers, "scheduler": scheduler,
+            "figures": figures, "overrides": list(overrides or []),
             "seconds": round(seconds, 3), "interrupted": interrupted, "counts": counts,
             "inputs": entries}
     with atomic_path(out_dir / "summary.json") as tmp:

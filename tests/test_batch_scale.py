@@ -91,6 +91,18 @@ def test_default_workers_is_the_number_of_cores(run_cli, tmp_path):
     s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     cores = len(os.sched_getaffinity(0))
     assert s["workers"] == (cores if min(cores, 2) > 1 else 1)
+    assert s["figures"] == "all" and s["overrides"] == []
+
+
+def test_summary_records_the_figures_and_overrides_asked(run_cli, tmp_path):
+    """A night's summary.json says how its inputs were run: --figures and every --set text."""
+    files = _inputs(tmp_path, 1)
+    code, _, err = run_cli("--batch", RECIPE, *files, "--out", tmp_path / "o", "--quiet", "--workers", "1",
+                           "--figures", "none", "--set", "aperture.diameter=1280")
+    assert code == 0, err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    assert s["figures"] == "none" and s["overrides"] == ["aperture.diameter=1280"]
+    assert not list((tmp_path / "o" / "part00").glob("*.png"))
 
 
 def test_resume_skips_complete_outputs_and_reruns_changed_recipes(run_cli, tmp_path):
