@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..errors import InputError
 
@@ -31,6 +31,17 @@ class GPSpec(BaseModel):
     y: list[float]
 
 
+class UCalibrationSpec(BaseModel):
+    """u_k² = s_k² + τ²·d per component k (core.calibration.gp.blocked_cv and distance_term): s_k the GP's
+    predictive σ, d the distance (mm, machine frame) from the point to the nearest ball of the GP's X,
+    τ² = ``excess_variance_um2_per_mm``."""
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    method: str
+    excess_variance_um2_per_mm: Annotated[float, Field(ge=0)]
+    blocks: int
+    held_out: int
+
+
 class VolumetricModelSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)  # NaN, ±inf: a damaged model file
     pointspro_volumetric_model: int
@@ -39,6 +50,9 @@ class VolumetricModelSpec(BaseModel):
     gp: dict[str, GPSpec]                 # "ex", "ey", "ez"
     loo_rms_um: dict                      # closed-form LOO at the all-points hyperparameters (biased low)
     gp_selection: dict = {}               # how the kernel was chosen: criterion, chosen, cross-validated RMS
+    # the distance term of u from the blocked cross-validation (UCalibrationSpec); absent in a file written
+    # before it (issue 16 part 1): u is then the GP's σ alone, as it was
+    u_calibration: UCalibrationSpec | None = None
     sha256: str
 
 
@@ -172,7 +186,39 @@ def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None,
                  "no_gp_rms_um": per_component(info["cv_rms"]["none"]),
                  "no_gp_in_sample_rms_um": per_component(info["zero_rms"]),
                  "cv_rms_um": {kk: per_component(v) for kk, v in info["cv_rms"].items()}}
+    if "blocked_cv" in info:
+        selection["blocked_cv"] = blocked_summary(info["blocked_cv"])
     return gps, specs, loo, selection
+
+
+BLOCKED_METHOD = ("blocked cross-validation: spatial blocks of ~4 neighbouring balls (k-means) held out whole, "
+                  "the transform and the hyperparameters re-fitted without them; u_k² = s_k² + τ²·d, "
+                  "τ² = max(0, Σ(r² − s²)) / (3 Σd) over the held-out balls and the 3 components (d: to the "
+                  "nearest training ball, mm)")
+
+
+def blocked_summary(b: dict) -> dict:
+    """The fiducials report's and the model file's account of the blocked cross-validation
+    (``select_gps``' info["blocked_cv"]: per component r, s (mm), d (mm), τ² (mm²/mm)): per component the
+    held-out RMS, the RMS of the σ the GP predicted there, their ratio (1: the GP's σ is right away from
+    the balls), τ² (µm²/mm), and the share of the held-out errors within 2s and within 2u (u² = s² +
+    τ²d; in sample for τ², a check of the fit, not a coverage figure)."""
+    d = np.asarray(b["d"], dtype=np.float64)
+    ok = np.isfinite(d)
+    r = np.column_stack(b["r"])[ok]
+    s = np.column_stack(b["s"])[ok]
+    tau2 = float(b["tau2"])
+    u = np.sqrt(s**2 + tau2 * d[ok, None])
+    comp = dict(zip(ERROR_COMPONENTS, range(3)))
+    return {"method": BLOCKED_METHOD, "blocks": len(b["blocks"]), "held_out": int(ok.sum()),
+            "distance_mm": {"median": float(np.median(d[ok])), "max": float(np.max(d[ok]))},
+            "held_out_rms_um": {n: float(np.sqrt(np.mean(r[:, k] ** 2)) * 1e3) for n, k in comp.items()},
+            "predicted_rms_um": {n: float(np.sqrt(np.mean(s[:, k] ** 2)) * 1e3) for n, k in comp.items()},
+            "ratio": {n: float(np.sqrt(np.mean(r[:, k] ** 2) / np.mean(s[:, k] ** 2))) for n, k in comp.items()},
+            "within_2s": float(np.mean(np.abs(r) <= 2 * s)), "within_2u": float(np.mean(np.abs(r) <= 2 * u)),
+            "excess_variance_um2_per_mm": tau2 * 1e6,
+            # what the term adds at 10 mm from a ball (µm, in quadrature)
+            "u_added_at_10mm_um": float(np.sqrt(tau2 * 10.0)) * 1e3}
 
 
 def model_text(fit, X, gp_specs: dict, loo_rms_um: dict, gp_selection: dict | None = None) -> str:
@@ -180,5 +226,25 @@ def model_text(fit, X, gp_specs: dict, loo_rms_um: dict, gp_selection: dict | No
     the machine-frame positions X), the GP specs and how their kernel was chosen."""
     X = np.asarray(X, dtype=np.float64)
     workspace = np.column_stack([X.min(axis=0), X.max(axis=0)]).tolist()
-    return dumps({"transform": fit.to_dict(), "workspace": workspace, "gp": gp_specs,
-                  "loo_rms_um": loo_rms_um, "gp_selection": gp_selection or {}})
+    d = {"transform": fit.to_dict(), "workspace": workspace, "gp": gp_specs,
+         "loo_rms_um": loo_rms_um, "gp_selection": gp_selection or {}}
+    b = (gp_selection or {}).get("blocked_cv")
+    if b:  # the distance term `volumetric` adds to u (UCalibrationSpec)
+        d["u_calibration"] = {"method": b["method"], "excess_variance_um2_per_mm": b["excess_variance_um2_per_mm"],
+                              "blocks": b["blocks"], "held_out": b["held_out"]}
+    return dumps(d)
+
+
+def distance_u(spec: VolumetricModelSpec, P, u):
+    """(u with the blocked cross-validation's distance term, d (mm) from each point to the nearest ball):
+    u_k² + τ²·d per component (UCalibrationSpec); u unchanged (and d None) for a model file without
+    ``u_calibration`` — one written before it, the old behaviour."""
+    cal = spec.u_calibration
+    if cal is None:
+        return u, None
+    from scipy.spatial import cKDTree
+
+    balls = np.asarray(spec.gp["ex"].X, dtype=np.float64)
+    d = cKDTree(balls).query(np.asarray(P, dtype=np.float64))[0]
+    tau2 = cal.excess_variance_um2_per_mm * 1e-6  # mm²/mm
+    return np.sqrt(u**2 + tau2 * d[:, None]), d

@@ -11,7 +11,10 @@ cross-validation with the transform and the hyperparameters re-fitted in each fo
 ``gp_cv_rms_um`` beside ``no_gp_rms_um``; a GP only where it beats "none" by more than one standard
 error; the noise term is bounded below by the centres' known σ; a ball the other balls cannot predict
 is never held out, and with too few balls to hold out the error left comes from the residuals with
-their degrees of freedom, or is unknown with 4 balls — said in the warnings and ``sigma_basis``). Writes ``volumetric_model.json`` (what `volumetric` applies), ``volumetric_grid.csv``
+their degrees of freedom, or is unknown with 4 balls — said in the warnings and ``sigma_basis``). A
+blocked cross-validation (spatial blocks of ~4 neighbouring balls held out whole, the transform and the
+hyperparameters re-fitted without them) measures how the error grows with the distance d from the balls,
+u_k² = s_k² + τ²·d (core.calibration.gp.distance_term; report ``blocked_cv``, model ``u_calibration``). Writes ``volumetric_model.json`` (what `volumetric` applies), ``volumetric_grid.csv``
 (predicted error and its uncertainty on a grid over the workspace) and figures. The cloud passes
 through unchanged.
 """
@@ -291,6 +294,9 @@ class FiducialsStep(Step):
             # the honest figure: held-out fiducials, hyperparameters re-fitted without them (it
             # includes their measurement noise); the kernel was chosen by it
             "gp_cv_rms_um": selection["gp_cv_rms_um"], "gp_selection": selection,
+            # blocked cross-validation (gp.blocked_cv): spatial blocks of balls held out whole — how the
+            # GP's error grows away from the balls, and the distance term τ² `volumetric` adds to u²
+            "blocked_cv": selection.get("blocked_cv"),
             # closed-form LOO at hyperparameters fitted to all fiducials: biased low, not used to choose
             "gp_loo_rms_um": loo,
             # balls the others cannot predict (held_out_outliers), named in the warnings, kept in the fit

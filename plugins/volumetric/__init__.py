@@ -5,7 +5,9 @@ so corrected points land where the calibrated transform puts them); frame `refer
 X_r = D⁻¹(p' − A), the CMM's frame. Channels u_x, u_y, u_z: standard uncertainties (mm) along the
 output's axes — the GP's predictive σ (per machine axis); in the reference frame the square roots of
 the diagonal of D⁻¹ (diag(σ_GP²) + J Σθ Jᵀ) D⁻ᵀ, the transform's covariance (001 eqs 12–14) included
-and both turned into the reference axes. Points outside the calibrated workspace get
+and both turned into the reference axes. The GP's σ is first raised by the fiducials' blocked
+cross-validation's distance term, σ_k² + τ²·d with d the distance to the nearest ball (a model file
+without ``u_calibration``: σ alone, as before; report ``u_inflation``). Points outside the calibrated workspace get
 `outside_workspace` = 1 and a warning.
 """
 from __future__ import annotations
@@ -62,6 +64,18 @@ class VolumetricStep(Step):
         for k, name in enumerate(("ex", "ey", "ez")):
             gp = vm.decode_gp(spec.gp[name])
             e[:, k], u[:, k] = gp.predict(P, return_std=True)
+        # the blocked cross-validation's distance term (volumetric_model.distance_u; issue 16 part 1): the
+        # GP's σ judged where the balls are dense grows too slowly across a gap (two planes of balls: 2u
+        # covered 72–87 %); u_k² = σ_k² + τ²·d, d the distance to the nearest ball — never below σ
+        u_gp = u
+        u, _ = vm.distance_u(spec, P, u)
+        inflation = None
+        if spec.u_calibration is not None and len(P):
+            ratio = np.max(u / np.maximum(u_gp, 1e-300), axis=1)
+            inflation = {"excess_variance_um2_per_mm": spec.u_calibration.excess_variance_um2_per_mm,
+                         "ratio_median": float(np.median(ratio)), "ratio_max": float(ratio.max()),
+                         "share_over_10pct": float(np.mean(ratio > 1.1)),
+                         "added_max_um": float(np.max(np.sqrt(np.maximum(u**2 - u_gp**2, 0))) * 1e3)}
         ctx.progress.update(0.7, "correcting")
         corr = P + e
         t = spec.transform
@@ -110,7 +124,15 @@ class VolumetricStep(Step):
             far = dist > GAP_FACTOR * spacing
             gap = {"spacing_mm": spacing, "share": float(far.mean()) if len(P) else 0.0,
                    "farthest_mm": float(dist.max()) if len(P) else 0.0}
-            if len(P) and far.mean() >= GAP_SHARE:
+            if len(P) and far.mean() >= GAP_SHARE and spec.u_calibration is not None:
+                warnings.append(f"{100 * far.mean():.3g} % of the points ({int(far.sum())}) lie farther than "
+                                f"{GAP_FACTOR:g} × the balls' typical spacing ({format_length(spacing)}, the median "
+                                f"distance between neighbouring balls) from every ball, up to "
+                                f"{format_length(float(dist.max()))}: there the correction is interpolated across a "
+                                "gap the balls do not sample; u includes the blocked cross-validation's distance "
+                                f"term (u raised up to {inflation['ratio_max']:.3g} ×, report: u_inflation) — "
+                                "add balls inside that region for a smaller u")
+            elif len(P) and far.mean() >= GAP_SHARE:
                 warnings.append(f"{100 * far.mean():.3g} % of the points ({int(far.sum())}) lie farther than "
                                 f"{GAP_FACTOR:g} × the balls' typical spacing ({format_length(spacing)}, the median "
                                 f"distance between neighbouring balls) from every ball, up to "
@@ -129,7 +151,9 @@ class VolumetricStep(Step):
                   "uncertainty_max_um": None if unknown else (u.max(axis=0) * 1e3).tolist(), "outside_workspace": int(outside.sum()),
                   "kernels": {k: v.kind for k, v in spec.gp.items()},
                   # points far from every ball (GAP_FACTOR × the balls' median neighbour distance)
-                  "far_from_balls": gap, "warnings": warnings}
+                  "far_from_balls": gap,
+                  # u raised by the blocked cross-validation's distance term (None: a model file without it)
+                  "u_inflation": None if unknown else inflation, "warnings": warnings}
         return StepResult(out, report)
 
 
