@@ -239,11 +239,21 @@ def _time_grid(t: np.ndarray) -> tuple[float, np.ndarray] | None:
     return dt, np.rint((t - t[0]) / dt).astype(np.int64)
 
 
-def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarray) -> Group | None:
+#: a second vibration line within this many bins (1/T, T the record's duration) of a line already
+#: chosen is not searched for: two tones closer than the Hann window's main lobe (±2 bins; the
+#: Rayleigh limit is one) cannot be told apart on this record, and lines packed that close fit a
+#: transient — a zone or bump the scan crosses once — not a machine's resonance (a ring on a spiral
+#: read as four "vibrations" at 0.200, 0.212, 0.222 and 0.233 Hz over a 30 s record)
+LINE_RESOLUTION_BINS = 2.0
+
+
+def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarray,
+                    chosen_hz=()) -> Group | None:
     """cos/sin at the strongest spectral line of the residual: the windowed FFT of the residual on the
     scan's clock (empty slots zero), the peak interpolated, then refined on the exact time stamps to
     the frequency of greatest periodogram power within half a bin. ``n_search`` is the number of
-    frequencies searched (the Bonferroni family of the vibration)."""
+    frequencies searched (the Bonferroni family of the vibration). ``chosen_hz``: the lines chosen
+    already; the search leaves out LINE_RESOLUTION_BINS bins around each."""
     from scipy.optimize import minimize_scalar
 
     t = ctx.t[order]
@@ -259,13 +269,15 @@ def vibration_group(ctx: ScanContext, resid_t_order: np.ndarray, order: np.ndarr
     F = np.abs(np.fft.rfft(x))
     f = np.fft.rfftfreq(n, dt)
     low = f < 5.0 / np.ptp(t)
+    df = 1.0 / (n * dt)
+    for fc in chosen_hz:
+        low |= np.abs(f - fc) < LINE_RESOLUTION_BINS * df
     F[low] = 0.0
     k = int(np.argmax(F))
-    if k == 0 or k >= len(F) - 1:
+    if k == 0 or k >= len(F) - 1 or F[k] == 0.0:
         return None
     a, b, c = np.log(F[k - 1] + 1e-300), np.log(F[k] + 1e-300), np.log(F[k + 1] + 1e-300)
-    shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 else 0.0
-    df = 1.0 / (n * dt)
+    shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 and F[k - 1] > 0 and F[k + 1] > 0 else 0.0
     fk = (k + shift) * df
     tt = t - t[0]
     power = lambda fr: -abs(np.sum(r * np.exp(-2j * np.pi * fr * tt)))  # noqa: E731
@@ -498,7 +510,8 @@ def _candidates(s: _Search, max_effects: int) -> list[str]:
         # the strongest spectral line of what is left, again after a line was chosen: a machine has
         # more than one resonance (a review: 170.3 Hz at 30 nm and 61.7 Hz at 6 nm, one line named,
         # the second left as 2.6 σ of "noise" with nothing said)
-        vib = vibration_group(s.ctx, s.resid[s.order], s.order)
+        vib = vibration_group(s.ctx, s.resid[s.order], s.order,
+                              [s.by_name[st.candidate].frequency for st in s.stages if st.effect == "vibration"])
         if vib is not None:
             name = f"vibration@{len(s.stages)}"
             s.D.add(name, vib.cols)
@@ -694,7 +707,9 @@ def _refine(s: _Search, sigma: float) -> None:
     stage, effects found later were still in the gap and could favour a look-alike): of the tie, those
     that still fit as well as the best form the tie now, named by the same rule (_choose); those that
     fit worse by more than the χ² threshold are no longer ambiguous — the scan tells them apart once the
-    other effects are modelled. The stages' evidence is then computed again in their order."""
+    other effects are modelled. An alternative whose fit beside the others cancels one of them
+    (_cancels) is not swapped in, as it could not have entered. The stages' evidence is then computed
+    again in their order."""
     piston = list(s.D.index["_piston"])
     for i, st in enumerate(s.stages):
         alts = [a["candidate"] for a in st.ambiguous_with if "candidate" in a]
@@ -711,6 +726,8 @@ def _refine(s: _Search, sigma: float) -> None:
         others = piston + [c for j, o in enumerate(s.stages) if j != i for c in s.D.index[o.candidate]]
         fits = []
         for nm in [st.candidate] + alts:
+            if nm != st.candidate and _cancels(s, others + s.D.index[nm]):
+                continue  # a look-alike swapped in against another chosen effect (as at entry: CANCEL_LIMIT)
             gr = s.by_name[nm]
             fits.append(Candidate(nm, s.D.ssr(others + s.D.index[nm])[0], 0.0, 0.0, 0.0, 1.0, gr.n_params,
                                   gr.catch_all))
