@@ -88,13 +88,14 @@ def surface(p, x, y, rng):
 
 
 # ---------------------------------------------------------------- outliers
-def inject(p, x, y, d, rng, counts=None):
-    """Adds outliers to d in place; returns truth {class: set}, edge set (shallow dig points)."""
+def inject(p, x, y, d, rng, counts=None, target=(3, 31)):
+    """Adds outliers to d in place; returns truth {class: set}, edge set (shallow dig points).
+    target: the range [lo, hi) of the number of points deeper than 5 σ_n wanted per dig."""
     R, sn = p["R"], p["noise_um"] * 1e-3
     s_eff = math.sqrt(sn ** 2 + (p.get("ring_um", 0) * 1e-3) ** 2)
     dens = p["density"]
     scale = float(np.clip(math.pi * R * R / A200, 0.25, 2.0))
-    counts = counts or {c: max(1, int(round(v * scale))) for c, v in BASE.items()}
+    counts = {c: 0 for c in BASE} | counts if counts else {c: max(1, int(round(v * scale))) for c, v in BASE.items()}
     tree = cKDTree(np.column_stack([x, y]))
     r = np.hypot(x, y)
     taken = np.zeros(len(x), bool)   # outliers and their 3 mm exclusion zones
@@ -138,11 +139,11 @@ def inject(p, x, y, d, rng, counts=None):
                 c0 = rng.choice(interior)
                 cx, cy = x[c0], y[c0]
                 depth = rng.uniform(dmin, 2e-3)
-                target = rng.integers(3, 31)        # points deeper than 5σ wanted
+                want = rng.integers(*target)        # points deeper than 5σ wanted
                 if kind == "pit":
                     lnr = math.log(depth / (5 * sn)) if sn > 0 else 5.0
                     # N5 = dens·π·2 s² ln(D/5σ) -> s
-                    s = math.sqrt(target / (dens * math.pi * 2 * lnr))
+                    s = math.sqrt(want / (dens * math.pi * 2 * lnr))
                     rad = 3.5 * s
                     idx = np.asarray(tree.query_ball_point([cx, cy], rad), dtype=np.int64)
                     add = depth * np.exp(-((x[idx] - cx) ** 2 + (y[idx] - cy) ** 2) / (2 * s * s))
@@ -150,7 +151,7 @@ def inject(p, x, y, d, rng, counts=None):
                 else:
                     w = rng.uniform(0.2, 0.6)
                     frac_deep = math.sqrt(max(0.0, 1 - 5 * sn / depth))
-                    L = float(np.clip(target / (dens * w * frac_deep), 2.0, 20.0))
+                    L = float(np.clip(want / (dens * w * frac_deep), 2.0, 20.0))
                     ang = rng.uniform(0, 2 * np.pi)
                     if kind == "scratch":
                         tt = np.linspace(0, L, max(2, int(L / 0.05)))
