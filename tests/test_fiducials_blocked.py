@@ -68,6 +68,35 @@ def test_distance_term_recovers_a_linear_excess_variance():
     assert distance_term(r, s, d) == pytest.approx(tau2, rel=0.1)
     # residuals the GP's σ covers: no term (never below the GP's own σ)
     assert distance_term(0.5 * r, s + 1e-3, d) == 0.0
+    # one component whose σ the GP over-states does not cancel the others' excess (a review: a plate
+    # of balls, held-out RMS / σ 1.12, 0.50, 1.29 per component, gave τ² = 0)
+    s_over = s.copy()
+    s_over[1] *= 4.0
+    assert distance_term(r, s_over, d) == pytest.approx(2 / 3 * tau2, rel=0.15)
+
+
+def test_a_plate_of_balls_keeps_the_gap_warning_honest(tmp_path):
+    """24 balls on a plate (z 0–2 mm) and two at z = 50, the workpiece through the whole box: the blocks
+    hold out balls beside each other on the plate, not across the 50 mm above it. u grows (τ² > 0: one
+    over-stated component no longer cancels it) and the warning still says u may be too small there."""
+    rng = np.random.default_rng(1)
+    ref = LOW + rng.uniform(0, 1, (24, 3)) * EXTENT
+    ref[:, 2] = rng.uniform(0, 2, 24)
+    ref[:2, 2] = 50.0
+    res, f = calibrate(tmp_path, ref, 1, "fourier")
+    assert res.report["blocked_cv"]["excess_variance_um2_per_mm"] > 0
+    W = ref.min(0) + rng.uniform(0, 1, (1500, 3)) * np.ptp(ref, axis=0)
+    out, err, u = apply(tmp_path, res.artifacts["volumetric_model.json"], W, f)
+    gap = [w for w in out.report["warnings"] if "from every ball" in w]
+    assert len(gap) == 1 and "may still be too small" in gap[0], out.report["warnings"]
+    # a model whose distance term is 0 says nothing of it
+    d = json.loads(res.artifacts["volumetric_model.json"])
+    d["u_calibration"]["excess_variance_um2_per_mm"] = 0.0
+    for k in ("sha256", "pointspro_volumetric_model"):
+        d.pop(k)
+    out0, _, _ = apply(tmp_path, vm.dumps(d), W, f)
+    gap0 = [w for w in out0.report["warnings"] if "from every ball" in w]
+    assert len(gap0) == 1 and "distance term" not in gap0[0] and "u may be too small" in gap0[0]
 
 
 def test_blocks_are_compact_and_leave_the_transform_determined():

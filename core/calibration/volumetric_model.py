@@ -40,6 +40,8 @@ class UCalibrationSpec(BaseModel):
     excess_variance_um2_per_mm: Annotated[float, Field(ge=0)]
     blocks: int
     held_out: int
+    #: the farthest a held-out ball lay from the training balls (mm): beyond it τ² is extrapolated
+    max_distance_mm: Annotated[float, Field(ge=0)] | None = None
 
 
 class VolumetricModelSpec(BaseModel):
@@ -193,7 +195,7 @@ def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None,
 
 BLOCKED_METHOD = ("blocked cross-validation: spatial blocks of ~4 neighbouring balls (k-means) held out whole, "
                   "the transform and the hyperparameters re-fitted without them; u_k² = s_k² + τ²·d, "
-                  "τ² = max(0, Σ(r² − s²)) / (3 Σd) over the held-out balls and the 3 components (d: to the "
+                  "τ² = Σ_k max(0, Σ_i(r² − s²)) / (3 Σd) over the held-out balls i and the 3 components k (d: to the "
                   "nearest training ball, mm)")
 
 
@@ -231,7 +233,8 @@ def model_text(fit, X, gp_specs: dict, loo_rms_um: dict, gp_selection: dict | No
     b = (gp_selection or {}).get("blocked_cv")
     if b:  # the distance term `volumetric` adds to u (UCalibrationSpec)
         d["u_calibration"] = {"method": b["method"], "excess_variance_um2_per_mm": b["excess_variance_um2_per_mm"],
-                              "blocks": b["blocks"], "held_out": b["held_out"]}
+                              "blocks": b["blocks"], "held_out": b["held_out"],
+                              "max_distance_mm": b["distance_mm"]["max"]}
     return dumps(d)
 
 
