@@ -13,21 +13,7 @@ slope: steep regions and the rim do not look like outliers.
 σ. σ_g = 1.4826 · median |z − median z| over the cloud (outliers do not inflate it), and a local σ_l:
 the RMS of z over the window's points within 3 σ of their plane, corrected for that truncation
 (÷ 0.9733). A point is judged against σ(P) = max(σ_g, σ_l(P)): never below the cloud's noise, above it
-where the neighbourhood is rougher (a ripple or a curved region the plane cannot follow). In the coarse
-pass's first round, where no point is trimmed yet and the noise sets the threshold (threshold_sigma ·
-σ_g > floor), σ_l leaves out the points beyond COARSE_CLIP = 10 σ_g:
-a dig of 20–30 points at a window of 2.5 point spacings fills much of the coarse window too, and its own
-z inflated its σ_l (12 σ_g) so that none of it was ever trimmed (review 7: recall 0.72 / 0.01). Later
-rounds use the trim as before (clipping every round lost a 5 nm-noise cone tip's top, 12 points; on
-noise-free data, clipping at 10 σ_g → 0 lost 40 points of the review's cone part's roll-off).
-Measured (issue's flat digs, nearest 20–30 points 0.2–2 µm deep, 20 nm noise, 4 points/mm², a =
-2.5 spacings, seeds 0–3; tests/test_knn_denoise_review8.py): recall scattered 0.30 → 0.91, raster
-0.34 → 0.87, spiral 0.33 → 0.91 (Hampel 0.16 / 0.22 / 0.17), no false removal; the raster seed 3
-0.00 → 0.49 (a dig whose coarse σ_l stays 3–4 σ_g after the first round). The review generator's
-round pits and parabolic scratches of 20–30 deep points at the same window: 0.52 / 0.70 / 0.48 →
-0.57 / 0.71 / 0.54 (Hampel 0.22–0.26): the fine quadratic follows a pit the size of its window and
-the coarse candidates join only digs the fine pass found (counted alone: 25–216 false removals on
-the cone part with 5 nm noise) — use a ≥ 4 spacings (the window warning says so).
+where the neighbourhood is rougher (a ripple or a curved region the plane cannot follow).
 
 Rounds (iteratively trimmed least squares). A point with |z| ≥ 3 σ(P) does not enter the planes of the
 next round, so a spike no longer lifts its neighbours' reference and the points of a dig stop pulling
@@ -71,20 +57,9 @@ step across its edge within 3 σ, the floor or twice its own inner steps, and it
 half its peak — is form (`_keep_tapered`). A spike's edge step is its height; the issue's digs keep
 ≥ 0.57 of their depth at the edge. Not with noise: a round pit tapers as well, and the fine fit bends
 into it. Measured: the reviewer's noise-free centre + roll-off part 52 points lost per seed → 0, the
-cone part 49 → 0; the noisy centre + roll-off mixture's 36–38 false removals are unchanged; the issue's
+cone part 49 → 0; its 10 mm hex part (10 / 12 / 9, σ set by a ripple the window cannot follow, not by
+the floor) and the noisy centre + roll-off mixture's 36–38 false removals are unchanged; the issue's
 classes too (benchmarks/bench_denoise.py --classes).
-
-Noise-free where a ripple sets σ (issue 16, left from review 7). On a small part (10 mm, hexagonal or
-round, 3,000–20,000 points) a ripple of 1–4 windows, 10–100 nm, sets σ_g at 0.8–15 nm by the model
-error of the window's quadratic: neither σ → 0 nor, from 2 nm, the floor judges, and the centre cone's
-top was removed (5 of 40 seeds: 4–301 points). The points' own noise is measured apart from the form
-(`_point_noise`: each point against the quadratic through its 15 nearest neighbours; 0.01–0.3 nm
-there, 1.00–1.04 nm with 1 nm of noise): where it is below QUIET = 0.05 of the floor and below
-STRUCTURED = 0.25 of the group's σ, the data is noise-free and σ is model error, so a flagged group is
-form when it tapers (as above) or when its edge points continue the quadratic of their unflagged
-nearest neighbours (`_continuous`: within the floor or 3 × that fit's own RMS — at a kink neither
-predicts). Measured: noise-free rippled parts (40 seeds, with and without a cone) 586 → 0 points
-lost; spikes and a flat dig added to them are still all found; 1 nm noise keeps nothing as form.
 
 On Gaussian noise the false-positive rate claimed is erfc(threshold_sigma / √2) (5.7e-7 at 5 σ);
 `false_positive_rate` in the report says it.
@@ -109,14 +84,11 @@ TRUNCATED_VAR = 0.9733  # variance of a unit normal truncated at ±3
 MAX_ROUNDS = 10
 COARSE = 3.0          # the first pass: windows this many times larger
 COARSE_ROUNDS = 3
-COARSE_CLIP = 10.0     # the coarse pass's first round: σ_l without the points beyond this × σ_g
 RIDGE = 1e-6           # relative ridge on the slope and curvature terms: a window of collinear points
                        # (a star's line) gets no slope across the line instead of a singular system
 MIN_QUADRATIC = 12     # fewer points in a window: a plane
 AGREE = 1.25
-NOISE_FREE = 1e-4      # _keep_tapered acts where the flagged points' σ is below this × the floor …
-QUIET = 0.05           # … or where the points' own noise (_point_noise) is below this × the floor
-STRUCTURED = 0.25      #     and this × their σ: σ is the model error of a form the window cannot follow
+NOISE_FREE = 1e-4      # _keep_tapered acts where the flagged points' σ is below this × the floor
 STEP_NOISE = 3.0       # _keep_tapered: an edge step within this many σ, or within STEP_RAMP times the
 STEP_RAMP = 2.0        # group's own steps, continues the surface (form) …
 TAPER = 0.5            # … when its edge points also keep at most this of its peak deviation
@@ -429,7 +401,7 @@ def _robust_sigma(z):
     return float(1.4826 * np.median(np.abs(z - np.median(z))))
 
 
-def _trim_rounds(win, d, w, max_rounds, progress, offset, clip=None):
+def _trim_rounds(win, d, w, max_rounds, progress, offset):
     """Iteratively trimmed local fits: returns the final weights, z, σ(P), σ_g, the cells' fits."""
     n = len(d)
     full = win.full_sums(d)
@@ -448,10 +420,6 @@ def _trim_rounds(win, d, w, max_rounds, progress, offset, clip=None):
         zf = np.where(fin, z, 0.0)
         # (without the point itself: an outlier does not inflate its own σ)
         inside = w * fin
-        if clip is not None and rounds == 1 and sg > clip[1]:
-            # (the first round's fits hold every point: a dig's own z would inflate its σ — module doc;
-            # not where the floor sets the threshold: noise-free, σ_g → 0 and every form error is beyond)
-            inside = inside * (np.abs(zf) < clip[0] * sg)
         z2 = zf * zf
         cw = win.window(np.column_stack([win.binary_sums(inside, full[0][:, :1])[:, 0],
                                          win.cell_sums(inside, z2[None, :])[:, 0]]))
@@ -489,8 +457,7 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
     # a coarse pass first (window COARSE · a): a dig or scratch that fills a good part of the 2a window
     # is a small part of the larger one, so its points are trimmed before the fine planes see them
     coarse = _Windows(x, y, COARSE * window)
-    w, zc, sigc, _, betac, livec, _ = _trim_rounds(coarse, d, np.ones(n), COARSE_ROUNDS, progress, 0,
-                                                   (COARSE_CLIP, floor / threshold_sigma))
+    w, zc, sigc, _, betac, livec, _ = _trim_rounds(coarse, d, np.ones(n), COARSE_ROUNDS, progress, 0)
     win = _Windows(x, y, window)
     w, z, sig, sg, beta, live, rounds = _trim_rounds(win, d, w, MAX_ROUNDS, progress, COARSE_ROUNDS)
     # where the 2a window is too sparse to judge (the end of a star's line), the coarse window judges
@@ -535,7 +502,7 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
         grown = _grow(x, y, np.where(cflag, zc, z), growable | cflag, flagged)
         # a group whose deviation ramps into its surroundings is form (a cone tip, a crease, a roll-off),
         # not a spike or a dig (review 7; _keep_tapered) — on noise-free data only
-        kept = _keep_tapered(x, y, d, np.where(cflag, zc, z), sig, thr, floor, flagged)
+        kept = _keep_tapered(x, y, np.where(cflag, zc, z), sig, thr, floor, flagged)
     back = np.empty_like(order)
     back[order] = np.arange(n)
     return RobustResult(flagged[back], z[back], sig[back], sg, thr[back], rounds, grown, int((~fin).sum()),
@@ -566,40 +533,7 @@ def local_spacing(x, y, k: int = 12, sample: int = 20_000, tree=None) -> float:
     return float(np.median(r) * np.sqrt(np.pi / k))
 
 
-def _point_noise(x, y, d, k: int = 15, sample: int = 5_000) -> float:
-    """The noise of one point, free of the form: the robust σ (1.4826 · MAD) of each point's residual
-    from the least-squares quadratic through its k nearest neighbours (itself not among them), scaled
-    by √(1 + h) for the prediction's own error. Taken on `sample` consecutive points from the middle
-    of the cloud (robust_outliers passes the points in the order of their cells: a band of the
-    surface at its full density).
-
-    Why: a form the 2a window cannot follow (a ripple of 1–4 windows) makes z, and so σ, as large as
-    noise would — the global σ of a noise-free 10 mm part with a 13–40 nm ripple read 2–15 nm — but it
-    is smooth over a point's nearest neighbours, whose quadratic follows it to 0.01–0.3 nm, while noise
-    stays whole (1 nm noise reads 1.00–1.04 nm). 5,000 points: 0.03 s at 10⁶ points (20,000: 0.1 s, the
-    same σ within 4 %). Where the neighbours are collinear (a star's line, a
-    spiral's track) the ridge makes the fit a plane across them: the estimate only grows."""
-    from scipy.spatial import cKDTree
-
-    n = len(x)
-    if n <= k + 6:
-        return float("inf")
-    sl = slice(max(0, n // 2 - sample // 2), min(n, n // 2 + sample // 2))
-    xs, ys, ds = x[sl], y[sl], d[sl]
-    pts = np.column_stack([xs, ys])
-    dist, idx = cKDTree(pts).query(pts, k=k + 1)
-    nb = idx[:, 1:]
-    sc = dist[:, -1:] + 1e-300
-    u, v = (xs[nb] - xs[:, None]) / sc, (ys[nb] - ys[:, None]) / sc
-    G = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=2)
-    M = np.einsum("mki,mkj->mij", G, G) + (RIDGE * k) * np.eye(6)
-    Minv = np.linalg.inv(M)
-    beta = np.einsum("mij,mkj,mk->mi", Minv, G, ds[nb])
-    r = (ds - beta[:, 0]) / np.sqrt(1.0 + Minv[:, 0, 0])
-    return _robust_sigma(r)
-
-
-def _keep_tapered(x, y, d, z, sig, thr, floor, flagged) -> int:
+def _keep_tapered(x, y, z, sig, thr, floor, flagged) -> int:
     """Unflag (in place) the connected flagged groups whose deviation runs on continuously into their
     surroundings: the median step of |z| across the group's edge (a flagged point to an unflagged
     neighbour within 1.5 point spacings, ``local_spacing``) is at most the larger of STEP_NOISE · σ, the floor and
@@ -609,14 +543,12 @@ def _keep_tapered(x, y, d, z, sig, thr, floor, flagged) -> int:
     Why: the trim sets every point of a kink narrower than the window aside, so the form error of a
     cone tip stands out like a bump (review 7: a 0.4 µm diamond-turning centre cone, 0.75 mm radius,
     on a 0.18 mm raster, noise-free, lost 49 points; on a 10 mm part, where an unfollowed ripple sets
-    σ at 1–15 nm, 4–301). Its deviation ramps down to the surface: the step across its edge is the ramp's
+    σ = 20 nm, 9–12). Its deviation ramps down to the surface: the step across its edge is the ramp's
     step inside it. A spike has no ramp (its edge step is its height), and a dig or dust particle is cut
     out of the surface — the issue's profiles, flat or 0.5 + 0.5·exp(−2 r²/r_max²), drop by at least
     0.57 of their depth at the edge.
 
-    Only on noise-free data (σ below 1e-4 of the floor, as the floor warning's test; or the points' own
-    noise, _point_noise, below QUIET × the floor and STRUCTURED × σ: σ is the model error of a form the
-    window cannot follow — then also beside the taper, _continuous): with 1 nm noise the
+    Only on noise-free data (σ below 1e-4 of the floor, as the floor warning's test): with 1 nm noise the
     floor sets the threshold too, and smooth pits and bumps of any depth taper — a review of this rule's
     first version saw 30-point Gaussian pits and bumps 50–1000 nm deep found 0 of 480 (362–480 before).
     Returns how many points it kept."""
@@ -624,11 +556,7 @@ def _keep_tapered(x, y, d, z, sig, thr, floor, flagged) -> int:
 
     zz = np.where(np.isfinite(z), z, 0.0)
     fi = np.flatnonzero(flagged)
-    if fi.size == 0:
-        return 0
-    exact = float(np.median(sig[fi])) < NOISE_FREE * floor
-    noise = 0.0 if exact else _point_noise(x, y, d)
-    if not exact and not noise < QUIET * floor:
+    if fi.size == 0 or not float(np.median(sig[fi])) < NOISE_FREE * floor:
         return 0
     pts = np.column_stack([x, y])
     tree = cKDTree(pts)
@@ -664,45 +592,16 @@ def _keep_tapered(x, y, d, z, sig, thr, floor, flagged) -> int:
         grp = fi[label == c]
         peak = float(np.abs(zz[grp]).max())
         t = float(np.median(thr[grp]))
-        # only on noise-free data: with noise a round pit tapers too, and the fine fit bends into it (an
-        # earlier review's Gaussian pits, 1 µm = 50 σ deep, read 1.6–3.5 × the threshold at their peak;
-        # clearing them lost 97 % of the pits' deep points). Noise-free: σ → 0 (the floor judges), or σ is
-        # the model error of a form the window cannot follow while the points' own noise is nil
-        if not (t <= floor * (1 + 1e-9) if exact else noise < STRUCTURED * float(np.median(sig[grp]))):
+        # only where the floor sets the threshold (noise-free): with noise a round pit tapers too, and
+        # the fine fit bends into it (an earlier review's Gaussian pits, 1 µm = 50 σ deep, read 1.6–3.5 ×
+        # the threshold at their peak, as the 10 mm hex part's cone, whose σ an unfollowed ripple sets,
+        # does: 3.3 ×; clearing both lost 97 % of the pits' deep points)
+        if t > floor * (1 + 1e-9):
             continue
-        tapered = np.median(step[edge]) <= allow and np.median(np.abs(zz[src[edge]])) <= TAPER * peak
-        if tapered or _continuous(pts, d, flagged, np.unique(src[edge]), tree, floor):
+        if np.median(step[edge]) <= allow and np.median(np.abs(zz[src[edge]])) <= TAPER * peak:
             flagged[grp] = False
             kept += grp.size
     return kept
-
-
-def _continuous(pts, d, flagged, edge, tree, floor, k: int = 12) -> bool:
-    """Whether a flagged group's edge points (``edge``: those with an unflagged neighbour) lie on the
-    surface of their unflagged surroundings: the median, over them, of |D − the least-squares quadratic
-    through the point's k nearest unflagged points| is within the floor or STEP_NOISE times that fit's
-    own RMS residual (where the quadratic does not describe the neighbours — at a kink — it does not
-    predict the point better either). On noise-free data an outlier
-    is a break at the scale of the spacing — a spike's edge is the spike, a dig's edge its depth — and
-    form is not (the cone tip of a part whose σ a ripple sets: its flagged top sits on the cone's flank,
-    which its neighbours' quadratic continues; the z of neighbouring cells' fits differ by the model
-    error, so their steps do not tell)."""
-    if edge.size == 0:
-        return False
-    kk = min(len(pts), 4 * k + 1)
-    dist, idx = tree.query(pts[edge], k=kk)
-    res = []
-    for e, ds, ix in zip(edge, dist, idx):
-        ok = ix[~flagged[ix]][:k]
-        if ok.size < 6:
-            return False
-        sc = max(float(ds[-1]), 1e-300)
-        u, v = (pts[ok, 0] - pts[e, 0]) / sc, (pts[ok, 1] - pts[e, 1]) / sc
-        G = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v])
-        beta = np.linalg.solve(G.T @ G + RIDGE * len(ok) * np.eye(6), G.T @ d[ok])
-        rms = float(np.sqrt(np.sum((d[ok] - G @ beta) ** 2) / max(ok.size - 6, 1)))
-        res.append(abs(float(d[e]) - float(beta[0])) / max(floor, STEP_NOISE * rms))
-    return float(np.median(res)) <= 1.0
 
 
 def _grow(x, y, z, cand, flagged) -> int:
