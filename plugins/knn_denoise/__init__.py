@@ -62,7 +62,8 @@ class KnnDenoiseParams(Params):
                        "threshold_sigma MAD of the nearest neighbours")
     window: float = param(10.0, unit="mm", gt=0, help="a: half-side of the 2a × 2a neighbourhood; "
                           "robust: at least 4 × the mean point spacing (at 2.5 × a dig of 20–30 points "
-                          "fills the window and is lost); paper: about the sampling spacing, 10–15 mm on "
+                          "fills the window and is lost), and a defect wider than about the window is form at "
+                          "that scale (kept: a Gaussian pit of σ ≥ half the window); paper: about the sampling spacing, 10–15 mm on "
                           "CMM rasters")
     spacing: float = param(1.0, unit="mm", gt=0, help="paper: interpolation grid spacing, at most the "
                            "window (the other methods do not use it)")
