@@ -167,10 +167,15 @@ class DaskSession:
 
         self.address, self.cluster, self.client = address, None, None
         self.bundle, self.workers = None, 0  # set by the CLI: the recipe bundle, the workers found
-        self._dlog = logging.getLogger("distributed")
-        self._saved_level = self._dlog.level
+        # Dask's loggers, and tornado's "application" logger, on which distributed's event loop logs the
+        # exceptions of its own callbacks with their traceback (a Ctrl-C while the client was waiting
+        # printed distributed/utils.py's "NameError: cannot access free variable 'future'" — a race in
+        # its sync() — above our "interrupted" line): shown with -vv (DEBUG) only
+        self._loggers = {name: logging.getLogger(name) for name in ("distributed", "tornado.application")}
+        self._saved_levels = {name: lg.level for name, lg in self._loggers.items()}
         if logging.getLogger("pointspro").getEffectiveLevel() > logging.DEBUG:
-            self._dlog.setLevel(logging.WARNING)
+            self._loggers["distributed"].setLevel(logging.WARNING)
+            self._loggers["tornado.application"].setLevel(logging.CRITICAL)
         try:
             if address == "local":
                 import dask
@@ -207,7 +212,8 @@ class DaskSession:
             if cluster is not None:
                 cluster.close()
         finally:
-            self._dlog.setLevel(self._saved_level)
+            for name, lg in self._loggers.items():
+                lg.setLevel(self._saved_levels[name])
 
 
 def run_dask(session: DaskSession, bundle: dict, jobs, out_dir: Path, allowed_dirs=None,

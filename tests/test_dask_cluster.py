@@ -341,3 +341,23 @@ def test_check_only_without_a_cluster_checks_this_machine(run_cli, tmp_path, mon
         f"pointspro: this machine: cannot read the input {work / 'in' / 'gone.csv'}"], err
     code, out, err = run_cli("--batch", "recipes/r.yaml", "in/p0.csv", "--out", "o", "--ship")
     assert code == 2 and "--ship goes with --scheduler" in err
+
+
+def test_dask_internal_callback_errors_are_not_shown(real_cluster, caplog):
+    """distributed logs its own callbacks' exceptions on tornado's "application" logger with their
+    traceback (a Ctrl-C raced its sync() and printed a NameError above the "interrupted" line): quiet
+    while the batch is connected (shown with -vv), its level restored afterwards."""
+    import logging
+
+    from pointspro.core.executors import DaskSession
+
+    app = logging.getLogger("tornado.application")
+    before = app.level
+    session = DaskSession(real_cluster.address)
+    try:
+        with caplog.at_level(logging.DEBUG):
+            app.error("Exception in callback", exc_info=(NameError, NameError("future"), None))
+        assert not [r for r in caplog.records if r.name == "tornado.application"]
+    finally:
+        session.close()
+    assert app.level == before
