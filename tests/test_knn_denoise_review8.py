@@ -86,3 +86,16 @@ def test_deep_pits_and_bumps_are_found_whole(noise):
         assert min(found) >= 0.8, (seed, np.round(found, 2))
         near = cKDTree(np.column_stack([x, y])[np.concatenate(deep)]).query(np.column_stack([x, y]))[0]
         assert not np.any(r.flagged & (near > 2 * window))
+
+
+@pytest.mark.parametrize("noise", [2e-6, 50e-6])
+@pytest.mark.parametrize("height,width,x0", [(3e-3, 0.4, 0.0), (3.64e-3, 0.41, 2.02)])
+def test_steep_steps_without_outliers_lose_nothing_at_a_small_window(noise, height, width, x0):
+    """A tanh step of 3–3.6 µm over 0.4 mm on a 0.5 mm raster, a = 2.5 spacings, Gaussian noise: no
+    point is an outlier and none is removed (a second attempt at small-window digs, also taken back,
+    removed whole raster columns along the step's shoulder: 0 → 33–66)."""
+    g = np.arange(-8, 8.001, 0.5)
+    x, y = (v.ravel() for v in np.meshgrid(g, g))
+    for seed in range(3):
+        d = height * np.tanh((x - x0) / (width / 2)) + np.random.default_rng(seed).normal(0, noise, x.size)
+        assert robust_outliers(x, y, d, 1.25, 1.0, 5.0, FLOOR).flagged.sum() == 0

@@ -38,22 +38,6 @@ points of noise-free data). Measured on an independent review's Gaussian pits (1
 noise, 1.9 points/mm², seeds 1–3): points deeper than 10 σ found 0.89–0.98 → 0.999–1.00, deeper
 than 5 σ 0.61–0.80 → 0.82–0.93; flat-bottomed digs unchanged.
 
-Digs that fill the window (`_clipped_digs`). At a small window (2.5 point spacings) a flat dig of the
-nearest 20–30 points fills the fine window, and in the coarse pass's first round its own points inflate
-σ_l, so neither pass trims it (recall ~0.3). Only where the points' own noise sets the threshold
-(threshold_sigma · `_point_noise` > floor) and some point stands out in that first round: its σ_l is taken
-again without the points beyond CLIP σ_g, the coarse windows refitted without the points that σ_l trims;
-a point beyond threshold_sigma σ there that the fine pass's final fits (the candidates left out) show
-beyond threshold_sigma σ with the same sign, and that the form tests leave, seeds a dig; the candidates
-that stand out beyond TRIM σ in the fine fits (or that no fine window judges) join it by growth. An added
-point whose group (with the points already flagged) holds fewer than MIN_DIG points is dropped: a
-heavy-tailed noise point the clipped σ_l made stand out (Student-t 3-dof noise on a steep part lost one
-point more without it). It only adds. Measured (flat digs, a = 2.5 spacings, 20 nm noise, seeds 0–5;
-tests/test_knn_denoise_digs.py): recall scattered 0.38 → 0.90, raster 0.32 → 0.85, spiral 0.35 → 0.86
-(Hampel 0.14–0.19), no false removal more. Cost at 10⁶ points: 0.03–0.07 s where it stops at its
-first tests (benchmark clouds: 1.2–8 s either way); where it runs (300 flat digs, a = 2.5 spacings,
-20 nm noise) 3.4–3.6 s on 21–23 s, recall 0.03 → 0.89, false removals 10 → 10.
-
 Form, not outlier. The quadratic of a 2a window cannot follow every smooth surface: at a cone tip
 (a polishing residual's centre), a crest, a turned-down edge or the end of a star's line its error
 reaches 0.04–0.4 µm, far above the floor on noise-free data. A candidate is kept when (i) the
@@ -100,8 +84,6 @@ TRUNCATED_VAR = 0.9733  # variance of a unit normal truncated at ±3
 MAX_ROUNDS = 10
 COARSE = 3.0          # the first pass: windows this many times larger
 COARSE_ROUNDS = 3
-MIN_DIG = 3            # _clipped_digs: an added point's group (with the flagged points) holds at least this many
-CLIP = 10.0            # _clipped_digs: the coarse first round's σ_l without the points beyond this × σ_g
 RIDGE = 1e-6           # relative ridge on the slope and curvature terms: a window of collinear points
                        # (a star's line) gets no slope across the line instead of a singular system
 MIN_QUADRATIC = 12     # fewer points in a window: a plane
@@ -419,27 +401,10 @@ def _robust_sigma(z):
     return float(1.4826 * np.median(np.abs(z - np.median(z))))
 
 
-def _local_sigma(win, z, zf, fin, inside, full):
-    """(σ(P) = max(σ_g, σ_l), σ_g): σ_l the RMS of z over the window's points with ``inside`` = 1 (the
-    point itself left out: an outlier does not inflate its own σ), corrected for the trim's truncation."""
-    sg = _robust_sigma(z)
-    z2 = zf * zf
-    cw = win.window(np.column_stack([win.binary_sums(inside, full[0][:, :1])[:, 0],
-                                     win.cell_sums(inside, z2[None, :])[:, 0]]))
-    c0 = np.take(np.ascontiguousarray(cw[:, 0]), win.cell) - inside
-    c1 = np.take(np.ascontiguousarray(cw[:, 1]), win.cell) - inside * z2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sl = np.sqrt(np.clip(c1, 0, None) / c0 / TRUNCATED_VAR)
-    return np.fmax(sg, np.where(c0 >= 8, sl, 0.0)), sg
-
-
-def _trim_rounds(win, d, w, max_rounds, progress, offset, first=None):
-    """Iteratively trimmed local fits: returns the final weights, z, σ(P), σ_g, the cells' fits.
-    ``first``: a dict that receives the first round's z and the per-cell sums (for _clipped_digs)."""
+def _trim_rounds(win, d, w, max_rounds, progress, offset):
+    """Iteratively trimmed local fits: returns the final weights, z, σ(P), σ_g, the cells' fits."""
     n = len(d)
     full = win.full_sums(d)
-    if first is not None:
-        first["full"] = full
     prev = None
     last = None
     sig = None
@@ -449,11 +414,20 @@ def _trim_rounds(win, d, w, max_rounds, progress, offset, first=None):
         if progress is not None:
             progress.update(min(0.85, 0.1 + 0.06 * (rounds + offset)), f"round {rounds + offset}")
         z, beta, live = _plane_loo(win, d, w, full)
-        if rounds == 1 and first is not None:
-            first["z"] = z
+        sg = _robust_sigma(z)
+        # local σ: RMS of z over the window's points inside the trim (w), truncation corrected
         fin = np.isfinite(z)
         zf = np.where(fin, z, 0.0)
-        sig, sg = _local_sigma(win, z, zf, fin, w * fin, full)
+        # (without the point itself: an outlier does not inflate its own σ)
+        inside = w * fin
+        z2 = zf * zf
+        cw = win.window(np.column_stack([win.binary_sums(inside, full[0][:, :1])[:, 0],
+                                         win.cell_sums(inside, z2[None, :])[:, 0]]))
+        c0 = np.take(np.ascontiguousarray(cw[:, 0]), win.cell) - inside
+        c1 = np.take(np.ascontiguousarray(cw[:, 1]), win.cell) - inside * z2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sl = np.sqrt(np.clip(c1, 0, None) / c0 / TRUNCATED_VAR)
+        sig = np.fmax(sg, np.where(c0 >= 8, sl, 0.0))
         trimmed = fin & ~(np.abs(zf) < TRIM * sig)
         trimmed |= ~fin & (w == 0)  # an unjudged point keeps its weight (a dig's emptied windows)
         changed = None if prev is None else int(np.count_nonzero(trimmed != prev))
@@ -483,10 +457,9 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
     # a coarse pass first (window COARSE · a): a dig or scratch that fills a good part of the 2a window
     # is a small part of the larger one, so its points are trimmed before the fine planes see them
     coarse = _Windows(x, y, COARSE * window)
-    first_c, first_f = {}, {}
-    w, zc, sigc, _, betac, livec, _ = _trim_rounds(coarse, d, np.ones(n), COARSE_ROUNDS, progress, 0, first_c)
+    w, zc, sigc, _, betac, livec, _ = _trim_rounds(coarse, d, np.ones(n), COARSE_ROUNDS, progress, 0)
     win = _Windows(x, y, window)
-    w, z, sig, sg, beta, live, rounds = _trim_rounds(win, d, w, MAX_ROUNDS, progress, COARSE_ROUNDS, first_f)
+    w, z, sig, sg, beta, live, rounds = _trim_rounds(win, d, w, MAX_ROUNDS, progress, COARSE_ROUNDS)
     # where the 2a window is too sparse to judge (the end of a star's line), the coarse window judges
     sparse = ~np.isfinite(z)
     z, sig = np.where(sparse, zc, z), np.where(sparse, sigc, sig)
@@ -530,8 +503,6 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
         # a group whose deviation ramps into its surroundings is form (a cone tip, a crease, a roll-off),
         # not a spike or a dig (review 7; _keep_tapered) — on noise-free data only
         kept = _keep_tapered(x, y, np.where(cflag, zc, z), sig, thr, floor, flagged)
-    # flat digs the coarse pass's first round missed (module doc, "Digs that fill the window"): only added
-    grown += _clipped_digs(x, y, d, coarse, first_c, win, first_f["full"], w, flagged, threshold_sigma, floor)
     back = np.empty_like(order)
     back[order] = np.arange(n)
     return RobustResult(flagged[back], z[back], sig[back], sg, thr[back], rounds, grown, int((~fin).sum()),
@@ -560,120 +531,6 @@ def local_spacing(x, y, k: int = 12, sample: int = 20_000, tree=None) -> float:
         return float(np.median(r) * np.sqrt(np.pi / k) / np.sqrt(m))
     r = tree.query(pts[:: max(1, n // sample)], k=k + 1)[0][:, k]
     return float(np.median(r) * np.sqrt(np.pi / k))
-
-
-def _point_noise(x, y, d, k: int = 15, sample: int = 5_000) -> float:
-    """The noise of one point, free of the form: the robust σ (1.4826 · MAD) of each point's residual
-    from the least-squares quadratic through its k nearest neighbours (itself not among them), scaled
-    by √(1 + h) for the prediction's own error. Taken on `sample` consecutive points from the middle
-    of the cloud (robust_outliers passes the points in the order of their cells: a band of the
-    surface at its full density).
-
-    Why: a form the 2a window cannot follow (a ripple of 1–4 windows) makes z, and so σ, as large as
-    noise would — the global σ of a noise-free 10 mm part with a 13–40 nm ripple read 2–15 nm — but it
-    is smooth over a point's nearest neighbours, whose quadratic follows it to 0.01–0.3 nm, while noise
-    stays whole (1 nm noise reads 1.00–1.04 nm). 5,000 points: 0.03 s at 10⁶ points (20,000: 0.1 s, the
-    same σ within 4 %). Where the neighbours are collinear (a star's line, a
-    spiral's track) the ridge makes the fit a plane across them: the estimate only grows."""
-    from scipy.spatial import cKDTree
-
-    n = len(x)
-    if n <= k + 6:
-        return float("inf")
-    sl = slice(max(0, n // 2 - sample // 2), min(n, n // 2 + sample // 2))
-    xs, ys, ds = x[sl], y[sl], d[sl]
-    pts = np.column_stack([xs, ys])
-    dist, idx = cKDTree(pts).query(pts, k=k + 1)
-    nb = idx[:, 1:]
-    sc = dist[:, -1:] + 1e-300
-    u, v = (xs[nb] - xs[:, None]) / sc, (ys[nb] - ys[:, None]) / sc
-    G = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=2)
-    M = np.einsum("mki,mkj->mij", G, G) + (RIDGE * k) * np.eye(6)
-    Minv = np.linalg.inv(M)
-    beta = np.einsum("mij,mkj,mk->mi", Minv, G, ds[nb])
-    r = (ds - beta[:, 0]) / np.sqrt(1.0 + Minv[:, 0, 0])
-    return _robust_sigma(r)
-
-
-
-def _clipped_digs(x, y, d, coarse, first, win, full, w, flagged, threshold_sigma, floor) -> int:
-    """Add to ``flagged`` (in place, never removing) the points of digs that fill the fine window and
-    inflated the coarse pass's own first-round σ_l; returns how many were added.
-
-    Candidates: the coarse pass's first-round z (every point in the fits) judged against a σ_l that
-    leaves out the points beyond CLIP σ_g: beyond TRIM σ (cand), beyond threshold_sigma σ (strong).
-    Confirmed in the fine windows: the fine pass's final fits with every candidate left out — a strong
-    candidate whose z there is beyond threshold_sigma times that fit's own σ(P), with the same sign,
-    that the fine windows around it do not predict (the form tests, the best window within
-    threshold_sigma σ, not TRIM) seeds the dig; the candidates that stand out in the fine fits beyond
-    TRIM σ (or that no fine window judges: the middle of a dig that fills it) join by growth from the
-    seeds and from the points already flagged. Only where the points' own noise (_point_noise), not the
-    floor, sets the threshold: on noise-free data σ_g is model error, and the clip acts on form."""
-    z1 = first["z"]
-    fin1 = np.isfinite(z1)
-    z1f = np.where(fin1, z1, 0.0)
-    sg1 = _robust_sigma(z1)
-    if not np.any(fin1 & ~flagged & (np.abs(z1f) > max(threshold_sigma * sg1, floor))):
-        return 0
-    if not threshold_sigma * _point_noise(x, y, d) > floor:
-        return 0
-    inside = (fin1 & (np.abs(z1f) < CLIP * sg1)).astype(np.float64)
-    sig1, _ = _local_sigma(coarse, z1, z1f, fin1, inside, first["full"])
-    # the coarse round that σ_l's trim makes (a large pit no longer drags its neighbours' fits)
-    wc = (~(fin1 & (np.abs(z1f) >= TRIM * sig1))).astype(np.float64)
-    z1, _, _ = _plane_loo(coarse, d, wc, first["full"])
-    fin1 = np.isfinite(z1)
-    z1f = np.where(fin1, z1, 0.0)
-    sig1, _ = _local_sigma(coarse, z1, z1f, fin1, wc * fin1, first["full"])
-    cand = fin1 & ~flagged & (np.abs(z1f) >= np.maximum(TRIM * sig1, floor))
-    strong = cand & (np.abs(z1f) > np.maximum(threshold_sigma * sig1, floor))
-    if not strong.any():
-        return 0
-    w2 = w * ~cand
-    z2, fits2, live2 = _plane_loo(win, d, w2, full)
-    fin2 = np.isfinite(z2)
-    z2f = np.where(fin2, z2, 0.0)
-    sig2, _ = _local_sigma(win, z2, z2f, fin2, w2 * fin2, full)
-    same = np.sign(z2f) == np.sign(z1f)
-    seed = strong & fin2 & same & (np.abs(z2f) > np.maximum(threshold_sigma * sig2, floor))
-    pos = np.flatnonzero(seed)
-    spread = _disagreement(win, fits2, live2, pos)
-    seed[pos[np.abs(z2f[pos]) <= AGREE * spread]] = False
-    pos = np.flatnonzero(seed)
-    best = _best_window_z(win, fits2, live2, pos, d)
-    seed[pos[best <= np.maximum(threshold_sigma * sig2[pos], floor)]] = False
-    if not seed.any():
-        return 0
-    join = strong & ~seed & (~fin2 | (same & (np.abs(z2f) > np.maximum(TRIM * sig2, floor))))
-    out = flagged | seed
-    _grow(x, y, z1f, join, out)
-    # a dig has points: an added point whose group (with the points already flagged) holds fewer than
-    # MIN_DIG is a heavy-tailed noise point the clipped σ_l made stand out, not a dig (Student-t noise)
-    _drop_small(x, y, out, flagged)
-    added = int(np.count_nonzero(out & ~flagged))
-    flagged |= out
-    return added
-
-
-def _drop_small(x, y, out, flagged) -> None:
-    """Unset (in place) in ``out`` the points not in ``flagged`` whose connected group of ``out`` points
-    (neighbours within 1.5 mean point spacings, as _grow) holds fewer than MIN_DIG points."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-
-    oi = np.flatnonzero(out)
-    if not np.any(out & ~flagged):
-        return
-    area = max(np.ptp(x) * np.ptp(y), 1e-300)
-    reach = 1.5 * np.sqrt(area / len(x))
-    pairs = cKDTree(np.column_stack([x[oi], y[oi]])).query_pairs(reach, output_type="ndarray")
-    m = len(oi)
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
-    _, lab = connected_components(g, directed=False)
-    size = np.bincount(lab, minlength=m)
-    small = oi[size[lab] < MIN_DIG]
-    out[small[~flagged[small]]] = False
 
 
 def _keep_tapered(x, y, z, sig, thr, floor, flagged) -> int:
