@@ -130,24 +130,23 @@ class VolumetricStep(Step):
             # "u includes the distance term" over 40 % of the points, 2u covering 71 %)
             measured = (cal is not None and cal.excess_variance_um2_per_mm > 0 and cal.max_distance_mm is not None
                         and float(dist[far].max(initial=0.0)) <= cal.max_distance_mm)
-            if len(P) and far.mean() >= GAP_SHARE and measured:
-                warnings.append(f"{100 * far.mean():.3g} % of the points ({int(far.sum())}) lie farther than "
-                                f"{GAP_FACTOR:g} × the balls' typical spacing ({format_length(spacing)}, the median "
-                                f"distance between neighbouring balls) from every ball, up to "
-                                f"{format_length(float(dist.max()))}: there the correction is interpolated across a "
-                                "gap the balls do not sample; u includes the blocked cross-validation's distance "
-                                f"term (u raised up to {inflation['ratio_max']:.3g} ×, report: u_inflation), which "
-                                "measured how the error grows away from the balls where blocks of them could be held "
-                                "out, not across this gap — u may still be too small there (balls on a plate and "
-                                "the workpiece above it: 2u held 77 %); add balls inside that region")
-            elif len(P) and far.mean() >= GAP_SHARE:
-                warnings.append(f"{100 * far.mean():.3g} % of the points ({int(far.sum())}) lie farther than "
-                                f"{GAP_FACTOR:g} × the balls' typical spacing ({format_length(spacing)}, the median "
-                                f"distance between neighbouring balls) from every ball, up to "
-                                f"{format_length(float(dist.max()))}: there the correction and its u are "
-                                "interpolated across a gap the balls do not sample, and the fiducials' cross-"
-                                "validation (which held out balls beside other balls) did not measure the error "
-                                "there — u may be too small; add balls inside that region")
+            if len(P) and far.mean() >= GAP_SHARE:
+                where = (f"{100 * far.mean():.3g} % of the points ({int(far.sum())}) lie farther than "
+                         f"{GAP_FACTOR:g} × the balls' typical spacing ({format_length(spacing)}, the median "
+                         f"distance between neighbouring balls) from every ball, up to "
+                         f"{format_length(float(dist.max()))}: there the correction")
+                if measured:
+                    warnings.append(where + " is interpolated across a gap the balls do not sample; u includes "
+                                    "the blocked cross-validation's distance term (u raised up to "
+                                    f"{inflation['ratio_max']:.3g} ×, report: u_inflation), which measured how the "
+                                    "error grows away from the balls where blocks of them could be held out, not "
+                                    "across this gap — u may still be too small there (balls on a plate and the "
+                                    "workpiece above it: 2u held 77 %); add balls inside that region")
+                else:
+                    warnings.append(where + " and its u are interpolated across a gap the balls do not sample, "
+                                    "and the fiducials' cross-validation (which held out balls beside other balls) "
+                                    "did not measure the error there — u may be too small; add balls inside that "
+                                    "region")
         chans = {"outside_workspace": outside.astype(np.int64)}
         if not unknown:
             chans = {"u_x": u[:, 0], "u_y": u[:, 1], "u_z": u[:, 2], **chans}
