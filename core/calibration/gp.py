@@ -548,6 +548,49 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
                               or pooled >= SM_BEHIND * best_any)
                 best_sm = min(best_sm, pooled)
     best = min(cv, key=lambda n: float(np.sum(np.square(cv[n]))))
+    blocks = spatial_blocks(X, None if affine is None else aff[0][0], fixed, seed)
+    blocked = {}
+
+    def run_blocked(name):
+        """Per column (r, s, d) of ``name``'s blocked cross-validation (``blocked_cv``)."""
+        out = []
+        with threadpool_limits(1):
+            for j in range(m):
+                if check is not None:
+                    check()
+                sig = fitted[name][j].sigma if name == NONE else 0.0
+                # "none"'s σ is the K-fold RMS of the re-fitted transform's error at held-out balls:
+                # its leverage term is in it already (added again, τ² came out low — a review)
+                nvar = 0.0 if name == NONE else nx[j] if nx[j] is not None else (nv[j] or 0.0)
+                out.append(blocked_cv(cand[j][name], X, Y[:, j], blocks, maxiter, aff[j], sig, nvar))
+        blocked[name] = out
+        return out
+
+    simple = [n for n in cv if n != NONE and not n.startswith("spectral_mixture")]
+    if best.startswith("spectral_mixture") and simple and sum(len(b) for b in blocks) >= MIN_BLOCKED:
+        # a spectral mixture (3Q + 1 hyperparameters a column, fitted to ~24 balls) is kept only if it also
+        # predicts whole blocks of held-out balls — the gaps a workpiece lies in — no worse than the best
+        # simple kernel (RBF, Matérn) does: the K-fold folds hold out single balls between neighbours,
+        # where a mixture interpolates well and may still oscillate across a gap (balls on the edges of a
+        # box, bench_fiducials --coverage box_grid seed 2: Q4 chosen at 0.59 µm K-fold against Matérn's
+        # 0.68, blocks 0.70 against 0.68 µm, the workpiece 1.53 µm against 1.35 µm — and against the
+        # affine transform's 1.41 µm). Over 56 layouts × seeds (bench_fiducials, its 16 cases and the 40 of
+        # --coverage) K-fold chose a mixture twice, both on that grid, and both are set aside by this rule
+        # (workpiece 1.53 → 1.35 and 0.50 → 0.45 µm); the other 54 choices are unchanged
+        alt = min(simple, key=lambda n: float(np.sum(np.square(cv[n]))))
+
+        def pooled(out):
+            return float(sum(np.nansum(o[0] ** 2) for o in out))
+
+        if pooled(run_blocked(best)) > pooled(run_blocked(alt)):
+            info_sm = {"chosen_by_k_fold": best, "kept": alt,
+                       "blocked_rms_um": {n: float(np.sqrt(pooled(blocked[n]) / max(
+                           1, int(np.sum(np.isfinite(blocked[n][0][0])))))) * 1e3 for n in (best, alt)}}
+            best = alt
+        else:
+            info_sm = None
+    else:
+        info_sm = None
     if best != NONE and NONE in cv:
         # a GP is applied only where it wins out of sample by more than the chance of the folds: the
         # one-standard-error rule (Hastie, Tibshirani & Friedman §7.10) on the paired per-fiducial
@@ -562,19 +605,11 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
             "zero_rms": [float(np.sqrt(np.mean(Y[:, j] ** 2))) for j in range(m)],
             "held_out": int(sum(len(f) for f in fold_sets)), "never_held_out": fixed.tolist(),
             "sigma_basis": "cross-validation", "notes": [] if cv_note is None else [cv_note]}
+    if info_sm is not None:
+        info["spectral_mixture_set_aside"] = info_sm
     # how the chosen model's error grows away from the balls (blocked cross-validation): u² = s² + τ² d
-    blocks = spatial_blocks(X, None if affine is None else aff[0][0], fixed, seed)
     if sum(len(b) for b in blocks) >= MIN_BLOCKED:
-        out = []
-        with threadpool_limits(1):
-            for j in range(m):
-                if check is not None:
-                    check()
-                sig = fitted[best][j].sigma if best == NONE else 0.0
-                # "none"'s σ is the K-fold RMS of the re-fitted transform's error at held-out balls:
-                # its leverage term is in it already (added again, τ² came out low — a review)
-                nvar = 0.0 if best == NONE else nx[j] if nx[j] is not None else (nv[j] or 0.0)
-                out.append(blocked_cv(cand[j][best], X, Y[:, j], blocks, maxiter, aff[j], sig, nvar))
+        out = blocked.get(best) or run_blocked(best)
         info["blocked_cv"] = {"blocks": [b.tolist() for b in blocks],
                               "r": [o[0] for o in out], "s": [o[1] for o in out], "d": out[0][2],
                               "tau2": distance_term(np.array([o[0] for o in out]), np.array([o[1] for o in out]),
