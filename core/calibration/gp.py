@@ -579,13 +579,17 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
         # (workpiece 1.53 → 1.35 and 0.50 → 0.45 µm); the other 54 choices are unchanged
         alt = min(simple, key=lambda n: float(np.sum(np.square(cv[n]))))
 
-        def pooled(out):
-            return float(sum(np.nansum(o[0] ** 2) for o in out))
+        r_sm = np.array([o[0] for o in run_blocked(best)])  # (columns, balls), nan where not held out
+        r_alt = np.array([o[0] for o in run_blocked(alt)])
+        both = np.all(np.isfinite(r_sm) & np.isfinite(r_alt), axis=0)  # a fold one kernel could not fit
+        # leaves its balls out of both sums
 
-        if pooled(run_blocked(best)) > pooled(run_blocked(alt)):
+        def rms_um(r):  # RMS of |r| over the balls both held out, µm (r in mm)
+            return float(np.sqrt(np.sum(r[:, both] ** 2) / max(int(both.sum()), 1))) * 1e3
+
+        if both.sum() >= MIN_BLOCKED and rms_um(r_sm) > rms_um(r_alt):
             info_sm = {"chosen_by_k_fold": best, "kept": alt,
-                       "blocked_rms_um": {n: float(np.sqrt(pooled(blocked[n]) / max(
-                           1, int(np.sum(np.isfinite(blocked[n][0][0])))))) * 1e3 for n in (best, alt)}}
+                       "blocked_rms_um": {best: rms_um(r_sm), alt: rms_um(r_alt)}}
             best = alt
         else:
             info_sm = None
