@@ -173,9 +173,9 @@ def test_a_mixture_that_fails_the_blocks_is_set_aside(tmp_path):
     """Balls on the edges of the box (a 6 × 2 × 2 grid), a smooth field, the workpiece inside: the K-fold
     folds pick a spectral mixture (Q4, 0.59 µm against Matérn's 0.68), which predicts whole blocks of
     balls worse than Matérn (0.70 against 0.68 µm) and oscillates across the box — the workpiece was left
-    with 1.53 µm, worse than the affine transform alone (1.41 µm). The mixture is set aside, said in the
-    selection, and the workpiece's error falls below the transform's (bench_fiducials --coverage
-    box_grid, seed 2)."""
+    with 1.53 µm, worse than the affine transform alone (1.41 µm). The mixture is set aside, the block
+    test is reported (`spectral_mixture_block_test`, its "chosen" the selection's), and the workpiece's
+    error falls below the transform's (bench_fiducials --coverage box_grid, seed 2)."""
     import zlib
 
     from pointspro.core.calibration.fiducials import PARAMS, AffineFit
@@ -197,10 +197,11 @@ def test_a_mixture_that_fails_the_blocks_is_set_aside(tmp_path):
                               FiducialsStep.Params(reference="reference.csv", monte_carlo_runs=0),
                               Context(base_dir=tmp_path))
     sel = res.report["gp_selection"]
-    aside = sel["spectral_mixture_set_aside"]
-    assert aside["chosen_by_k_fold"].startswith("spectral_mixture") and aside["kept"] == sel["chosen"]
-    assert not sel["chosen"].startswith("spectral_mixture") and sel["chosen"] != "none"
-    assert aside["blocked_rms_um"][aside["chosen_by_k_fold"]] > aside["blocked_rms_um"][sel["chosen"]]
+    test = sel["spectral_mixture_block_test"]
+    assert test["chosen_by_k_fold"].startswith("spectral_mixture") and not test["mixture_kept"]
+    assert test["compared_with"] == sel["chosen"] == test["chosen"] and sel["chosen"] != "none"
+    assert test["blocked_rms_um"][test["chosen_by_k_fold"]] > test["blocked_rms_um"][sel["chosen"]]
+    assert test["balls_compared"] >= 8
     _, err, _ = apply(tmp_path, res.artifacts["volumetric_model.json"], W, f)
     tr = vm.loads(res.artifacts["volumetric_model.json"], "m.json").transform
     affine = AffineFit(np.array([tr["params"][p] for p in PARAMS]), np.zeros((12, 12)), 0, 0, 0, None)

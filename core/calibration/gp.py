@@ -566,7 +566,17 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
         blocked[name] = out
         return out
 
+    def beats_none(name):
+        """The one-standard-error rule (Hastie, Tibshirani & Friedman §7.10) on the paired per-fiducial
+        difference of the squared held-out errors |r|² (pooled over the columns) against no GP."""
+        if name == NONE or NONE not in cv:
+            return True
+        d = np.sum(resid[NONE] ** 2, axis=1) - np.sum(resid[name] ** 2, axis=1)
+        d = d[np.isfinite(d)]  # the balls some fold held out
+        return bool(np.mean(d) > np.std(d, ddof=1) / np.sqrt(len(d)))
+
     simple = [n for n in cv if n != NONE and not n.startswith("spectral_mixture")]
+    block_test = None
     if best.startswith("spectral_mixture") and simple and sum(len(b) for b in blocks) >= MIN_BLOCKED:
         # a spectral mixture (3Q + 1 hyperparameters a column, fitted to ~24 balls) is kept only if it also
         # predicts whole blocks of held-out balls — the gaps a workpiece lies in — no worse than the best
@@ -576,41 +586,38 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
         # 0.68, blocks 0.70 against 0.68 µm, the workpiece 1.53 µm against 1.35 µm — and against the
         # affine transform's 1.41 µm). Over 56 layouts × seeds (bench_fiducials, its 16 cases and the 40 of
         # --coverage) K-fold chose a mixture twice, both on that grid, and both are set aside by this rule
-        # (workpiece 1.53 → 1.35 and 0.50 → 0.45 µm); the other 54 choices are unchanged
+        # (workpiece 1.53 → 1.35 and 0.50 → 0.45 µm); the other 54 choices are unchanged. A review's 158
+        # cases of its own (ballscrew pitch errors, quasi-periodic fields, gaps, clusters): a mixture
+        # chosen 26 times, set aside 5 (1.91 → 1.30 µm once, 4 ending at "none" either way), none worse.
+        # Not run where neither kernel beats "none" (the choice is "none" whatever the blocks say)
         alt = min(simple, key=lambda n: float(np.sum(np.square(cv[n]))))
+        if beats_none(best) or beats_none(alt):
+            r_sm = np.array([o[0] for o in run_blocked(best)])  # (columns, balls), nan where not held out
+            r_alt = np.array([o[0] for o in run_blocked(alt)])
+            both = np.all(np.isfinite(r_sm) & np.isfinite(r_alt), axis=0)  # a fold one kernel could not
+            # fit leaves its balls out of both sums
 
-        r_sm = np.array([o[0] for o in run_blocked(best)])  # (columns, balls), nan where not held out
-        r_alt = np.array([o[0] for o in run_blocked(alt)])
-        both = np.all(np.isfinite(r_sm) & np.isfinite(r_alt), axis=0)  # a fold one kernel could not fit
-        # leaves its balls out of both sums
+            def rms_um(r):  # RMS of |r| over the balls both held out, µm (r in mm)
+                return float(np.sqrt(np.sum(r[:, both] ** 2) / max(int(both.sum()), 1))) * 1e3
 
-        def rms_um(r):  # RMS of |r| over the balls both held out, µm (r in mm)
-            return float(np.sqrt(np.sum(r[:, both] ** 2) / max(int(both.sum()), 1))) * 1e3
-
-        if both.sum() >= MIN_BLOCKED and rms_um(r_sm) > rms_um(r_alt):
-            info_sm = {"chosen_by_k_fold": best, "kept": alt,
-                       "blocked_rms_um": {best: rms_um(r_sm), alt: rms_um(r_alt)}}
-            best = alt
-        else:
-            info_sm = None
-    else:
-        info_sm = None
-    if best != NONE and NONE in cv:
-        # a GP is applied only where it wins out of sample by more than the chance of the folds: the
-        # one-standard-error rule (Hastie, Tibshirani & Friedman §7.10) on the paired per-fiducial
-        # difference of the squared held-out errors |r|² (pooled over the columns) against no GP
-        d = np.sum(resid[NONE] ** 2, axis=1) - np.sum(resid[best] ** 2, axis=1)
-        d = d[np.isfinite(d)]  # the balls some fold held out
-        if np.mean(d) <= np.std(d, ddof=1) / np.sqrt(len(d)):
-            best = NONE
+            if both.sum() >= MIN_BLOCKED:
+                kept = rms_um(r_sm) <= rms_um(r_alt)
+                block_test = {"chosen_by_k_fold": best, "compared_with": alt, "mixture_kept": kept,
+                              "blocked_rms_um": {best: rms_um(r_sm), alt: rms_um(r_alt)},
+                              "balls_compared": int(both.sum())}
+                if not kept:
+                    best = alt
+    # a GP is applied only where it wins out of sample by more than the chance of the folds
+    if not beats_none(best):
+        best = NONE
     words = CRITERION if affine is None else CRITERION_AFFINE
     info = {"chosen": best, "kind": NONE if best == NONE else kernel_kind(best),
             "criterion": words.format(k=len(fold_sets)), "cv_rms": cv, "loo_rms": loo,
             "zero_rms": [float(np.sqrt(np.mean(Y[:, j] ** 2))) for j in range(m)],
             "held_out": int(sum(len(f) for f in fold_sets)), "never_held_out": fixed.tolist(),
             "sigma_basis": "cross-validation", "notes": [] if cv_note is None else [cv_note]}
-    if info_sm is not None:
-        info["spectral_mixture_set_aside"] = info_sm
+    if block_test is not None:  # the mixture's block test; "chosen" after it and the rule against none
+        info["spectral_mixture_block_test"] = block_test | {"chosen": best}
     # how the chosen model's error grows away from the balls (blocked cross-validation): u² = s² + τ² d
     if sum(len(b) for b in blocks) >= MIN_BLOCKED:
         out = blocked.get(best) or run_blocked(best)

@@ -188,8 +188,8 @@ def fit_error_gps(X, errors, Q: int = 10, check=None, noise_var=None, ref=None,
                  "no_gp_rms_um": per_component(info["cv_rms"]["none"]),
                  "no_gp_in_sample_rms_um": per_component(info["zero_rms"]),
                  "cv_rms_um": {kk: per_component(v) for kk, v in info["cv_rms"].items()}}
-    if "spectral_mixture_set_aside" in info:  # (gp.select_gps: K-fold's mixture, worse on spatial blocks)
-        selection["spectral_mixture_set_aside"] = info["spectral_mixture_set_aside"]
+    if "spectral_mixture_block_test" in info:  # (gp.select_gps: K-fold's mixture against spatial blocks)
+        selection["spectral_mixture_block_test"] = info["spectral_mixture_block_test"]
     if "blocked_cv" in info:
         selection["blocked_cv"] = blocked_summary(info["blocked_cv"])
     return gps, specs, loo, selection
