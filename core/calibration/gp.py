@@ -587,26 +587,28 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
         # affine transform's 1.41 µm). Over 56 layouts × seeds (bench_fiducials, its 16 cases and the 40 of
         # --coverage) K-fold chose a mixture twice, both on that grid, and both are set aside by this rule
         # (workpiece 1.53 → 1.35 and 0.50 → 0.45 µm); the other 54 choices are unchanged. A review's 158
-        # cases of its own (ballscrew pitch errors, quasi-periodic fields, gaps, clusters): a mixture
-        # chosen 26 times, set aside 5 (1.91 → 1.30 µm once, 4 ending at "none" either way), none worse.
-        # Not run where neither kernel beats "none" (the choice is "none" whatever the blocks say)
+        # cases of its own (ballscrew pitch errors, quasi-periodic fields, gaps, clusters): K-fold chose a
+        # mixture 26 times; set aside 7 — 1.91 → 1.30, 2.89 → 2.45 and 1.04 → 0.92 µm, 4 ending at "none"
+        # either way — none worse. Not run where neither kernel beats "none" by the one-standard-error
+        # rule (the choice is "none" whatever the blocks say)
         alt = min(simple, key=lambda n: float(np.sum(np.square(cv[n]))))
         if beats_none(best) or beats_none(alt):
-            r_sm = np.array([o[0] for o in run_blocked(best)])  # (columns, balls), nan where not held out
-            r_alt = np.array([o[0] for o in run_blocked(alt)])
-            both = np.all(np.isfinite(r_sm) & np.isfinite(r_alt), axis=0)  # a fold one kernel could not
-            # fit leaves its balls out of both sums
+            # ... and no worse than the transform alone ("none") on the same blocks: a review's case (balls
+            # on two planes, a pitch error) kept Q2 at 2.89 µm against the transform's 2.45 µm
+            r = {n: np.array([o[0] for o in run_blocked(n)]) for n in (best, alt, NONE)}  # (columns, balls)
+            both = np.all([np.isfinite(v) for v in r.values()], axis=(0, 1))  # a fold one model could not
+            # fit leaves its balls out of every sum
 
-            def rms_um(r):  # RMS of |r| over the balls both held out, µm (r in mm)
-                return float(np.sqrt(np.sum(r[:, both] ** 2) / max(int(both.sum()), 1))) * 1e3
+            def rms_um(v):  # RMS of |r| over the balls all three held out, µm (r in mm)
+                return float(np.sqrt(np.sum(v[:, both] ** 2) / max(int(both.sum()), 1))) * 1e3
 
             if both.sum() >= MIN_BLOCKED:
-                kept = rms_um(r_sm) <= rms_um(r_alt)
-                block_test = {"chosen_by_k_fold": best, "compared_with": alt, "mixture_kept": kept,
-                              "blocked_rms_um": {best: rms_um(r_sm), alt: rms_um(r_alt)},
-                              "balls_compared": int(both.sum())}
-                if not kept:
-                    best = alt
+                rms = {n: rms_um(v) for n, v in r.items()}
+                kept = rms[best] <= min(rms[alt], rms[NONE])
+                block_test = {"chosen_by_k_fold": best, "compared_with": [alt, NONE], "mixture_kept": kept,
+                              "blocked_rms_um": rms, "balls_compared": int(both.sum())}
+                if not kept:  # the better of the two on the blocks (a GP then still against none, below)
+                    best = alt if rms[alt] <= rms[NONE] else NONE
     # a GP is applied only where it wins out of sample by more than the chance of the folds
     if not beats_none(best):
         best = NONE
