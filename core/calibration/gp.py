@@ -549,6 +549,7 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
                 best_sm = min(best_sm, pooled)
     best = min(cv, key=lambda n: float(np.sum(np.square(cv[n]))))
     blocks = spatial_blocks(X, None if affine is None else aff[0][0], fixed, seed)
+    enough_blocked = sum(len(b) for b in blocks) >= MIN_BLOCKED
     blocked = {}
 
     def run_blocked(name):
@@ -577,7 +578,7 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
 
     simple = [n for n in cv if n != NONE and not n.startswith("spectral_mixture")]
     block_test = None
-    if best.startswith("spectral_mixture") and simple and sum(len(b) for b in blocks) >= MIN_BLOCKED:
+    if best.startswith("spectral_mixture") and simple and enough_blocked:
         # a spectral mixture (3Q + 1 hyperparameters a column, fitted to ~24 balls) is kept only if it also
         # predicts whole blocks of held-out balls — the gaps a workpiece lies in — no worse than the best
         # simple kernel (RBF, Matérn) does: the K-fold folds hold out single balls between neighbours,
@@ -621,7 +622,7 @@ def select_gps(X, Y, Q: int = 10, noise_var=None, folds: int = 6, seed: int = 0,
     if block_test is not None:  # the mixture's block test; "chosen" after it and the rule against none
         info["spectral_mixture_block_test"] = block_test | {"chosen": best}
     # how the chosen model's error grows away from the balls (blocked cross-validation): u² = s² + τ² d
-    if sum(len(b) for b in blocks) >= MIN_BLOCKED:
+    if enough_blocked:
         out = blocked.get(best) or run_blocked(best)
         info["blocked_cv"] = {"blocks": [b.tolist() for b in blocks],
                               "r": [o[0] for o in out], "s": [o[1] for o in out], "d": out[0][2],
