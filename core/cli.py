@@ -1071,11 +1071,34 @@ def console() -> None:  # pragma: no cover - the console-script wrapper
     import faulthandler
 
     faulthandler.enable()
+    without_hugepage_advice()
     code = main()
     argv = sys.argv[1:]
     if "--batch" in argv and not any(a.startswith("--scheduler") for a in argv):
         exit_now(code)
     sys.exit(code)
+
+
+def without_hugepage_advice() -> None:
+    """numpy asks Linux for transparent huge pages on every array of ≥ 4 MiB (madvise); where the
+    kernel then compacts memory on the first touch of each 2 MiB page (THP ``defrag: madvise``, the
+    default of common distributions, this machine's), a fresh process pays for it on each new large
+    temporary: the 10⁶-point raster's whole command took 8.17–8.60 s with the advice and 7.37–7.74 s
+    without (3 runs each, alternated), the steps run a second time in one process equally fast either
+    way (2026-11-28, benchmarks/README.md). The process's own numpy stops advising; the batch's
+    workers, spawned with this environment, start without it. A user's own NUMPY_MADVISE_HUGEPAGE
+    is left as set (numpy reads it at import)."""
+    import os
+
+    if "NUMPY_MADVISE_HUGEPAGE" in os.environ:
+        return
+    os.environ["NUMPY_MADVISE_HUGEPAGE"] = "0"  # for the processes this one starts
+    import numpy as np
+
+    core = getattr(np, "_core", None) or getattr(np, "core", None)
+    setter = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+    if setter is not None:  # a private numpy function (1.x and 2.x); absent: the advice stays
+        setter(False)
 
 
 def exit_now(code: int) -> None:
