@@ -94,9 +94,12 @@ def run_cli(recipe: Path, data: Path, out: Path, extra=()) -> tuple[float, float
 def stage_table(recipe: Path, data: Path, out: Path, profile: bool = False,
                 extra: dict | None = None) -> list[tuple[str, float]]:
     """[(stage, seconds)] of one input run in process (imports already paid); ``extra``: keywords
-    of write_outputs (bench_large_map.py passes the cloud format)."""
+    of write_outputs (bench_large_map.py passes the cloud format). numpy without its huge-page advice,
+    as in the console command (core/cli.py without_hugepage_advice)."""
+    from pointspro.core.cli import without_hugepage_advice
     from pointspro.core.parallel import single_threaded_blas
 
+    without_hugepage_advice()  # as the console command runs (core/cli.py)
     with single_threaded_blas():  # as the batch command runs an input (core.executors)
         return _stage_table(recipe, data, out, profile, extra or {})
 
