@@ -6,6 +6,7 @@ import json
 import time
 
 from . import __version__
+from .errors import PointsProError
 from .io import atomic_path
 
 
@@ -43,8 +44,14 @@ def write_summary(out_dir, recipe_path, entries: list[dict], *, workers: int, sc
             "figures": figures, "overrides": list(overrides or []),
             "seconds": round(seconds, 3), "interrupted": interrupted, "counts": counts,
             "inputs": entries}
-    with atomic_path(out_dir / "summary.json") as tmp:
-        tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    try:
+        with atomic_path(out_dir / "summary.json") as tmp:
+            tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    except OSError as e:  # the machine (a full disk, a lost share), not a bug: one line naming the file
+        done = sum(1 for e_ in entries if e_["status"] == "ok")
+        raise PointsProError(f"{out_dir / 'summary.json'}: cannot be written ({e.strerror or e}); "
+                             f"{done} of {len(entries)} input(s) finished, each with its folder "
+                             "complete") from None
     return data
 
 

@@ -417,3 +417,21 @@ def test_an_ascii_terminal_gets_its_lines_not_an_internal_error(tmp_path):
                          capture_output=True, env=env, timeout=300)
     assert res.returncode == 0, res.stderr.decode("ascii", "replace")
     assert b"asphere_cmm.csv: ok ? " in res.stdout and b"internal error" not in res.stderr
+
+
+def test_a_full_disk_is_one_line_naming_the_file_not_an_internal_error(tmp_path):
+    """A file-size limit (as a full disk: EFBIG/ENOSPC on write) fails each input's outputs and then
+    summary.json itself — that was "internal error: OSError … please report it" (a review)."""
+    import resource
+
+    def limit():  # 2 KiB a file: the figures and summary.json cannot be written
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
+
+    res = subprocess.run([sys.executable, "-m", "pointspro.core.cli", "--batch", str(RECIPE), str(DATA),
+                          "--out", str(tmp_path / "o"), "--workers", "1", "--quiet"],
+                         capture_output=True, text=True, timeout=300, preexec_fn=limit)
+    assert res.returncode == 2, res.stderr
+    assert "internal error" not in res.stderr and "Traceback" not in res.stderr
+    assert "summary.json: cannot be written (File too large); 0 of 1 input(s) finished" in res.stderr
+    assert not (tmp_path / "o" / "asphere_cmm").exists()  # no half-written folder
+    assert [p.name for p in (tmp_path / "o").iterdir()] == []  # nor a temporary one
