@@ -792,11 +792,19 @@ def cleanup_partials(out_dir: Path, names) -> list[str]:
 
 def remove_leftovers(paths) -> list[str]:
     """Remove those of ``paths`` that are atomic writes' leftovers (``*.partial``, ``*.old``: files or
-    folders); the names removed."""
+    folders); the names removed. A folder set aside as ``.<name>.<hex>.old`` whose ``<name>`` is
+    missing is an earlier complete output whose replacement never arrived: it is renamed back."""
     import shutil
 
     gone = []
     for p in paths:
+        m = _LEFTOVER.fullmatch(p.name)
+        if m and p.name.endswith(".old") and p.is_dir() and not p.is_symlink() \
+                and not os.path.lexists(p.parent / m.group(1)):
+            # an earlier complete output set aside by a swap that did not finish (core/io/atomic.py
+            # atomic_dir's two renames, a process killed between them): put back, not deleted
+            os.replace(p, p.parent / m.group(1))
+            continue
         if p.name.endswith((".partial", ".old")):
             if p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)
