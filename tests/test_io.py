@@ -288,8 +288,17 @@ def test_integer_channels_out_of_int64_range_are_named(tmp_path):
     with pytest.raises(InputError, match=r"m.csv, line 2, column 4 \(line\): 1e\+300 is not a whole "
                                          r"number"):
         read_cloud(write(tmp_path / "m.csv", "x,y,z,line\n1,2,3,1e300\n4,5,6,2\n"))
-    big = read_cloud(write(tmp_path / "ok.csv", "x,y,z,index\n1,2,3,9223372036854774784\n4,5,6,0\n"))
-    assert big.index.tolist() == [2**63 - 1024, 0]  # the largest float64 below 2**63 still fits
+    big = read_cloud(write(tmp_path / "ok.csv", "x,y,z,index\n1,2,3,9007199254740991\n4,5,6,0\n"))
+    assert big.index.tolist() == [2**53 - 1, 0]  # the largest whole number float64 reads exactly
+
+
+@pytest.mark.parametrize("value", ["9007199254740992", "9007199254740993", "4611686018427387907"])
+def test_whole_numbers_float64_cannot_read_exactly_are_refused(tmp_path, value):
+    """2⁵³ + 1 read as 2⁵³ and 2⁶² + 3 as 2⁶² + 4, silently (a review): a file's numbers are parsed as
+    float64, so an integer column holds whole numbers below 2⁵³ (docs/formats.md)."""
+    with pytest.raises(InputError, match=r"m.csv, line 3, column 4 \(index\): .* below 2⁵³ .*read as "
+                                         r"float64"):
+        read_cloud(write(tmp_path / "m.csv", f"x,y,z,index\n1,2,3,0\n4,5,6,{value}\n"))
 
 
 @pytest.mark.parametrize("text", [

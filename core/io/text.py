@@ -750,21 +750,29 @@ def _rows_to_keep(path, lines, first_data, data, names, invalid: str, quote: boo
     return keep
 
 
+#: float64 holds every whole number below 2⁵³ exactly; 2⁵³ itself is also what 2⁵³ + 1 reads as
+EXACT_WHOLE = 2.0**53
+
+
 def _check_index(path, lines, first_data, cols: dict, names, rows, quote: bool = True) -> None:
-    """The integer columns of the file (index, line, fiducial, sensor) must be whole numbers that an
-    int64 holds — cast as they are, 1e300 or 9.3e18 wraps to -9223372036854775808 with no more than a
-    RuntimeWarning — and non-negative (docs/formats.md), the index never repeated; the
+    """The integer columns of the file (index, line, fiducial, sensor) must be whole numbers below 2⁵³,
+    read exactly from float64 — cast as they are, 1e300 or 9.3e18 wrapped to -9223372036854775808 with
+    no more than a RuntimeWarning — and non-negative (docs/formats.md), the index never repeated; the
     first bad value is named by line and column."""
     for n in (n for n in names if n in INTEGER_CHANNELS and n in cols):
         v = cols[n]
         # ≥ 0 for all four (docs/formats.md): a line, ball or sensor number of −1 is no number at all
-        bad = ~((v == np.floor(v)) & (v >= 0.0) & (v < 2.0**63))  # 2**63 itself is out of range
+        # < 2⁵³: the file's numbers are parsed as float64, exact as whole numbers only that far — 2⁵³ + 1
+        # read as 2⁵³, 2⁶² + 3 as 2⁶² + 4, with no message (a review); beyond it a value is refused
+        bad = ~((v == np.floor(v)) & (v >= 0.0) & (v < EXACT_WHOLE))
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
             ln = _data_line_number(lines.all(), first_data, int(rows[row]))
             val = f"{float(v[row])!r} " if quote else ""
-            what = ("a non-negative whole number (the index numbers the input rows)" if n == "index"
-                    else "a whole number from 0 to 9.2e18")
+            what = ("a non-negative whole number below 2⁵³ = 9007199254740992 (the index numbers the "
+                    "input rows)" if n == "index" else "a whole number from 0 to below 2⁵³ = 9007199254740992")
+            if v[row] == np.floor(v[row]) and v[row] >= EXACT_WHOLE:
+                what += ": a file's numbers are read as float64, exact whole numbers only below it"
             raise InputError(f"{path}, line {ln}, column {names.index(n) + 1} ({n}): {val}is not "
                              f"{what}")
     if "index" in cols and len(np.unique(cols["index"])) != len(cols["index"]):
