@@ -283,12 +283,21 @@ def write_artifact(folder: Path, name: str, art) -> None:
     target = folder / name
     if Path(name).name != name:
         raise ValueError(f"artifact name {name!r} must be a plain file name")
-    if callable(art):
-        art(target)
-    elif isinstance(art, bytes):
-        target.write_bytes(art)
-    else:
-        target.write_text(str(art), encoding="utf-8")
+    try:
+        if callable(art):
+            art(target)
+        elif isinstance(art, bytes):
+            target.write_bytes(art)
+        else:
+            target.write_text(str(art), encoding="utf-8")
+    except OSError as e:
+        raise naming(e, target) from e
+
+
+def naming(e: OSError, path) -> OSError:
+    """``e`` naming ``path`` where it names no file: a write's error (a full disk: "File too large")
+    says which file it was writing (a review: "writing the outputs: File too large")."""
+    return e if e.filename is not None else OSError(e.errno, e.strerror or str(e), str(path))
 
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
@@ -338,7 +347,10 @@ def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork
 
     def timed(name, write):
         t0 = time.perf_counter()
-        write()
+        try:
+            write()
+        except OSError as e:
+            raise naming(e, folder / name) from e
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -525,7 +537,7 @@ def failed_outcome(path: str, stage: str, e: BaseException, seconds: float = 0.0
     if isinstance(e, PointsProError):
         msg = str(e)
     elif isinstance(e, OSError):  # the machine, not a bug: disk full, permissions, a lost share
-        where = f" {e.filename}" if getattr(e, "filename", None) else ""
+        where = f" {e.filename}:" if getattr(e, "filename", None) else ""
         msg = f"{stage}:{where} {e.strerror or e}"
     else:
         msg = internal_message(stage, e)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -274,7 +275,7 @@ def test_failure_while_writing_leaves_no_folder(tmp_path, monkeypatch):
     out = tmp_path / "o"
     out.mkdir()
     oc = batch.process_input(good, r, out, "good")  # the input fails alone, with one line
-    assert not oc.ok and oc.error == f"{good}: writing the outputs: disk full"
+    assert not oc.ok and oc.error == f"{good}: writing the outputs: {out / 'good' / 'report.html'}: disk full"
     assert "OSError: disk full" in oc.traceback
     assert list(out.iterdir()) == []
 
@@ -433,5 +434,8 @@ def test_a_full_disk_is_one_line_naming_the_file_not_an_internal_error(tmp_path)
     assert res.returncode == 2, res.stderr
     assert "internal error" not in res.stderr and "Traceback" not in res.stderr
     assert "summary.json: cannot be written (File too large); 0 of 1 input(s) finished" in res.stderr
+    # the input's line names the file it was writing, where it was going (not the temporary folder)
+    assert re.search(r"asphere_cmm.csv: writing the outputs: \S*/o/asphere_cmm/[\w.]+: File too large",
+                     res.stderr), res.stderr
     assert not (tmp_path / "o" / "asphere_cmm").exists()  # no half-written folder
     assert [p.name for p in (tmp_path / "o").iterdir()] == []  # nor a temporary one

@@ -118,9 +118,13 @@ def atomic_path(path):
     try:
         yield tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(e, OSError) and e.filename is None:
+            # a writer's error that names no file (Arrow's CSV writer on a full disk: "File too large")
+            # names the file it was writing (a review: "writing the outputs: File too large")
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from e
         raise
 
 
@@ -149,8 +153,12 @@ def atomic_dir(path):
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         shutil.rmtree(tmp, ignore_errors=True)
+        name = getattr(e, "filename", None) if isinstance(e, OSError) else None
+        if name and str(name).startswith(str(tmp) + os.sep):
+            # the file named where it was going, not in the temporary folder that is gone now
+            raise OSError(e.errno, e.strerror or str(e), str(path) + str(name)[len(str(tmp)):]) from e
         raise
 
 
