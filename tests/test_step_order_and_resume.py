@@ -184,7 +184,7 @@ def test_negative_line_numbers_are_refused(tmp_path):
 
     f = write(tmp_path / "l.csv", "x,y,z,line\n0,0,0,0\n1,0,0,-1\n0,1,0,1\n")
     with pytest.raises(InputError, match=r"l\.csv, line 3, column 4 \(line\): -1\.0 is not a whole number "
-                                         r"from 0 to 9\.2e18"):
+                                         r"from 0 to below 2⁵³"):
         read_cloud(f)
 
 
