@@ -1,0 +1,24 @@
+"""knn_denoise on an exactly constant residual (a review, 2026-11-28): σ is 0 there, and the trimmed
+fits' test ``|z| < 3σ`` trimmed every point — no point was judged, 0 of 20 spikes of 1–20 µm were
+found (a Hampel filter found all 20), and the step said every point "had fewer than 3 others in its
+window"."""
+import numpy as np
+
+from pointspro.core import PointCloud
+from pointspro.core.step import Context
+from pointspro.plugins.knn_denoise import KnnDenoiseStep
+
+
+def test_spikes_on_an_exactly_constant_residual_are_found():
+    rng = np.random.default_rng(3)
+    n = 40_000
+    x, y = rng.uniform(-50, 50, n), rng.uniform(-50, 50, n)
+    spacing = np.sqrt(1e4 / n)
+    spikes = rng.choice(n, 20, replace=False)
+    for base in (np.zeros(n), np.full(n, 5.0), 1e-4 * x):  # zero, a constant, an exact plane
+        d = base.copy()
+        d[spikes] += rng.choice([-1, 1], 20) * rng.uniform(1e-3, 2e-2, 20)  # 1–20 µm
+        cloud = PointCloud.from_xyz(x, y, 1e-3 * x, residual=d)
+        res = KnnDenoiseStep().run(cloud, KnnDenoiseStep.Params(window=4 * spacing), Context())
+        assert sorted(res.report["removed_index"]) == sorted(spikes.tolist())
+        assert not any("fewer than" in w for w in res.report["warnings"])
