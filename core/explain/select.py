@@ -68,8 +68,13 @@ MAX_VIBRATION_LINES = 3
 #: the σ re-estimated on the residual replaces the gap's when it differs by more than this share
 SIGMA_SETTLED = 0.05
 #: the residual's lag-1 autocorrelation along the scan beyond which (either sign, and beyond 4/√N, its
-#: white-noise spread ×4) the chosen effects are tested again under the residual's AR noise (_correlated_noise_gate)
-RHO_GATE = 0.2
+#: white-noise spread ×4) the chosen effects are tested again under the residual's AR noise (_correlated_noise_gate).
+#: 0.2 until 2026-11-28: white noise plus a random walk of the same RMS (an instrument's drift) left
+#: ρ̂ 0.08–0.13 once the chosen low-frequency effects had taken the walk's wander, the gate never fired
+#: and 14 of 20 such null gaps on a 5,000-point spiral named effects (one "explained" by straightness
+#: and three vibrations — a review); at 0.05: 4 of 20; the 204 white-noise cases and the power on
+#: white and AR(1) 0.15 / 0.3 noise unchanged (benchmarks/README.md)
+RHO_GATE = 0.05
 
 
 def local_fraction(ctx: ScanContext, r_old: np.ndarray, r_new: np.ndarray, cells: int = 24
