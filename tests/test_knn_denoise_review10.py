@@ -22,3 +22,19 @@ def test_spikes_on_an_exactly_constant_residual_are_found():
         res = KnnDenoiseStep().run(cloud, KnnDenoiseStep.Params(window=4 * spacing), Context())
         assert sorted(res.report["removed_index"]) == sorted(spikes.tolist())
         assert not any("fewer than" in w for w in res.report["warnings"])
+
+
+def test_a_window_of_three_spacings_is_warned_of():
+    """At 3.0 point spacings, 6 σ digs of 27–29 points were missed whole and nothing was said (the
+    warning began below 3.0; a review): it begins below 3.5 now, and not at 4."""
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(-20, 20, 16000), rng.uniform(-20, 20, 16000)  # mean spacing 0.32 mm
+    d = rng.normal(0, 20e-6, len(x))
+    cloud = PointCloud.from_xyz(x, y, d)
+
+    def warned(window):
+        res = KnnDenoiseStep().run(cloud, KnnDenoiseStep.Params(window=window), Context())
+        return [w for w in res.report["warnings"] if "point spacings" in w]
+
+    assert warned(0.95)  # 3.0 spacings
+    assert not warned(1.3)  # 4.1
