@@ -25,7 +25,7 @@ from typing import Callable
 
 from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
-from .io.atomic import InputPlaces, why_not_replace
+from .io.atomic import InputPlaces, naming, why_not_replace
 from .io.background import BackgroundWrite, share_out
 from .io.formats import write_ply_cloud
 from .io.npz import write_npz_cloud
@@ -291,13 +291,10 @@ def write_artifact(folder: Path, name: str, art) -> None:
         else:
             target.write_text(str(art), encoding="utf-8")
     except OSError as e:
-        raise naming(e, target) from e
-
-
-def naming(e: OSError, path) -> OSError:
-    """``e`` naming ``path`` where it names no file: a write's error (a full disk: "File too large")
-    says which file it was writing (a review: "writing the outputs: File too large")."""
-    return e if e.filename is not None else OSError(e.errno, e.strerror or str(e), str(path))
+        renamed = naming(e, target)
+        if renamed is not None:
+            raise renamed from e
+        raise
 
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
@@ -350,7 +347,10 @@ def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork
         try:
             write()
         except OSError as e:
-            raise naming(e, folder / name) from e
+            renamed = naming(e, folder / name)
+            if renamed is not None:
+                raise renamed from e
+            raise
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
     t0 = time.perf_counter()

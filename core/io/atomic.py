@@ -110,6 +110,15 @@ def _not_written_by_it(folder: Path, marker: str) -> str | None:
     return next((p.name for p in sorted(folder.iterdir()) if p.name not in listed), None)
 
 
+def naming(e: BaseException, path) -> OSError | None:
+    """A copy of the OSError ``e`` naming ``path``, where ``e`` names no file (a write's error: a full
+    disk's "File too large" says which file it was writing — a review: "writing the outputs: File too
+    large"); None otherwise (not an OSError, or it names its file)."""
+    if not isinstance(e, OSError) or e.filename is not None:
+        return None
+    return OSError(e.errno, e.strerror or str(e), str(path))
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path``; on success rename it to ``path``, else remove it."""
@@ -121,10 +130,9 @@ def atomic_path(path):
     except BaseException as e:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        if isinstance(e, OSError) and e.filename is None:
-            # a writer's error that names no file (Arrow's CSV writer on a full disk: "File too large")
-            # names the file it was writing (a review: "writing the outputs: File too large")
-            raise OSError(e.errno, e.strerror or str(e), str(path)) from e
+        renamed = naming(e, path)  # Arrow's CSV writer on a full disk names no file
+        if renamed is not None:
+            raise renamed from e
         raise
 
 
@@ -185,9 +193,9 @@ def _exchange(a: Path, b: Path) -> bool:
     renameat2.restype = ctypes.c_int
     if renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
         return True
-    err = ctypes.get_errno()
     import errno
 
+    err = ctypes.get_errno()
     if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.EXDEV):
         return False
     raise OSError(err, os.strerror(err), str(b))
