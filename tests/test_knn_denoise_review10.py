@@ -38,3 +38,35 @@ def test_a_window_of_three_spacings_is_warned_of():
 
     assert warned(0.95)  # 3.0 spacings
     assert not warned(1.3)  # 4.1
+
+
+
+def _bump_with_spikes(seed, height):
+    """A bump as wide as the window (form: kept) with three true spikes of 100 σ on it, 2 nm noise,
+    60,000 scattered points, a window of 6 point spacings; the cloud, the window and the spikes' rows."""
+    rng = np.random.default_rng(seed)
+    n = 60_000
+    x, y = rng.uniform(-40, 40, n), rng.uniform(-40, 40, n)
+    a = 6 * np.sqrt(6400 / n)
+    d = height * np.exp(-((x - 5) ** 2 + (y + 3) ** 2) / (2 * a * a)) + rng.normal(0, 2e-6, n)
+    near = np.flatnonzero(np.hypot(x - 5, y + 3) < 1.2 * a)
+    spikes = rng.choice(near, 3, replace=False)
+    d[spikes] += 0.2e-3
+    return PointCloud.from_xyz(x, y, d), a, spikes
+
+
+def test_a_spike_on_a_window_sized_bump_takes_none_of_the_bump_with_it():
+    """The coarse pass (window 3a) cannot follow a bump the fine quadratic follows; its candidates there
+    joined a true spike's dig by growth and 4–17 of the bump's points were removed with it (a review;
+    here 32 over these 8 cases). A coarse candidate joins now only where the fine fit also sees it
+    beyond COARSE_JOIN σ: 1 over the 8."""
+    lost = found = 0
+    for height in (0.3e-3, 1e-3):
+        for seed in range(4):
+            cloud, a, spikes = _bump_with_spikes(seed, height)
+            res = KnnDenoiseStep().run(cloud, KnnDenoiseStep.Params(window=a), Context())
+            removed = set(res.report["removed_index"])
+            found += len(removed & set(spikes.tolist()))
+            lost += len(removed - set(spikes.tolist()))
+    assert found >= 23  # of 24 (one sits where the bump's own slope hides it, before and after)
+    assert lost <= 2

@@ -88,6 +88,7 @@ RIDGE = 1e-6           # relative ridge on the slope and curvature terms: a wind
                        # (a star's line) gets no slope across the line instead of a singular system
 MIN_QUADRATIC = 12     # fewer points in a window: a plane
 AGREE = 1.25
+COARSE_JOIN = 2.0      # a coarse-pass candidate joins a dig only beyond this many σ of the fine fit too
 NOISE_FREE = 1e-4      # _keep_tapered acts where the flagged points' σ is below this × the floor
 STEP_NOISE = 3.0       # _keep_tapered: an edge step within this many σ, or within STEP_RAMP times the
 STEP_RAMP = 2.0        # group's own steps, continues the surface (form) …
@@ -491,6 +492,10 @@ def robust_outliers(x, y, d, window, spacing, threshold_sigma, floor, progress=N
     fin_c = np.isfinite(zc)
     zcz = np.where(fin_c, zc, 0.0)
     cflag = fin_c & ~sparse & ~flagged & (np.abs(zcz) > np.maximum(threshold_sigma * sigc, floor))
+    # … and only where the fine fit sees the point beyond COARSE_JOIN σ too: the round pit's deep points
+    # read 3–5 σ there, a bump of the window's size that the fine quadratic follows 0.5–2.7 σ — a true
+    # spike on such a bump grew into 4–17 of its points through the coarse candidates (a review)
+    cflag &= np.abs(zz) > COARSE_JOIN * sig
     cand = np.flatnonzero(cflag)
     spread = _disagreement(coarse, betac, livec, cand)
     cflag[cand[np.abs(zc[cand]) <= AGREE * spread]] = False
