@@ -70,3 +70,20 @@ def test_a_spike_on_a_window_sized_bump_takes_none_of_the_bump_with_it():
             lost += len(removed - set(spikes.tolist()))
     assert found >= 23  # of 24 (one sits where the bump's own slope hides it, before and after)
     assert lost <= 2
+
+
+def test_a_nan_residual_is_refused_naming_its_row():
+    """A NaN in the residual left the points around it unjudged with the reason "fewer than 3 others
+    in their window", and through the pipeline the sanity check later blamed the steps (a review)."""
+    import pytest
+
+    from pointspro.core.errors import StepError
+
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-20, 20, 5000), rng.uniform(-20, 20, 5000)
+    d = rng.normal(0, 20e-6, 5000)
+    d[1234] = np.nan
+    with pytest.raises(StepError, match=r"1 value\(s\) of `residual` are NaN or infinite \(the first at "
+                                        r"row 1234\)"):
+        KnnDenoiseStep().run(PointCloud.from_xyz(x, y, 0 * x, residual=d), KnnDenoiseStep.Params(window=2.0),
+                             Context())

@@ -125,6 +125,14 @@ class KnnDenoiseStep(Step):
         channel = "residual" if "residual" in cloud.channels else "z"
         d = np.asarray(cloud[channel], dtype=np.float64)
         x, y = cloud.x, cloud.y
+        bad = ~np.isfinite(d)
+        if bad.any():
+            # a review: the robust fits left the points around it unjudged ("fewer than 3 others in
+            # their window"), and the pipeline's sanity check later blamed the steps
+            first = int(np.flatnonzero(bad)[0])
+            row = int(cloud["index"][first]) if "index" in cloud.channels else first
+            raise StepError(f"{int(bad.sum())} value(s) of `{channel}` are NaN or infinite (the first at row "
+                            f"{row}): the local fits cannot judge their neighbours — drop those points first")
         self._check_input(x, y, d, params)
         if params.method == "robust":
             removal = remove_robust(x, y, d, params, ctx.progress)
