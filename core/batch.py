@@ -805,18 +805,18 @@ def cleanup_partials(out_dir: Path, names) -> list[str]:
 def remove_leftovers(paths) -> list[str]:
     """Remove those of ``paths`` that are atomic writes' leftovers (``*.partial``, ``*.old``: files or
     folders); the names removed. A folder set aside as ``.<name>.<hex>.old`` whose ``<name>`` is
-    missing is an earlier complete output whose replacement never arrived: it is renamed back."""
+    missing is an earlier complete output whose replacement never arrived: it is renamed back
+    (``_set_aside_to_restore``)."""
+    import contextlib
     import shutil
 
+    paths = list(paths)
+    for p in _set_aside_to_restore(paths):
+        paths.remove(p)  # put back, or where that fails left as it is — never deleted
+        with contextlib.suppress(OSError):  # the clean-up never fails a batch
+            os.replace(p, p.parent / _LEFTOVER.fullmatch(p.name).group(1))
     gone = []
     for p in paths:
-        m = _LEFTOVER.fullmatch(p.name)
-        if m and p.name.endswith(".old") and p.is_dir() and not p.is_symlink() \
-                and not os.path.lexists(p.parent / m.group(1)):
-            # an earlier complete output set aside by a swap that did not finish (core/io/atomic.py
-            # atomic_dir's two renames, a process killed between them): put back, not deleted
-            os.replace(p, p.parent / m.group(1))
-            continue
         if p.name.endswith((".partial", ".old")):
             if p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)
@@ -824,6 +824,24 @@ def remove_leftovers(paths) -> list[str]:
                 p.unlink(missing_ok=True)
             gone.append(p.name)
     return gone
+
+
+def _set_aside_to_restore(paths) -> list[Path]:
+    """Of ``paths``, the ``.<name>.<hex>.old`` folders to rename back to ``<name>``: an earlier complete
+    output set aside by a swap that did not finish (core/io/atomic.py atomic_dir's two renames, a
+    process killed between them) — where ``<name>`` is missing, the newest such folder that still
+    holds its report.json (another may be an old folder whose deletion failed half-way: a review)."""
+    best: dict[str, Path] = {}
+    for p in paths:
+        m = _LEFTOVER.fullmatch(p.name)
+        if not (m and p.name.endswith(".old") and p.is_dir() and not p.is_symlink()):
+            continue
+        name = m.group(1)
+        if os.path.lexists(p.parent / name) or not (p / "report.json").is_file():
+            continue
+        if name not in best or p.stat().st_mtime > best[name].stat().st_mtime:
+            best[name] = p
+    return list(best.values())
 
 
 def input_digest(path) -> str:

@@ -48,10 +48,10 @@ def write_summary(out_dir, recipe_path, entries: list[dict], *, workers: int, sc
         with atomic_path(out_dir / "summary.json") as tmp:
             tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
     except OSError as e:  # the machine (a full disk, a lost share), not a bug: one line naming the file
-        done = sum(1 for e_ in entries if e_["status"] == "ok")
+        # skipped (--resume): complete from an earlier run, as cli._batch_exit_code counts them
+        done = sum(1 for e_ in entries if e_["status"] in ("ok", "skipped"))
         raise PointsProError(f"{out_dir / 'summary.json'}: cannot be written ({e.strerror or e}); "
-                             f"{done} of {len(entries)} input(s) finished, each with its folder "
-                             "complete") from None
+                             f"{done} of {len(entries)} input(s) have their folder complete") from None
     return data
 
 

@@ -67,3 +67,18 @@ def test_a_set_aside_folder_whose_replacement_arrived_is_removed(tmp_path):
     assert cleanup_partials(tmp_path, ["part"]) == [stale.name]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["part"]
     assert (folder / "old.txt").read_text(encoding="utf-8") == "earlier"
+
+
+def test_of_two_set_aside_folders_the_complete_one_is_put_back(tmp_path):
+    """An old folder whose deletion failed half-way (atomic_dir's fallback removes it with
+    ignore_errors) beside a complete one: the one that still holds its report.json is put back, the
+    other removed (a review: the first in the order of their random names was restored)."""
+    half = tmp_path / ".part.00000000.old"
+    half.mkdir()
+    (half / "figure.png").write_bytes(b"x")
+    whole = tmp_path / ".part.ffffffff.old"
+    whole.mkdir()
+    (whole / "report.json").write_text('{"files": []}', encoding="utf-8")
+    cleanup_partials(tmp_path, ["part"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["part"]
+    assert (tmp_path / "part" / "report.json").is_file()

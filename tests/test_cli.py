@@ -433,7 +433,8 @@ def test_a_full_disk_is_one_line_naming_the_file_not_an_internal_error(tmp_path)
                          capture_output=True, text=True, timeout=300, preexec_fn=limit)
     assert res.returncode == 2, res.stderr
     assert "internal error" not in res.stderr and "Traceback" not in res.stderr
-    assert "summary.json: cannot be written (File too large); 0 of 1 input(s) finished" in res.stderr
+    assert "summary.json: cannot be written (File too large); 0 of 1 input(s) have their folder complete" \
+        in res.stderr
     # the input's line names the file it was writing, where it was going (not the temporary folder)
     assert re.search(r"asphere_cmm.csv: writing the outputs: \S*/o/asphere_cmm/[\w.]+: File too large",
                      res.stderr), res.stderr

@@ -447,3 +447,23 @@ def test_numbers_in_double_quotes_are_read(tmp_path, monkeypatch, text, xyz, fas
 def test_bad_quoted_fields_are_named(tmp_path, text, pattern):
     with pytest.raises(InputError, match=pattern):
         read_cloud(write(tmp_path / "m.csv", text))
+
+
+@pytest.mark.parametrize("kind", ["ply", "pcd"])
+def test_ascii_ply_and_pcd_refuse_integer_channels_float64_cannot_hold(tmp_path, kind):
+    """An index written as a floating property of an ASCII PLY (or TYPE F of an ASCII PCD) is parsed as
+    float64: 9007199254740993 and …992 read as two equal indices, silently (a review). Refused now;
+    a PCD's TYPE I / U SIZE 8 field is read exactly."""
+    if kind == "ply":
+        p = write(tmp_path / "m.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\n"
+                  "property double y\nproperty double z\nproperty double index\nend_header\n"
+                  "0 0 0 9007199254740993\n1 1 1 5\n")
+        with pytest.raises(InputError, match=r"m.ply: vertex 0, property 'index': .* below 2⁵³"):
+            read_cloud(p)
+        return
+    head = ("VERSION .7\nFIELDS x y z index\nSIZE 8 8 8 8\nTYPE F F F {t}\nCOUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+            "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n0 0 0 9007199254740993\n1 1 1 9007199254740992\n")
+    with pytest.raises(InputError, match=r"m.pcd, line 11: field 'index' is TYPE F .* below 2⁵³"):
+        read_cloud(write(tmp_path / "m.pcd", head.format(t="F")))
+    exact = read_cloud(write(tmp_path / "u.pcd", head.format(t="U")))
+    assert exact.index.tolist() == [2**53 + 1, 2**53]
