@@ -467,3 +467,12 @@ def test_ascii_ply_and_pcd_refuse_integer_channels_float64_cannot_hold(tmp_path,
         read_cloud(write(tmp_path / "m.pcd", head.format(t="F")))
     exact = read_cloud(write(tmp_path / "u.pcd", head.format(t="U")))
     assert exact.index.tolist() == [2**53 + 1, 2**53]
+
+
+def test_a_repeated_index_is_refused_by_every_reader(tmp_path):
+    """The index numbers the input's rows (manual_edit removes by it): the text reader refused a repeated
+    one, an ASCII PLY's `3, 3` was read as is (a review)."""
+    p = write(tmp_path / "m.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\n"
+              "property double y\nproperty double z\nproperty double index\nend_header\n0 0 0 3\n1 1 1 3\n")
+    with pytest.raises(InputError, match=r"m.ply: the index column has repeated values \(the first: 3, 2 times\)"):
+        read_cloud(p)
