@@ -25,7 +25,7 @@ from typing import Callable
 
 from .errors import Cancelled, PointsProError, RecipeError
 from .io import atomic_dir, read_cloud, write_csv
-from .io.atomic import InputPlaces, naming, why_not_replace
+from .io.atomic import InputPlaces, naming_errors, why_not_replace
 from .io.background import BackgroundWrite, share_out
 from .io.formats import write_ply_cloud
 from .io.npz import write_npz_cloud
@@ -283,18 +283,13 @@ def write_artifact(folder: Path, name: str, art) -> None:
     target = folder / name
     if Path(name).name != name:
         raise ValueError(f"artifact name {name!r} must be a plain file name")
-    try:
+    with naming_errors(target):  # a full disk names the file (a review)
         if callable(art):
             art(target)
         elif isinstance(art, bytes):
             target.write_bytes(art)
         else:
             target.write_text(str(art), encoding="utf-8")
-    except OSError as e:
-        renamed = naming(e, target)
-        if renamed is not None:
-            raise renamed from e
-        raise
 
 
 def write_outputs(folder: Path, input_path: str, recipe: Recipe, result, *, figures: str = "all",
@@ -344,13 +339,8 @@ def _write_outputs(folder, input_path, recipe, result, *, figures, timings, fork
 
     def timed(name, write):
         t0 = time.perf_counter()
-        try:
+        with naming_errors(folder / name):
             write()
-        except OSError as e:
-            renamed = naming(e, folder / name)
-            if renamed is not None:
-                raise renamed from e
-            raise
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
     t0 = time.perf_counter()

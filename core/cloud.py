@@ -15,6 +15,32 @@ import numpy as np
 _CHANNEL_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 # Channels that hold integers (labels, ids, rows); everything else is float64.
 INTEGER_CHANNELS = frozenset({"index", "line", "fiducial", "sensor"})
+#: float64 holds every whole number below 2⁵³ exactly (2⁵³ itself is also what 2⁵³ + 1 reads as): an
+#: integer channel parsed from text as float64 must lie below it (docs/formats.md)
+EXACT_WHOLE = 2**53
+
+
+def first_repeat(index) -> tuple | None:
+    """(the first repeated value in row order, how often it occurs, how many repeats in all) when
+    ``index`` repeats a value, else None; an increasing index, the usual case, is told without sorting."""
+    idx = np.asarray(index)
+    if idx.size < 2 or bool(np.all(idx[1:] > idx[:-1])):
+        return None
+    uniq, counts = np.unique(idx, return_counts=True)
+    if uniq.size == idx.size:
+        return None
+    first = idx[np.isin(idx, uniq[counts > 1])][0].item()
+    first = int(first) if isinstance(first, float) and first.is_integer() else first
+    return first, int(counts[np.searchsorted(uniq, first)]), int(idx.size - uniq.size)
+
+
+def repeated_index_message(index) -> str | None:
+    """A reader's words for a repeated index (it numbers the input's rows: manual_edit removes by it):
+    "the index column has repeated values (the first: 3, 2 times)"; None when none repeats."""
+    rep = first_repeat(index)
+    return None if rep is None else f"the index column has repeated values (the first: {rep[0]}, {rep[1]} times)"
+
+
 FRAMES = ("measuring", "part")
 
 
@@ -33,13 +59,10 @@ def _unique_index(index, where: str) -> None:
         return
     from .errors import InputError
 
-    idx = np.asarray(index)
-    uniq, counts = np.unique(idx, return_counts=True)
-    if uniq.size < idx.size:
-        repeated = uniq[counts > 1]
-        first = idx[np.isin(idx, repeated)][0].item()  # the first in row order
-        times = int(counts[np.searchsorted(uniq, first)])
-        raise InputError(f"{where}: the index column must name each input row once; {idx.size - uniq.size} "
+    rep = first_repeat(index)
+    if rep is not None:
+        first, times, repeats = rep
+        raise InputError(f"{where}: the index column must name each input row once; {repeats} "
                          f"repeat(s) (first: {first!r}, {times} times) — "
                          "renumber it (df['index'] = range(len(df))) or drop it")
 

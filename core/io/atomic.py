@@ -120,6 +120,18 @@ def naming(e: BaseException, path) -> OSError | None:
 
 
 @contextlib.contextmanager
+def naming_errors(path):
+    """Context: an OSError raised inside that names no file names ``path`` (``naming``)."""
+    try:
+        yield
+    except OSError as e:
+        renamed = naming(e, path)
+        if renamed is None:
+            raise
+        raise renamed from e
+
+
+@contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path``; on success rename it to ``path``, else remove it."""
     path = Path(path)

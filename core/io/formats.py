@@ -38,7 +38,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..cloud import PointCloud
+from ..cloud import PointCloud, repeated_index_message
 from ..errors import InputError
 from ..units import channel_unit
 from .atomic import atomic_path
@@ -280,20 +280,12 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
 
 
 def _check_index_unique(path: Path, cols) -> None:
-    """An ``index`` channel numbers the input's rows (manual_edit removes by it): a repeated value is
-    refused, by every reader as by the text reader (a review: an ASCII PLY's `3, 3` was read as is)."""
+    """A repeated index is refused by every reader, as by the text reader (a review: an ASCII PLY's
+    `3, 3` was read as is)."""
     idx = cols.get("index") if hasattr(cols, "get") else None
-    if idx is None:
-        return
-    a = np.asarray(idx)
-    if a.size < 2 or bool(np.all(a[1:] > a[:-1])):  # increasing: the usual case, no sort
-        return
-    u, counts = np.unique(a, return_counts=True)
-    if (counts > 1).any():
-        v = u[counts > 1][0].item()
-        v = int(v) if isinstance(v, float) and v.is_integer() else v
-        raise InputError(f"{path}: the index column has repeated values (the first: {v}, "
-                         f"{int(counts[counts > 1][0])} times)")
+    why = None if idx is None else repeated_index_message(idx)
+    if why:
+        raise InputError(f"{path}: {why}")
 
 
 def _zip_has(path: Path, name: str) -> bool:

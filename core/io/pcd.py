@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cloud import INTEGER_CHANNELS
+from ..cloud import EXACT_WHOLE, INTEGER_CHANNELS
 from ..errors import InputError
 from .ply import line_at, load_rows, nth_line
 
@@ -197,10 +197,10 @@ def _pcd_ascii(f, path: Path, fields, n: int, start: int) -> list:
     for (name, t, s, c) in fields:
         v = data[:, j:j + c]
         j += c
-        if t == "F" and name in INTEGER_CHANNELS and np.any(np.abs(v) >= 2.0**53):
+        if t == "F" and name in INTEGER_CHANNELS and np.any(np.abs(v) >= EXACT_WHOLE):
             # parsed as float64: exact as a whole number only below 2⁵³ (a review: 9007199254740993 and
             # …992 read as two equal indices); TYPE I / U SIZE 8 are read exactly (_exact_integers)
-            row = int(np.argwhere(np.abs(v) >= 2.0**53)[0, 0])
+            row = int(np.argwhere(np.abs(v) >= EXACT_WHOLE)[0, 0])
             raise InputError(f"{path}, line {line_at(f, start) + row}: field '{name}' is TYPE F but point {row} "
                              f"holds {float(v[row].max())!r}, not a whole number below 2⁵³ = 9007199254740992 "
                              "(exact in a float64 only below it): write it as TYPE I or U SIZE 8")

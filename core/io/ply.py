@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cloud import INTEGER_CHANNELS
+from ..cloud import EXACT_WHOLE, INTEGER_CHANNELS
 from ..errors import InputError
 
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -38,7 +38,7 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
 _PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 #: header comment naming integer channels written as double (beyond uint32): read back as int64
 _INT64_COMMENT = "pointspro int64"
-_EXACT = 2**53  # every integer of magnitude up to this is exact in a float64
+_EXACT = EXACT_WHOLE  # every integer of magnitude up to this is exact in a float64 (core/cloud.py)
 
 
 def _is_list(t) -> bool:

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cloud import INTEGER_CHANNELS
+from ..cloud import EXACT_WHOLE, INTEGER_CHANNELS, repeated_index_message
 from ..errors import InputError
 from ..units import LENGTH_UNITS, UNITLESS_CHANNELS, is_length_unit, length_to_mm, read_in
 
@@ -750,10 +750,6 @@ def _rows_to_keep(path, lines, first_data, data, names, invalid: str, quote: boo
     return keep
 
 
-#: float64 holds every whole number below 2⁵³ exactly; 2⁵³ itself is also what 2⁵³ + 1 reads as
-EXACT_WHOLE = 2.0**53
-
-
 def _check_index(path, lines, first_data, cols: dict, names, rows, quote: bool = True) -> None:
     """The integer columns of the file (index, line, fiducial, sensor) must be whole numbers below 2⁵³,
     read exactly from float64 — cast as they are, 1e300 or 9.3e18 wrapped to -9223372036854775808 with
@@ -775,8 +771,9 @@ def _check_index(path, lines, first_data, cols: dict, names, rows, quote: bool =
                 what += ": a file's numbers are read as float64, exact whole numbers only below it"
             raise InputError(f"{path}, line {ln}, column {names.index(n) + 1} ({n}): {val}is not "
                              f"{what}")
-    if "index" in cols and len(np.unique(cols["index"])) != len(cols["index"]):
-        raise InputError(f"{path}: the index column has repeated values")
+    why = repeated_index_message(cols["index"]) if "index" in cols else None
+    if why:
+        raise InputError(f"{path}: {why}")
 
 
 _FAST_BYTES = 4_000_000
