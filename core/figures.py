@@ -316,11 +316,15 @@ def grid_map_figure(grid, title="Form-error map"):
     return fig
 
 
-def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None, weights=None):
+def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None, weights=None,
+                 after_rms_mm=None):
     """Two maps side by side on their own scales (each about its mean: piston is not shown, each in
     the unit its size asks for); x2, y2 when the point sets differ. ``weights``: the points' areas
     (core.metrics.area_weights; one per point, both panels) for the RMS in the titles — over the area
-    (docs/conventions.md, Summary figures); None: the points' plain RMS (an even sampling)."""
+    (docs/conventions.md, Summary figures); None: the points' plain RMS (an even sampling).
+    ``after_rms_mm``: the after panel's RMS as the step reports it, where that is not about the mean
+    (misalignment's residual RMS is about zero: a held dz's piston counts) — the title and the report
+    then say one number (953.6 nm stood beside the report's 953.7 nm)."""
     from .metrics.area_weights import weighted_rms
 
     fig = _figure(11, 4.6)
@@ -334,17 +338,40 @@ def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None,
         img, ext = _binned(px, py, vals)
         img = img - mean
         rms = np.std(vals) if weights is None else weighted_rms(vals, weights)
+        if when == "after" and after_rms_mm is not None:
+            rms = after_rms_mm
         _map_axes(fig, ax, img, ext, "", f"{when} {what}: RMS {format_length(rms, 4)}")
     return fig
 
 
 def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients"):
+    """The coefficients (nm) as bars, the removed ones grey, in the unit the largest kept one asks
+    for (core.units.length_unit: a 1 mm sag's terms in µm or mm, not 1e6 nm). The axis is the kept
+    terms': a removed term beyond it (an interferometer's piston of 50 µm beside 15 nm of power) is
+    cut at the axis's end with its value written there — it hid every kept term."""
+    from .units import length_unit
+
     fig = _figure(max(6.4, 0.22 * len(labels) + 2), 4.2)
     ax = fig.add_subplot()
-    colors = ["#bbbbbb" if lab in removed else "#2c6fbb" for lab in labels]
-    ax.bar(np.arange(len(labels)), coef_nm, color=colors)
+    coef_mm = np.asarray(coef_nm, dtype=np.float64) * 1e-6
+    gone = np.array([lab in removed for lab in labels], dtype=bool)
+    kept = coef_mm[~gone] if (~gone).any() else coef_mm
+    kept = kept[np.isfinite(kept)]
+    scale, unit = length_unit(float(np.max(np.abs(kept))) if kept.size else 0.0)
+    if unit == "m":
+        scale, unit = 1.0, "mm"
+    shown = coef_mm / scale
+    lim = 1.15 * float(np.max(np.abs(kept))) / scale if kept.size else 0.0
+    cut = gone & (np.abs(shown) > lim) if lim > 0 and (~gone).any() else np.zeros(len(shown), dtype=bool)
+    colors = ["#bbbbbb" if g else "#2c6fbb" for g in gone]
+    ax.bar(np.arange(len(labels)), np.clip(shown, -lim, lim) if cut.any() else shown, color=colors)
+    if cut.any():
+        ax.set_ylim(-lim, lim)
+        for k in np.flatnonzero(cut):
+            ax.text(k, np.sign(shown[k]) * lim * 0.97, format_length(coef_mm[k]), rotation=90, fontsize=7,
+                    ha="center", va="top" if shown[k] > 0 else "bottom", color="#555555")
     ax.set_xticks(np.arange(len(labels)), labels, rotation=90, fontsize=7)
-    ax.set_ylabel("coefficient (nm RMS)")
+    ax.set_ylabel(f"coefficient ({unit})")
     ax.axhline(0, color="k", lw=0.5)
     ax.set_title(title + (" (grey: removed)" if removed else ""), fontsize=10)
     return fig

@@ -90,6 +90,25 @@ text-align:left;vertical-align:top} td.num{text-align:right;font-variant-numeric
 """
 
 
+def surface_for_people(surf: dict) -> dict:
+    """The recipe's surface with the units its numbers are in (docs/conventions.md: lengths in mm):
+    the vertex curvature c in mm⁻¹ with its radius, an even asphere's A_n in mm^(1−n) — the report
+    read "c 0.000333333" and "A 4 = 7e-13" without a unit."""
+    out = dict(surf)
+    c = surf.get("c")
+    if _is_number(c):
+        out["c"] = f"{c:.6g} mm⁻¹" + (f" (R = {1.0 / c:.6g} mm)" if c else " (flat)")
+    A = surf.get("A")
+    if isinstance(A, dict) and all(_is_number(v) for v in A.values()):
+        def power(n):
+            try:
+                return str(1 - int(n)).replace("-", "⁻").translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
+            except (TypeError, ValueError):
+                return None
+        out["A"] = ", ".join(f"{n}: {v:.6g}" + (f" mm{power(n)}" if power(n) else "") for n, v in A.items())
+    return out
+
+
 def _fmt_keyed(key, v) -> str:
     """``v`` under report key ``key``: a number with the unit the key names (core.units.format_keyed:
     "797.536 µm" for a pose's dx in mm, "297.595 nm" for robust_sigma_um), anything else as ``_fmt``."""
@@ -256,10 +275,13 @@ def table_html(d: dict) -> str:
     from .units import format_keyed
 
     rows = []
-    keys = set(map(str, d))
+    # a bare length key beside the same value under its _mm name (zernike's norm_radius and the pupil's
+    # norm_radius_mm) is shown once, as "norm_radius" — it stood twice, once as "norm_radius_mm 438.5 µm"
+    same = {str(k) for k, v in d.items() if _is_number(v) and d.get(f"{k}_mm") == v}
+    keys = set(map(str, d)) - same
     unc = d.get("uncertainty") if isinstance(d.get("uncertainty"), dict) else {}
     for k, v in d.items():
-        if k in ("warnings",):
+        if k in ("warnings",) or str(k) in same:
             continue
         if k == "uncertainty" and unc and all(_is_number(x) for x in unc.values()):
             # standard uncertainties to two significant digits, each with its unit
@@ -337,7 +359,7 @@ def render_html(report: dict, folder=None) -> str:
         parts += uncertainty_html(s["uncertainty"], folder)
     surf = report.get("recipe", {}).get("surface")
     if surf:
-        parts += ["<h2>Nominal surface</h2>", table_html(surf)]
+        parts += ["<h2>Nominal surface</h2>", table_html(surface_for_people(surf))]
     fig = report.get("figures") or {}
     if fig.get("skipped"):
         parts.append(f"<p class='muted'>Figures: {html.escape(fig['mode'])} — not drawn: "
@@ -398,9 +420,11 @@ def uncertainty_html(block: dict, folder=None) -> list[str]:
            "uncertainty u, the expanded uncertainty U95 and the 95 % coverage interval of the Monte "
            "Carlo samples about it. What the interval includes and what it does not: "
            "docs/uncertainty.md.</p>"]
+    from .uncertainty.artifacts import figure_name
+
     for name, e in block.items():
         if _is_figure(e) and name in ("rms_um", "pv_um", "pvr_um"):
-            out.append(f"<p><b>{html.escape(name)}</b>: "
+            out.append(f"<p><b>{html.escape(figure_name(name))}</b>: "
                        f"{html.escape(with_uncertainty(e.get('value'), e.get('U95'), 'µm', e.get('k') or 2.0, e.get('interval95')))}</p>")
     if meta:
         out.append(table_html({k: v for m in meta.values() if isinstance(m, dict) for k, v in m.items()}

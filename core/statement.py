@@ -170,18 +170,21 @@ def verdict_banner_html(tolerance: dict | None) -> str:
         u = i.get("U95")
         c = VERDICT_COLOURS.get(i.get("verdict"), "#777")
         iv = i.get("interval95")
+        # U95 to two significant digits, the value and the interval to the same place (GUM §7.2.6), as
+        # the verdict's line (core.tolerance.decision.item_text): the table read "0.5769 ± 0.0117"
+        num = _num if u is None or not math.isfinite(u) else (lambda v, d=_decimals(u): _fixed(v, d))
         rows.append(
             f"<tr><td>{html.escape(str(i.get('name')))}</td>"
-            f"<td {nowrap}>{_num(i.get('value'))} {unit}</td>"
-            f"<td {nowrap}>{'—' if u is None else _num(u) + ' ' + unit}</td>"
-            + (f"<td {nowrap}>{'—' if not iv else f'{_num(iv[0])} … {_num(iv[1])} {unit}'}</td>" if intervals else "")
-            + f"<td {nowrap}>{_num(i.get('limit'))} {unit}</td>"
+            f"<td {nowrap}>{num(i.get('value'))} {unit}</td>"
+            f"<td {nowrap}>{'—' if u is None else num(u) + ' ' + unit}</td>"
+            + (f"<td {nowrap}>{'—' if not iv else f'{num(iv[0])} … {num(iv[1])} {unit}'}</td>" if intervals else "")
+            + f"<td {nowrap}>{_limit_text(i.get('limit'))} {unit}</td>"
             f"<td style='color:{c};font-weight:bold'>{html.escape(str(i.get('verdict')))}</td>"
             + (f"<td>{html.escape(str(i.get('note') or ''))}</td>" if notes else "") + "</tr>")
     basis = []
     if tolerance.get("form"):
         basis.append(f"drawing: {html.escape(str(tolerance['form']))}")
-    if tolerance.get("wavelength_nm"):
+    if tolerance.get("wavelength_nm") and any(i.get("unit") == "fr" for i in items):
         basis.append(f"1 fr = λ/2 = {tolerance.get('fringe_um', 0) * 1e3:.4g} nm at λ {tolerance['wavelength_nm']:g} nm")
     if tolerance.get("rule_text"):
         basis.append(html.escape(str(tolerance["rule_text"])))
@@ -191,6 +194,15 @@ def verdict_banner_html(tolerance: dict | None) -> str:
 
 def _num(v) -> str:
     return "—" if v is None else f"{v:.4g}"
+
+
+def _fixed(v, d: int) -> str:
+    return "—" if v is None else f"{v:.{d}f}"
+
+
+def _limit_text(v) -> str:
+    """A drawing's limit as written (0.25, not 0.2500)."""
+    return "—" if v is None else f"{v:g}"
 
 
 def weighting_text(summary: dict) -> str:

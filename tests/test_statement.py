@@ -41,9 +41,19 @@ def test_verdict_banner_colours_and_line():
                 items=[dict(tol["items"][0], interval95=[0.57, 0.70]),
                        dict(tol["items"][1], verdict="undecided", note="the 95 % interval holds the limit")])
     page = verdict_banner_html(full)  # what the verdict compares and why, readable without report.json
-    assert "<th>95 % interval</th>" in page and "0.57 … 0.7 fr" in page
+    # U95 to two significant digits, the value and the interval to its place (GUM §7.2.6), the
+    # drawing's limit as written (the table read 0.62 ± 0.05 and 0.57 … 0.7 beside the line's 0.620)
+    assert "<th>95 % interval</th>" in page and "0.570 … 0.700 fr" in page
+    assert ">0.620 fr<" in page and ">0.050 fr<" in page and ">0.5 fr<" in page
     assert "the 95 % interval holds the limit" in page and "drawing: 3/2(0.5)" in page
     assert "273 nm at λ 546.07 nm" in page and "coverage interval" in page
+    # plain limits in µm: no fringe to define (the banner said "1 fr = λ/2 = 273 nm" beside µm limits)
+    plain = dict(tol, wavelength_nm=546.07, fringe_um=0.273035,
+                 items=[{"name": "RMS", "value": 0.57693, "U95": 0.01172, "limit": 0.25, "unit": "µm",
+                         "verdict": "does not conform", "interval95": [0.56614, 0.58951]}])
+    page = verdict_banner_html(plain)
+    assert ">0.577 µm<" in page and ">0.012 µm<" in page and "0.566 … 0.590 µm" in page
+    assert ">0.25 µm<" in page and "λ" not in page
     assert verdict_banner_html(None) == "" and verdict_line(None) is None
     ok = dict(tol, verdict="conforms")
     assert "#1b7f3b" in verdict_banner_html(ok)

@@ -168,6 +168,29 @@ def test_artifacts_are_a_histogram_and_the_samples_csv(issue_run, tmp_path):
     assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_histograms_read_like_their_titles(issue_run):
+    """The figures named for people ("RMS", not "rms_um"), a length's axis in its title's unit (it
+    ran 0.566 … 0.590 µm under "577 nm"), whole sample counts (ticks read 2.5, 7.5)."""
+    from pointspro.core.statement import with_uncertainty
+    from pointspro.core.uncertainty.artifacts import histogram_figure
+
+    _, _, _, res = issue_run
+    fig = histogram_figure(res.uncertainty)
+    ax = fig.axes[0]
+    e = res.uncertainty.entries["rms_um"]
+    assert ax.get_title() == "RMS: " + with_uncertainty(e["value"], e["U95"], "µm", e.get("k") or 2.0,
+                                                        e.get("interval95"))
+    unit = "nm" if max(e["value"], e["U95"]) < 1.0 else "µm"
+    assert unit in ax.get_title() and ax.get_xlabel() == f"RMS ({unit})"
+    scale = 1e3 if unit == "nm" else 1.0
+    green = [ln for ln in ax.get_lines() if ln.get_color() == "#1b5e20"][0]
+    assert green.get_xdata()[0] == pytest.approx(e["value"] * scale)
+    for a in fig.axes:
+        ticks = a.yaxis.get_majorticklocs()
+        assert np.all(ticks == np.round(ticks)), a.get_title()
+        assert "_um" not in a.get_title() and "_urad" not in a.get_xlabel()
+
+
 def test_a_type_b_source_adds_what_its_sensitivity_predicts():
     """z_scale: the power term's sensitivity to ε by a finite difference times u(ε) is the budget's
     share, and u² grows by its square."""

@@ -17,9 +17,20 @@ def placed(res, name: str) -> np.ndarray:
     return res.entries[name]["_placed"]
 
 
+def figure_name(name: str) -> str:
+    """A Monte Carlo figure's name for people: the summary's ("RMS", "PVr (Evans)"), else its key
+    without the unit suffix ("rms_after_um" → "rms_after")."""
+    from ..report import _label
+    from ..statement import SUMMARY_FIGURES
+
+    return next((shown for key, shown, _ in SUMMARY_FIGURES if key == name), None) or _label(name, 0.0)
+
+
 def histogram_figure(res):
+    from matplotlib.ticker import MaxNLocator
+
     from ..figures import _figure
-    from ..statement import with_uncertainty
+    from ..statement import _unit_for, with_uncertainty
 
     names = [n for n in HISTOGRAM_FIGURES if n in res.names]
     names += [n for n in res.names if n not in names and n not in ("pvr_fit_pv_um", "pvr_rest_rms_um")
@@ -31,16 +42,24 @@ def histogram_figure(res):
     for k, name in enumerate(names):
         ax = fig.add_subplot(rows, cols, k + 1)
         e = res.entries[name]
-        ax.hist(placed(res, name), bins=30, color="#7aa6c2", edgecolor="white")
-        lo, hi = e["interval95"]
-        ax.axvspan(lo, hi, color="#f4c542", alpha=0.25, label="95 % interval")
-        ax.axvline(e["value"], color="#1b5e20", lw=2, label="corrected value")
-        ax.axvline(e["measured"], color="#b71c1c", lw=1.2, ls="--", label="as measured")
-        ax.set_xlabel(f"{name} ({_unit(name)})")
-        ax.set_ylabel("samples")
-        # stated as report.html and the window state it (core/statement.py: GUM §7.2.6 rounding)
         unit = _unit(name)
-        ax.set_title(f"{name}: {with_uncertainty(e['value'], e['U95'], unit, e.get('k') or 2.0, e.get('interval95'))}",
+        # a length's axis in the unit of its title (core.statement.with_uncertainty: that of the larger
+        # of the value and U95): "rms_um (µm)" ran 0.566 … 0.590 under a title of "577 nm"
+        scale, shown = 1.0, unit
+        if unit == "µm":
+            size_um, shown = _unit_for(max(abs(e["value"]), abs(e.get("U95") or 0.0)))
+            scale = 1.0 / size_um
+        ax.hist(placed(res, name) * scale, bins=30, color="#7aa6c2", edgecolor="white")
+        lo, hi = e["interval95"]
+        ax.axvspan(lo * scale, hi * scale, color="#f4c542", alpha=0.25, label="95 % interval")
+        ax.axvline(e["value"] * scale, color="#1b5e20", lw=2, label="corrected value")
+        ax.axvline(e["measured"] * scale, color="#b71c1c", lw=1.2, ls="--", label="as measured")
+        ax.set_xlabel(f"{figure_name(name)} ({shown})" if shown else figure_name(name))
+        ax.set_ylabel("samples")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts: no 2.5 samples
+        # stated as report.html and the window state it (core/statement.py: GUM §7.2.6 rounding)
+        ax.set_title(f"{figure_name(name)}: "
+                     f"{with_uncertainty(e['value'], e['U95'], unit, e.get('k') or 2.0, e.get('interval95'))}",
                      fontsize=9)
         if k == 0:
             ax.legend(fontsize=7, loc="upper right")

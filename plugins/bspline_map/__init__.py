@@ -31,7 +31,8 @@ class BSplineMapParams(PupilCentreParams):
     channel: Literal["auto", "residual", "z"] = param(
         "auto", help="what to map: the residual (form error) or z; auto: residual when present")
     spacing: float | None = param(None, unit="mm", gt=0,
-                                  help="grid spacing of the map; empty: half the knot spacing")
+                                  help="grid spacing of the map; empty: half the knot spacing, rounded down to 1, 2 or 5 × 10ⁿ "
+                                  "(up to 2× finer: 77.8 nm knots give a 20 nm grid)")
     knot_spacing: float | None = param(
         None, unit="mm", gt=0, help="B-spline knot spacing, the finest detail the map holds; empty: "
         "twice the mean point spacing (at most 150 intervals across)")

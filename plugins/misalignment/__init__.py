@@ -145,5 +145,8 @@ def _before_after(surface, measured, part, residual, area):
         return scattered_map(part[:, 0], part[:, 1], residual, "residual after removing the pose")
     # the titles' RMS over the area (docs/conventions.md, Summary figures): the same points in both
     # panels, each standing for its area in the part frame (as the summary weighs the residual)
+    from pointspro.core.metrics.area_weights import rms_about_zero
+
     return before_after(measured[:, 0], measured[:, 1], before, residual, what="pose removal",
-                        x2=part[:, 0], y2=part[:, 1], weights=area)
+                        x2=part[:, 0], y2=part[:, 1], weights=area,
+                        after_rms_mm=rms_about_zero(residual, area))  # the report's residual_rms_um
