@@ -30,6 +30,7 @@ from .io.background import BackgroundWrite, share_out
 from .io.formats import write_ply_cloud
 from .io.npz import write_npz_cloud
 from .parallel import single_threaded_blas, thread_count
+from .pathnames import resolved
 from .pipeline import run_pipeline
 from .progress import CancelToken, Progress
 from .recipe import Recipe
@@ -230,8 +231,8 @@ def check_output_targets(out: Path, inputs: list[Path], stems: list[str], resume
     (cli._plan_jobs): a skipped input's folder stays as it is, notes and all."""
     import json
 
-    out_r = out.resolve()
-    ins = [p.resolve() for p in inputs]
+    out_r = resolved(out)
+    ins = [resolved(p) for p in inputs]
     for name in BATCH_FILES:
         target = out_r / name
         for p, pr in zip(inputs, ins):

@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 from .errors import Cancelled, PointsProError, RecipeError
+from .pathnames import resolved
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -505,7 +506,7 @@ def _check_log_file(args) -> None:
             raise RecipeError(f"--log-file {log}: is {what} ({f}); the log would be appended to it — "
                               "choose another file")
     if args.batch and args.out:
-        out, target = Path(args.out).resolve(), log.resolve()
+        out, target = resolved(args.out), resolved(log)
         if target == out or out in target.parents:
             raise RecipeError(f"--log-file {log}: is inside --out {args.out}, whose folders the batch "
                               "replaces and whose summary.json it writes — put the log beside it")
@@ -642,7 +643,7 @@ def _allowed_dirs(recipe_path: Path, inputs: list[Path], extra: list[str]) -> li
         if not Path(d).is_dir():
             raise RecipeError(f"--allow-path {d}: not a folder")
     dirs = [recipe_path.parent, *(p.parent for p in inputs), *(Path(d) for d in extra)]
-    return list(dict.fromkeys(d.resolve() for d in dirs))
+    return list(dict.fromkeys(resolved(d) for d in dirs))
 
 
 def _check_recipe_files(recipe, allowed: list[Path], must_exist: bool = True) -> None:
@@ -891,7 +892,7 @@ def _check_simulate_out(out: Path, model: Path) -> None:
     """simulate writes one file: its folder must exist, the path must not be a folder or the model."""
     from .errors import RecipeError
 
-    if out.resolve() == model.resolve():
+    if resolved(out) == resolved(model):
         raise RecipeError(f"--out {out}: is the model file itself; choose another file name")
     if out.is_dir():
         raise RecipeError(f"--out {out}: is a folder; give the file to write (e.g. {out / 'simulated.csv'})")
@@ -916,7 +917,7 @@ def cmd_simulate(args) -> int:
     cloud.meta["channel_units"] = {"t": "s", "c": "deg"}  # written `t [s]`, `c [deg]` (docs/formats.md)
     _check_simulate_out(Path(args.out), Path(args.model))
     mesh = model.surface.get("path") if isinstance(model.surface, dict) else None
-    if mesh is not None and Path(args.out).resolve() == (Path(args.model).parent / mesh).resolve():
+    if mesh is not None and resolved(args.out) == resolved(Path(args.model).parent / mesh):
         # a review: `--out partmesh.ply` replaced the model's nominal mesh with a point cloud
         raise RecipeError(f"--out {args.out}: is the model's nominal mesh ({mesh}); choose another file name")
     write_cloud(cloud, args.out)

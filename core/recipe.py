@@ -34,10 +34,49 @@ RECIPE_VERSION = 1
 TOP_KEYS = ("pointspro", "surface", "input", "inputs", "steps", "uncertainty", "tolerance")
 
 
+#: a pydantic union branch's name at the end of an error's location ("literal['auto']", "int")
+_UNION_BRANCH = re.compile(r"^(literal\[.*\]|int|float|str|bool|none|list\[.*\]|dict\[.*\]|tuple\[.*\])$")
+#: what a union branch's error says the value should be
+_BRANCH_WORDS = {"int_parsing": "a whole number", "int_type": "a whole number",
+                 "int_from_float": "a whole number", "float_parsing": "a number", "float_type": "a number",
+                 "string_type": "a text", "bool_type": "true or false", "bool_parsing": "true or false",
+                 "list_type": "a list", "dict_type": "a mapping"}
+
+
+def _merged_unions(errors: list[dict]) -> list[dict]:
+    """A value that matches no branch of a union (``remove: auto | a count``) gives one error per
+    branch, each at the key plus the branch's name — "key 'remove.literal['auto']': Input should be
+    'auto'; key 'remove.int': Input should be a valid integer…" (a review). They become one error at
+    the key: "'auto' or a whole number"."""
+    groups: dict[tuple, list[dict]] = {}
+    for err in errors:
+        loc = tuple(err["loc"])
+        if loc and _UNION_BRANCH.match(str(loc[-1])):
+            groups.setdefault(loc[:-1], []).append(err)
+    out, done = [], set()
+    for err in errors:
+        key = tuple(err["loc"])[:-1]
+        branches = groups.get(key, [])
+        if len(branches) < 2 or not any(err is b for b in branches):
+            out.append(err)
+            continue
+        if key in done:
+            continue
+        done.add(key)
+        words = []
+        for b in branches:
+            w = (b.get("ctx") or {}).get("expected") if b["type"] == "literal_error" else None
+            w = w or _BRANCH_WORDS.get(b["type"]) or b["msg"].removeprefix("Input should be ")
+            if w not in words:
+                words.append(w)
+        out.append({"loc": key, "type": "union", "msg": " or ".join(words), "input": err.get("input")})
+    return out
+
+
 def format_validation_error(e: ValidationError, prefix: str = "") -> str:
     """One line naming each offending key: "key 'diameter': Input should be greater than 0 (got -5)"."""
     parts = []
-    for err in e.errors():
+    for err in _merged_unions(e.errors()):
         names = [str(x) for x in err["loc"] if not str(x).startswith("function-")]
         msg = err["msg"].removeprefix("Value error, ")  # a validator's own words, without pydantic's tag
         if err["type"] == "extra_forbidden":
@@ -246,10 +285,12 @@ def _plain(o):
 
 
 def load_recipe(path, registry: Registry | None = None) -> Recipe:
+    from .pathnames import why_not_a_file
+
     path = Path(path)
-    if not path.is_file():
-        raise RecipeError(f"{path}: " + ("is a folder, not a recipe file" if path.is_dir()
-                                         else "recipe file not found"))
+    why = why_not_a_file(path, "recipe file")
+    if why is not None:
+        raise RecipeError(f"{path}: {why}")
     text = read_utf8(path, "recipe", RecipeError)
     recipe = parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
     # a recipe file is what a batch runs: its order is checked as it is read (a session's project

@@ -17,6 +17,8 @@ import secrets
 import shutil
 from pathlib import Path
 
+from ..pathnames import resolved
+
 _TRIES = 100
 
 
@@ -60,7 +62,7 @@ class InputPlaces:
     def __init__(self, inputs=()):
         self._where: dict[Path, Path] = {}
         for p in inputs:
-            pr = Path(p).resolve()
+            pr = resolved(p)
             for place in (pr, *pr.parents):
                 self._where.setdefault(place, Path(p))
 
@@ -78,7 +80,7 @@ def why_not_replace(target: Path, marker: str, inputs=()) -> tuple[str, Path | N
     replaced. The
     callers (the batch's folders, explain's --out) word the refusal."""
     places = inputs if isinstance(inputs, InputPlaces) else InputPlaces(inputs)
-    held = places.held_by(Path(target).resolve())
+    held = places.held_by(resolved(target))
     if held is not None:
         return "input", held
     target = Path(target)

@@ -204,11 +204,12 @@ def foreign_kind(head: bytes) -> str | None:
 def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> PointCloud:
     """Read a measurement file into a PointCloud (frame `measuring`, a PointsPro .npz the frame it
     states; `index` = row of the input, or pixel number of a map). ``options`` / keywords: the reader options of the module doc."""
+    from ..pathnames import why_not_a_file
+
     path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    if path.is_dir():
-        raise InputError(f"{path}: is a folder, not a data file")
+    why = why_not_a_file(path, "data file")
+    if why is not None:
+        raise InputError(f"{path}: {why}")
     if not os.access(path, os.R_OK):
         raise InputError(f"{path}: permission denied")
     try:
@@ -273,10 +274,33 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
     meta = {**meta, "source": str(path), "frame": frame, "units": "mm"}
     meta.setdefault("invalid_dropped", 0)
     _check_index_unique(path, cols)
+    why = beyond_any_machine(xyz)
+    if why:
+        row, text = why
+        idx = cols.get("index") if hasattr(cols, "get") else None
+        raise InputError(f"{path}: point {int(idx[row]) if idx is not None else row} (index): {text}")
     try:
         return PointCloud(xyz, cols, meta)
     except ValueError as e:
         raise InputError(f"{path}: {e}") from None
+
+
+#: the largest coordinate a measurement holds (mm): 10⁹ mm = 1000 km, room for a geodetic frame's
+#: easting and northing. A corrupt 1e300 overflowed the pose fit's squares — "RuntimeWarning:
+#: overflow" lines, then the surface blamed ("1 point at r up to inf mm lies outside the conic's
+#: domain") with no word of the file's line (a review)
+MAX_COORDINATE_MM = 1e9
+
+
+def beyond_any_machine(xyz) -> tuple[int, str] | None:
+    """(row, what) of the first point with a coordinate beyond ``MAX_COORDINATE_MM``, or None."""
+    big = np.abs(xyz) > MAX_COORDINATE_MM
+    if not big.any():
+        return None
+    row = int(np.flatnonzero(big.any(axis=1))[0])
+    axis = int(np.flatnonzero(big[row])[0])
+    return row, (f"{'xyz'[axis]} = {float(xyz[row, axis])!r} mm lies beyond any measuring machine (|{'xyz'[axis]}| "
+                 f"≤ {MAX_COORDINATE_MM:.0e} mm) — a corrupt value or a wrong unit")
 
 
 def _check_index_unique(path: Path, cols) -> None:

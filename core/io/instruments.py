@@ -443,12 +443,16 @@ def st_magic_names(head: bytes) -> list[str]:
 
 
 class quiet:
-    """SurfaceTopography's warnings and stray prints (a reader prints whole buffers) kept off the
-    terminal."""
+    """SurfaceTopography's warnings, stray prints (a reader prints whole buffers) and its readers'
+    log records kept off the terminal: trying each format on a truncated .opd, igor2's reader logged
+    an error quoting the whole file — one line of 6.5 MB on stderr (a review). Records of other
+    loggers than PointsPro's are dropped by the root handlers (and logging's last resort) while a
+    file is read; PointsPro's own pass."""
 
     def __enter__(self):
         import contextlib
         import io
+        import logging
         import warnings
 
         self._stack = contextlib.ExitStack()
@@ -456,11 +460,21 @@ class quiet:
         warnings.simplefilter("ignore")
         self._stack.enter_context(contextlib.redirect_stdout(io.StringIO()))
         self._stack.enter_context(contextlib.redirect_stderr(io.StringIO()))
+        only = _OnlyPointsPro()  # its own: a nested quiet's exit must not remove the outer one's
+        for handler in [*logging.getLogger().handlers, logging.lastResort]:
+            if handler is not None:
+                handler.addFilter(only)
+                self._stack.callback(handler.removeFilter, only)
         return self
 
     def __exit__(self, *exc):
         self._stack.close()
         return False
+
+
+class _OnlyPointsPro:
+    def filter(self, record) -> bool:
+        return record.name == "pointspro" or record.name.startswith("pointspro.")
 
 
 def read_surface_topography(path: Path, opts=None, head: bytes | None = None):

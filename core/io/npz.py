@@ -48,7 +48,9 @@ def read_npz(path: Path, invalid: str = "drop"):
     are dropped and counted in ``meta["invalid_dropped"]`` (``index`` keeps the row), as x y z text;
     with ``invalid="error"`` the first is refused by row and column."""
     try:
-        with np.load(path, allow_pickle=False) as z:
+        # the file opened here: np.load leaves its own handle open when the zip cannot be read (a
+        # truncated .npz: "ResourceWarning: unclosed file" beside the message — a review)
+        with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:
             if META_KEY not in z.files:
                 raise InputError(f"{path}: not a PointsPro cloud .npz (no {META_KEY} array)")
             meta = json.loads(str(z[META_KEY]))

@@ -155,10 +155,12 @@ class Session:
         self._change("recipe", recipe)
 
     def load_recipe(self, path) -> None:
+        from ..pathnames import why_not_a_file
+
         p = Path(path)
-        if not p.is_file():
-            raise RecipeError(f"{p}: " + ("is a folder, not a recipe file" if p.is_dir()
-                                          else "recipe file not found"))
+        why = why_not_a_file(p, "recipe file")
+        if why is not None:
+            raise RecipeError(f"{p}: {why}")
         self.set_recipe(load_yaml(p.read_text(encoding="utf-8"), str(p)), str(p))
 
     # -- pipeline editing ---------------------------------------------------------------------------
