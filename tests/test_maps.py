@@ -444,6 +444,9 @@ def test_x3p_record_names_pointspro_and_claims_no_calibration(tmp_path, revision
     assert "<Manufacturer>PointsPro</Manufacturer>" in xml and f"<Version>{__version__}</Version>" in xml
     assert "x3pio" not in xml.split("<Record3>")[0]
     assert ("<CalibrationDate>" in xml) == (revision == "2000")
+    # the creator named, no blank serial number (a review read both as empty)
+    assert f"<Creator>PointsPro {__version__}</Creator>" in xml and "<Serial>not available</Serial>" in xml
+    assert read_x3p_map(tmp_path / "m.x3p").z.shape == (4, 5)
 
 
 @pytest.mark.parametrize("noise_nm, warned", [(0.0, False), (2.0, True), (10.0, True)])

@@ -117,10 +117,14 @@ def x3p_record(comment: str | None = None):
 
     from pointspro.core import __version__
 
-    meta = x3pio.Metadata.for_software("PointsPro", __version__)
-    if comment:
-        from dataclasses import replace
+    from dataclasses import replace
 
+    # Creator named too (optional in the schema; a review read the file's creator as empty), and the
+    # serial number said not to exist rather than left blank
+    meta = x3pio.Metadata.for_software("PointsPro", __version__)
+    meta = replace(meta, creator=f"PointsPro {__version__}",
+                   instrument=replace(meta.instrument, serial="not available"))
+    if comment:
         meta = replace(meta, comment=comment)
     return meta
 
