@@ -24,7 +24,10 @@ from typing import Any, Callable, Iterable, Iterator
 
 def _worker_main(conn, initializer, initargs) -> None:
     """A worker: its initializer, then one task after the other until told to stop (None) or the
-    parent's end of the pipe closes."""
+    parent's end of the pipe closes. SIGINT is ignored (``_interrupt_blocked``)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a SIGINT pending since the start is dropped …
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # … as it is unblocked
     if initializer is not None:
         initializer(*initargs)
     while True:
@@ -78,6 +81,25 @@ class _signals_deferred:
         return False
 
 
+class _interrupt_blocked:
+    """Context: SIGINT blocked in this thread, so that a worker started inside it starts with SIGINT
+    blocked (the signal mask outlives fork and exec); the worker then ignores it (``_worker_main``).
+    A terminal's Ctrl-C signals the whole process group: a worker still starting (its interpreter
+    importing, before any handler of ours) printed a KeyboardInterrupt traceback on the terminal
+    beside the batch's own line. The batch's process, which the Ctrl-C reaches too, stops the
+    workers itself (SIGTERM). A SIGINT that arrives here meanwhile is delivered as the block ends."""
+
+    def __enter__(self):
+        self._old = (signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+                     if hasattr(signal, "pthread_sigmask") else None)
+        return self
+
+    def __exit__(self, *exc):
+        if self._old is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, self._old)
+        return False
+
+
 @dataclass(eq=False)
 class _Worker:
     process: Any
@@ -125,7 +147,13 @@ class WorkerPool:
         saved = {k: os.environ.get(k) for k in self._env}
         os.environ.update(self._env)
         try:
-            p.start()
+            # multiprocessing starts its resource tracker at the first spawn and unblocks SIGINT
+            # after it (resource_tracker.ensure_running): started before the block, not inside it
+            from multiprocessing import resource_tracker
+
+            resource_tracker.ensure_running()
+            with _interrupt_blocked():
+                p.start()
         finally:
             for k, v in saved.items():
                 if v is None:

@@ -39,3 +39,41 @@ def test_an_ignored_signal_stays_ignored():
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, old)
+
+
+def _slow_start(seconds):
+    import time
+
+    time.sleep(seconds)
+
+
+def _pid():
+    return os.getpid()
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="POSIX signal masks")
+def test_a_workers_sigint_while_it_starts_and_works_is_ignored(capfd):
+    """A terminal's Ctrl-C reaches the whole process group: a worker still starting printed a
+    KeyboardInterrupt traceback (the batch's own process stops the workers itself). The worker
+    starts with SIGINT blocked and then ignores it: it lives on, silent, and answers."""
+    import time
+
+    from pointspro.core.workerpool import WorkerPool
+
+    pool = WorkerPool(1, initializer=_slow_start, initargs=(1.5,))
+    try:
+        worker = pool._workers[0].process
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 1.2:  # while its interpreter starts and its initializer runs
+            os.kill(worker.pid, signal.SIGINT)
+            time.sleep(0.02)
+        got = list(pool.map_unordered(_pid, [()], lost=lambda task, why: why))
+        assert got == [worker.pid] and worker.is_alive()
+        os.kill(worker.pid, signal.SIGINT)  # and once it has started
+        assert list(pool.map_unordered(_pid, [()], lost=lambda task, why: why)) == [worker.pid]
+    finally:
+        pool.terminate()
+    err = capfd.readouterr().err
+    assert "KeyboardInterrupt" not in err and "Traceback" not in err, err
+    assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN  # this process's own is untouched
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())  # nor blocked here
