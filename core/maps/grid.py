@@ -113,11 +113,11 @@ def x3p_record(comment: str | None = None):
     CalibrationDate is the instrument's last calibration, which computed data has none of (a review:
     every file claimed a calibration at the moment it was written). The 2000 revision's schema
     requires the element, so x3pio writes the creation date there; the 2017 revision leaves it out."""
+    from dataclasses import replace
+
     import x3pio
 
     from pointspro.core import __version__
-
-    from dataclasses import replace
 
     # Creator named too (optional in the schema; a review read the file's creator as empty), and the
     # serial number said not to exist rather than left blank
