@@ -129,6 +129,7 @@ class MapView(QtWidgets.QWidget):
         self.th_channel.currentTextChanged.connect(lambda _name: self._threshold(self.slider.value()))
         th.addWidget(self.slider, 1)
         self.th_info = QtWidgets.QLabel("")
+        self._thresholding = False  # a selection from the threshold, on its way back (highlight)
         th.addWidget(self.th_info)
         lay.addLayout(th)
         self.cloud = None
@@ -234,6 +235,10 @@ class MapView(QtWidgets.QWidget):
             self.im.set_clim(lo, hi)
             self.sel_im.set_extent(ext)
             if self.cbar.extend != extend:  # set when a colour bar is made: made again
+                # the old bar let go of the image first: left listening, it tried to redraw its
+                # cleared artists at every change ("NotImplementedError: cannot remove artist"
+                # on stderr) and one more stale listener piled up each time (a review)
+                self.im.callbacks.disconnect(getattr(self.im, "colorbar_cid", None))
                 self.cax.clear()
                 self.cbar = self.figure.colorbar(self.im, cax=self.cax, extend=extend)
         self.sel_im.set_data(np.zeros(img.shape + (4,)))
@@ -381,7 +386,11 @@ class MapView(QtWidgets.QWidget):
             self.canvas.draw_idle()
 
     def highlight(self, mask):
-        """Bins holding selected points turn yellow."""
+        """Bins holding selected points turn yellow. A selection the threshold did not make (cleared,
+        deleted, drawn) resets the threshold's slider and its "44 points: residual > 1.111 µm",
+        which stood on after those points were deleted (a review)."""
+        if not self._thresholding:
+            self.reset_threshold()
         if self.sel_im is None or self._k is None:
             return
         b = self._bins
@@ -426,6 +435,12 @@ class MapView(QtWidgets.QWidget):
             ok = n > 0
             centres = np.append(edges, edges[-1] + binw) - binw / 2
             mean_s, mean_v = centres[ok], m[ok] / n[ok]
+            # the curve breaks where two or more bins have no point (a deleted square, the space
+            # between a star's spokes): it was drawn straight across the hole (a review)
+            gap = np.flatnonzero(np.diff(mean_s) > 2.5 * binw)
+            if gap.size:
+                mean_s = np.insert(mean_s, gap + 1, np.nan)
+                mean_v = np.insert(mean_v, gap + 1, np.nan)
         label = self.cbar.ax.get_ylabel() if self.cbar else ""
         unit = label[label.rfind("(") + 1:-1] if label.endswith(")") else ""
         self.profile_info.setText(f"profile: {s.size:,} points, PV {display.shown_length(np.ptp(v), unit)}"
@@ -530,6 +545,10 @@ class MapView(QtWidgets.QWidget):
         elif "omega" in names:
             self.th_channel.setCurrentText("omega")
         self.th_channel.blockSignals(False)
+        self.reset_threshold()
+
+    def reset_threshold(self):
+        """The slider back at its end and its count cleared (no threshold selection)."""
         self.slider.blockSignals(True)
         self.slider.setValue(1000)
         self.slider.blockSignals(False)
@@ -549,11 +568,19 @@ class MapView(QtWidgets.QWidget):
             return
         if pos >= 1000:
             self.th_info.setText("")
-            self.selected.emit(None)
+            self._thresholding = True
+            try:
+                self.selected.emit(None)
+            finally:
+                self._thresholding = False
             return
         mask, text = self.threshold_mask(name, pos)
         self.th_info.setText(f"{int(mask.sum()):,} points: {text}")
-        self.selected.emit(mask)
+        self._thresholding = True  # the selection comes back through highlight: the slider stays
+        try:
+            self.selected.emit(mask)
+        finally:
+            self._thresholding = False
 
 
 def _stylus_profiles(cloud):

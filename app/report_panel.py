@@ -68,12 +68,14 @@ class ReportPanel(QtWidgets.QWidget):
         split.addWidget(self.list)
         self.view = QtWidgets.QTextBrowser()
         self.view.setOpenExternalLinks(True)
-        self.view.setLineWrapMode(QtWidgets.QTextEdit.NoWrap)  # a table scrolls sideways, never wraps
+        # sentences wrap at the panel's edge (the Summary's note ran off it, read by scrolling
+        # sideways: a review); a table's cells never wrap (nowrap below) and scroll sideways instead
+        self.view.setLineWrapMode(QtWidgets.QTextEdit.WidgetWidth)
         self.view.document().setDefaultStyleSheet(
             "th{text-align:left;padding-right:8px} td{white-space:nowrap;padding-right:8px}")
         split.addWidget(self.view)
-        split.setStretchFactor(0, 0)
-        split.setStretchFactor(1, 1)
+        split.setStretchFactor(0, 1)  # a wider panel widens the list too (its names were cut at
+        split.setStretchFactor(1, 4)  # 120 px on a 1000 px panel: a review)
         split.setSizes([120, 400])
         lay.addWidget(split)
         self.result = None

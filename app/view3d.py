@@ -93,6 +93,7 @@ class View3D(QtWidgets.QWidget):
         self.mesh = None  # the drawn points' PolyData (the level of detail)
         self._drag = None
         self._axes = False
+        self._big = True  # the colour actor draws flat points (above 100,000), not spheres
         self._keep = False
         self._unit = None  # display unit of the drawn channel (kept with the colour limits)
         self._clim = None
@@ -160,6 +161,7 @@ class View3D(QtWidgets.QWidget):
             self._sel_actor = self._sel_cache = None
             p.remove_scalar_bar() if p.scalar_bars else None
             big = idx.size > 100_000  # spheres cost ~1 s a frame per 10⁶ points in software GL
+            self._big = big
             self._actor = p.add_mesh(poly, scalars=title, cmap="RdBu_r" if diverging else "viridis",
                                      clim=clim, point_size=2 if big else 5,
                                      render_points_as_spheres=not big, render=False, reset_camera=False,
@@ -201,7 +203,11 @@ class View3D(QtWidgets.QWidget):
             if idx.size:
                 poly = pv.PolyData((self.cloud.xyz[idx] - self.origin).astype(np.float32))
                 if self._sel_cache is None:
-                    actor = p.add_mesh(poly, color="#ffcc00", point_size=4, render=False,
+                    # drawn as the colours are (spheres below 100,000 points) and larger: flat
+                    # 4-pixel points lay inside the 5-pixel spheres at the same depth and were hidden
+                    # — the example's selection never showed in 3D (a review)
+                    actor = p.add_mesh(poly, color="#ffcc00", point_size=4 if self._big else 8,
+                                       render_points_as_spheres=not self._big, render=False,
                                        reset_camera=False, pickable=False)
                     self._sel_cache = (actor, poly)
                 else:  # the same actor with the new points: no new actor, no new shader

@@ -186,6 +186,14 @@ class MainWindow(QtWidgets.QMainWindow):
     def _on_session(self, event) -> None:
         s = self.session
         what = event.type
+        if what == "opened":
+            # the last run was of the measurement open before: shown stale, never exported as this
+            # one's (a review: Export report wrote the old file's RMS under the new file's name);
+            # dropped before the forms are refreshed, whose "auto" fields read it ("last run:
+            # 80.43 mm" of the asphere stood beside a 0.7 mm MetroPro map — a review)
+            self.last_report = None
+            self.pipeline.bar.setValue(0)
+            self.pipeline.bar.setFormat("")
         self.pipeline.refresh()
         base, keep = s.view
         if base is not self._shown or keep is not self._keep:
@@ -197,9 +205,6 @@ class MainWindow(QtWidgets.QMainWindow):
         if what != "opened" or s.steps:
             self._autosave_timer.start()
         if what == "opened":
-            # the last run was of the measurement open before: shown stale, never exported as this
-            # one's (a review: Export report wrote the old file's RMS under the new file's name)
-            self.last_report = None
             self.report.set_stale("another measurement was opened")
         if what == "deleted":
             self.report.set_stale("points were deleted")
@@ -211,6 +216,7 @@ class MainWindow(QtWidgets.QMainWindow):
         c, shown_mask = self._shown, self._keep = s.view
         self._sel = None
         self.sel_label.setText("")
+        self.map.reset_threshold()  # no selection: nor the threshold's (it said "44 points" after they went)
         if c is None:
             return
         display.prepare_cell_index(c)  # for the first selection, in a thread

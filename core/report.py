@@ -144,7 +144,7 @@ def _label(key, v) -> str:
 def _fmt(v) -> str:
     if v is None:  # a value not given or not computed ("diameter None" read as if a value, a review)
         return "—"
-    if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 10_000:
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 1_000:
         return f"{v:,}"  # "307,200 points", as the step list writes them
     if isinstance(v, float):
         return f"{v:.6g}"
