@@ -27,6 +27,7 @@ coverage, the plane and the statistics are over it; its hole is continued like t
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -245,7 +246,9 @@ def coverage_message(cov: float, R2, inside, covered, radius: float, inner: floa
     order = np.argsort(rr, kind="stable")
     rs, oks = rr[order], ok[order]
     rmiss = float(rr[~ok].min())
-    head = (f"the map covers {cov:.1%} of the {_aperture_words(radius, inner)} about ({center[0]:g}, "
+    # the share rounded down: 98.97 % read "99.0 % … (≥ 99 % needed)" beside a refusal (a review)
+    shown = math.floor(cov * 1000.0) / 10.0
+    head = (f"the map covers {shown:.1f} % of the {_aperture_words(radius, inner)} about ({center[0]:g}, "
             f"{center[1]:g}) mm (≥ {MIN_COVERAGE:.0%} needed): no data from r = {rmiss:.4g} mm")
 
     def widest(radii, flags):
