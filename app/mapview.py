@@ -245,8 +245,8 @@ class MapView(QtWidgets.QWidget):
         self.cbar.set_label(title)
         self.ax.set_xlim(ext[0], ext[1])
         self.ax.set_ylim(ext[2], ext[3])
-        position_axis(self.ax, "x", "x", self._span())  # µm for a field under 1 mm
-        position_axis(self.ax, "y", "y", self._span())
+        position_axis(self.ax, "x", "x", self._span(), 0.5 * (ext[0] + ext[1]))  # µm for a field under
+        position_axis(self.ax, "y", "y", self._span(), 0.5 * (ext[2] + ext[3]))  # 1 mm, from an offset
         self.ax.set_title(title, fontsize=9)
         self._fill_threshold_channels()
         self.stylus = _stylus_profiles(cloud)
@@ -606,10 +606,10 @@ def _is_stylus(cloud) -> bool:
     return _STYLUS[1]
 
 
-def position_axis(ax, which, label, span_mm):  # core.figures', imported when a view draws
+def position_axis(ax, which, label, span_mm, centre_mm=None):  # core.figures', imported when a view draws
     from pointspro.core.figures import position_axis as axis
 
-    axis(ax, which, label, span_mm)
+    axis(ax, which, label, span_mm, centre_mm)
 
 
 def _extent(x, y):

@@ -284,8 +284,8 @@ def _map_axes(fig, ax, img_mm, ext, quantity, title, symmetric=True, cmap=DIVERG
     im = ax.imshow(img, origin="lower", extent=ext, cmap=cmap, vmin=lo, vmax=hi,
                    interpolation="nearest")
     span = max(ext[1] - ext[0], ext[3] - ext[2])
-    position_axis(ax, "x", "x", span)
-    position_axis(ax, "y", "y", span)
+    position_axis(ax, "x", "x", span, 0.5 * (ext[0] + ext[1]))
+    position_axis(ax, "y", "y", span, 0.5 * (ext[2] + ext[3]))
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=10)
     extend = colour_extend(img, lo, hi)
@@ -344,7 +344,7 @@ def before_after(x, y, before_mm, after_mm, what="correction", x2=None, y2=None,
     return fig
 
 
-def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients"):
+def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients", normalization=None):
     """The coefficients (nm) as bars, the removed ones grey, in the unit the largest kept one asks
     for (core.units.length_unit: a 1 mm sag's terms in µm or mm, not 1e6 nm). The axis is the kept
     terms': a removed term beyond it (an interferometer's piston of 50 µm beside 15 nm of power) is
@@ -355,14 +355,18 @@ def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients"):
     ax = fig.add_subplot()
     coef_mm = np.asarray(coef_nm, dtype=np.float64) * 1e-6
     gone = np.array([lab in removed for lab in labels], dtype=bool)
-    kept = coef_mm[~gone] if (~gone).any() else coef_mm
-    kept = kept[np.isfinite(kept)]
-    scale, unit = length_unit(float(np.max(np.abs(kept))) if kept.size else 0.0)
+    finite = np.isfinite(coef_mm)
+    basis = coef_mm[~gone & finite & (coef_mm != 0)]
+    own = basis.size > 0  # kept terms that are not all zero set the unit and the axis
+    if not own:  # every term removed, or the kept ones zero: all the terms set them, nothing is cut
+        basis = coef_mm[finite & (coef_mm != 0)]
+    big = float(np.max(np.abs(basis))) if basis.size else 0.0
+    scale, unit = length_unit(big) if big > 0 else (1e-6, "nm")
     if unit == "m":
         scale, unit = 1.0, "mm"
     shown = coef_mm / scale
-    lim = 1.15 * float(np.max(np.abs(kept))) / scale if kept.size else 0.0
-    cut = gone & (np.abs(shown) > lim) if lim > 0 and (~gone).any() else np.zeros(len(shown), dtype=bool)
+    lim = 1.15 * big / scale
+    cut = gone & finite & (np.abs(shown) > lim) if own else np.zeros(len(shown), dtype=bool)
     colors = ["#bbbbbb" if g else "#2c6fbb" for g in gone]
     ax.bar(np.arange(len(labels)), np.clip(shown, -lim, lim) if cut.any() else shown, color=colors)
     if cut.any():
@@ -371,7 +375,7 @@ def zernike_bars(labels, coef_nm, removed=(), title="Zernike coefficients"):
             ax.text(k, np.sign(shown[k]) * lim * 0.97, format_length(coef_mm[k]), rotation=90, fontsize=7,
                     ha="center", va="top" if shown[k] > 0 else "bottom", color="#555555")
     ax.set_xticks(np.arange(len(labels)), labels, rotation=90, fontsize=7)
-    ax.set_ylabel(f"coefficient ({unit})")
+    ax.set_ylabel(f"coefficient ({unit} RMS)" if normalization == "rms" else f"coefficient ({unit})")
     ax.axhline(0, color="k", lw=0.5)
     ax.set_title(title + (" (grey: removed)" if removed else ""), fontsize=10)
     return fig
@@ -454,17 +458,23 @@ def omega_map(x, y, omega_mm, removed_mask, title="ω after denoising"):
     return fig
 
 
-def position_axis(ax, which: str, label: str, span_mm: float) -> None:
+def position_axis(ax, which: str, label: str, span_mm: float, centre_mm: float | None = None) -> None:
     """Label axis ``which`` ("x" or "y") of positions in mm: "label (mm)", or "label (µm)" with the
     tick labels × 1000 where the field is under 1 mm across (a 20 µm field read 0.000 … 0.020 mm, its
     ticks running together). Only the labels change: the data stay in mm, so the window's
-    selections and cuts keep their coordinates."""
+    selections and cuts keep their coordinates. ``centre_mm``: the field's centre on that axis —
+    a small field far from the origin is labelled from a round offset, "y − 2000 mm (µm)", its ticks
+    the µm from there (a 3 µm field at y = 2000 mm read "2e+06" at every tick: a review)."""
     from matplotlib.ticker import FuncFormatter, ScalarFormatter
 
     axis = ax.xaxis if which == "x" else ax.yaxis
     if np.isfinite(span_mm) and 0 < span_mm < 1.0:
-        axis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v * 1e3:.6g}"))
-        axis.set_label_text(f"{label} (µm)")
+        off = 0.0
+        if centre_mm is not None and np.isfinite(centre_mm) and abs(centre_mm) > 100.0 * span_mm:
+            step = 10.0 ** np.floor(np.log10(span_mm))  # a round offset, to the field's own scale
+            off = float(np.round(centre_mm / step) * step)
+        axis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{(v - off) * 1e3:.6g}"))
+        axis.set_label_text(f"{label} − {off:g} mm (µm)" if off else f"{label} (µm)")
     else:
         axis.set_major_formatter(ScalarFormatter())
         axis.set_label_text(f"{label} (mm)")

@@ -31,11 +31,15 @@ def why_not_a_file(path, what: str = "data file") -> str | None:
     except OSError as e:
         if e.errno == errno.ELOOP:
             return "a loop of symbolic links, no file at its end"
-        if p.is_symlink():
-            return f"a symbolic link to {os.readlink(p)}, which does not exist"
-        if e.errno in (errno.ENOENT, errno.ENOTDIR):
-            return f"{what} not found" if what == "recipe file" else "file not found"
-        return f"cannot be read ({e.strerror or e})"
+        if e.errno not in (errno.ENOENT, errno.ENOTDIR):  # a folder on the way that may not be entered
+            return f"cannot be read ({e.strerror or e})"
+        try:
+            link = os.readlink(p) if p.is_symlink() else None
+        except OSError:
+            link = None
+        if link is not None:  # the link is there; what it names (or a link further on) is not
+            return f"a symbolic link to {link}, which leads to no file"
+        return f"{what} not found" if what == "recipe file" else "file not found"
     if stat.S_ISDIR(mode):
         return f"is a folder, not a {what}"
     if not stat.S_ISREG(mode):

@@ -98,15 +98,23 @@ def surface_for_people(surf: dict) -> dict:
     c = surf.get("c")
     if _is_number(c):
         out["c"] = f"{c:.6g} mm⁻¹" + (f" (R = {1.0 / c:.6g} mm)" if c else " (flat)")
+    if _is_number(surf.get("R")):  # the vertex radius, given instead of c
+        out["R"] = f"{surf['R']:.6g} mm"
     A = surf.get("A")
     if isinstance(A, dict) and all(_is_number(v) for v in A.values()):
-        def power(n):
-            try:
-                return str(1 - int(n)).replace("-", "⁻").translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
-            except (TypeError, ValueError):
-                return None
-        out["A"] = ", ".join(f"{n}: {v:.6g}" + (f" mm{power(n)}" if power(n) else "") for n, v in A.items())
+        out["A"] = ", ".join(f"{n}: {v:.6g}{_coefficient_unit(n)}" for n, v in A.items())
     return out
+
+
+def _coefficient_unit(n) -> str:
+    """" mm⁻³" for A_4 (A_n r^n is a length: mm^(1−n)); "" where n is no whole number ≥ 2."""
+    try:
+        p = 1 - int(n)
+    except (TypeError, ValueError):
+        return ""
+    if p > -1:
+        return ""
+    return " mm" + str(p).replace("-", "⁻").translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
 
 
 def _fmt_keyed(key, v) -> str:

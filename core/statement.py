@@ -201,8 +201,11 @@ def _fixed(v, d: int) -> str:
 
 
 def _limit_text(v) -> str:
-    """A drawing's limit as written (0.25, not 0.2500)."""
-    return "—" if v is None else f"{v:g}"
+    """A drawing's limit as the verdict's line writes it (core.tolerance.decision._limit: 0.25, not
+    0.2500; a limit converted from fringes with its 10 digits)."""
+    from .tolerance.decision import _limit
+
+    return "—" if v is None else _limit(float(v))
 
 
 def weighting_text(summary: dict) -> str:

@@ -47,8 +47,8 @@ def test_a_coordinate_beyond_any_machine_is_refused_by_its_line(tmp_path, where,
     with pytest.raises(InputError) as e:
         read_cloud(path)
     assert str(e.value).startswith(f"{path}, line {row + 2}: {where} = 1e+300 mm lies beyond any measuring")
-    lines[row] = f"{x},{y},{z}"  # 10⁸ mm: far, but a coordinate (a geodetic frame's easting)
-    lines[1] = "1e8,2.0,0.0"
+    lines[row] = f"{x},{y},{z}"  # 5.4·10⁹ mm: far, but a coordinate (a UTM northing; 10⁹ refused it)
+    lines[1] = "5.4e9,2.0,0.0"
     assert read_cloud(write(tmp_path / "q.csv", "\n".join(lines) + "\n")).n == 20
 
 
@@ -57,7 +57,7 @@ def test_a_coordinate_beyond_any_machine_in_a_ply_names_the_point(tmp_path):
     rows[4] = "4 1e300 0.04"
     ply = "ply\nformat ascii 1.0\nelement vertex 10\nproperty double x\nproperty double y\n" \
           "property double z\nend_header\n" + "\n".join(rows) + "\n"
-    with pytest.raises(InputError, match=r"point 4 \(index\): y = 1e\+300 mm lies beyond"):
+    with pytest.raises(InputError, match=r"the point with index 4: y = 1e\+300 mm lies beyond"):
         read_cloud(write(tmp_path / "p.ply", ply))
 
 
@@ -68,7 +68,7 @@ def test_a_link_to_itself_a_pipe_and_a_device_are_said_what_they_are(tmp_path, r
         read_cloud(loop)
     dangling = tmp_path / "gone.csv"
     dangling.symlink_to(tmp_path / "nothing.csv")
-    with pytest.raises(InputError, match="a symbolic link to .*nothing.csv, which does not exist"):
+    with pytest.raises(InputError, match="a symbolic link to .*nothing.csv, which leads to no file"):
         read_cloud(dangling)
     if hasattr(os, "mkfifo"):
         fifo = tmp_path / "fifo.csv"
@@ -113,3 +113,36 @@ def test_a_value_no_branch_of_a_union_takes_is_said_in_words(tmp_path):
     write(recipe, "pointspro: 1\nsteps:\n  - knn_denoise: {remove: 2.5}\n")
     with pytest.raises(RecipeError, match=r"key 'remove': 'auto' or a whole number \(got 2.5\)$"):
         load_recipe(recipe)
+
+
+def test_quiet_drops_only_the_reading_threads_library_records():
+    """While a file is read, its libraries' records are dropped — not other threads' (the window
+    reads in a worker thread) nor PointsPro's own; nothing stays attached after."""
+    import logging
+    import threading
+
+    from pointspro.core.io.instruments import quiet
+
+    seen = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            seen.append(record.name)
+
+    h = Keep()
+    root = logging.getLogger()
+    root.addHandler(h)
+    try:
+        with quiet():
+            with quiet():  # nested: the inner exit leaves the outer filter
+                pass
+            logging.getLogger("igor2.binarywave").error("a whole file")
+            logging.getLogger("pointspro.test").error("ours")
+            t = threading.Thread(target=lambda: logging.getLogger("myapp").error("another thread"))
+            t.start()
+            t.join()
+        logging.getLogger("igor2.binarywave").error("after")
+    finally:
+        root.removeHandler(h)
+    assert seen == ["pointspro.test", "myapp", "igor2.binarywave"]
+    assert not h.filters

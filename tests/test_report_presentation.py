@@ -28,12 +28,19 @@ def test_zernike_bars_take_the_unit_and_the_scale_of_the_kept_terms():
     assert h[0] == pytest.approx(hi) and h[1] == pytest.approx(hi)  # cut at its end …
     texts = {t.get_text() for t in ax.texts}
     assert {format_length(50_700e-6), format_length(80e-6)} <= texts  # … with their values written
-    # kept terms of 160 µm: µm, not 1.6e5 nm; nothing removed: every bar as it is
+    # nothing removed: every bar as it is, in the unit of the largest (1.16 mm)
     ax, h = _bars(zernike_bars(labels, [1.16e6, -5.3e4, 0.0, -1.6e5], removed=[]))
-    assert ax.get_ylabel() == "coefficient (mm)" or ax.get_ylabel() == "coefficient (µm)"
-    ax, h = _bars(zernike_bars(labels, [1.16e6, -5.3e4, 0.0, -1.6e5], removed=["F1", "F2", "F3"]))
-    assert ax.get_ylabel() == "coefficient (µm)" and h[3] == pytest.approx(-160.0)
-    assert not ax.texts or all("mm" in t.get_text() for t in ax.texts)
+    assert ax.get_ylabel() == "coefficient (mm)" and h[0] == pytest.approx(1.16) and not ax.texts
+    # kept terms of 160 µm: µm, not 1.6e5 nm; the removed 1.16 mm piston cut, its value written
+    ax, h = _bars(zernike_bars(labels, [1.16e6, -5.3e4, 0.0, -1.6e5], removed=["F1", "F2", "F3"],
+                               normalization="rms"))
+    assert ax.get_ylabel() == "coefficient (µm RMS)" and h[3] == pytest.approx(-160.0)
+    assert [t.get_text() for t in ax.texts] == [format_length(1.16)]
+    # the kept terms all zero: the removed ones set the unit and nothing is cut (it read "mm", 0.05)
+    ax, h = _bars(zernike_bars(labels, [50_700.0, 80.0, 0.0, 0.0], removed=["F1", "F2", "F3"]))
+    assert ax.get_ylabel() == "coefficient (µm)" and h[0] == pytest.approx(50.7) and not ax.texts
+    ax, h = _bars(zernike_bars(labels, [0.0, 0.0, 0.0, 0.0]))
+    assert ax.get_ylabel() == "coefficient (nm)"
 
 
 def test_misalignment_figure_states_the_reports_residual_rms(monkeypatch):
@@ -75,3 +82,4 @@ def test_the_nominal_surface_states_its_units():
     assert shown["A"] == "4: 7e-13 mm⁻³, 6: 1e-19 mm⁻⁵"
     assert shown["k"] == -0.98 and shown["aperture"] == 1300
     assert surface_for_people({"type": "plane", "c": 0.0})["c"] == "0 mm⁻¹ (flat)"
+    assert surface_for_people({"type": "even_asphere", "R": 100.0})["R"] == "100 mm"  # given as R

@@ -47,19 +47,21 @@ def test_reading_a_recipe_imports_no_scipy():
 def test_a_big_csv_is_read_exactly_without_pandas(tmp_path):
     """Files above 4 MB go through Arrow's CSV reader (core/io/text.py `_arrow_parse`): no pandas
     import (0.3 s of a batch's start), and every value read back to the last bit — 17-digit values
-    over 600 decades, subnormals and the largest double included."""
+    over 600 decades, subnormals and the largest double included (in a channel: a coordinate beyond
+    10¹² mm is refused as corrupt, docs/formats.md; the coordinates span 24 decades)."""
     import numpy as np
 
     rng = np.random.default_rng(7)
-    v = rng.normal(0, 1, 3 * 70_000) * 10.0 ** rng.integers(-300, 300, 3 * 70_000)
+    v = rng.normal(0, 1, 4 * 70_000) * 10.0 ** rng.integers(-300, 300, 4 * 70_000)
     v[:4] = [5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, 0.1]
-    v = v.reshape(-1, 3)
+    v = v.reshape(-1, 4)
+    v[:, :3] = rng.normal(0, 1, (len(v), 3)) * 10.0 ** rng.integers(-12, 12, (len(v), 3))
     p = tmp_path / "big.csv"
-    p.write_text("x,y,z\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in v.tolist()))
+    p.write_text("x,y,z,q\n" + "".join(f"{a!r},{b!r},{c!r},{d!r}\n" for a, b, c, d in v.tolist()))
     assert p.stat().st_size > 4_000_000
-    out = tmp_path / "xyz.npy"
+    out = tmp_path / "xyzq.npy"
     code = ("import sys, numpy as np; from pathlib import Path; from pointspro.core.io.text import read_text; "
-            "xyz, _, _ = read_text(Path(sys.argv[1])); np.save(sys.argv[2], xyz); "
+            "xyz, cols, _ = read_text(Path(sys.argv[1])); np.save(sys.argv[2], np.column_stack([xyz, cols['q']])); "
             "print('pandas' in sys.modules)")
     res = subprocess.run([sys.executable, "-c", code, str(p), str(out)], capture_output=True, text=True,
                          check=True, encoding="utf-8")

@@ -249,7 +249,7 @@ def coverage_message(cov: float, R2, inside, covered, radius: float, inner: floa
     # the share rounded down: 98.97 % read "99.0 % … (≥ 99 % needed)" beside a refusal (a review)
     shown = math.floor(cov * 1000.0) / 10.0
     head = (f"the map covers {shown:.1f} % of the {_aperture_words(radius, inner)} about ({center[0]:g}, "
-            f"{center[1]:g}) mm (≥ {MIN_COVERAGE:.0%} needed): no data from r = {rmiss:.4g} mm")
+            f"{center[1]:g}) mm (≥ {MIN_COVERAGE * 100:.0f} % needed): no data from r = {rmiss:.4g} mm")
 
     def widest(radii, flags):
         """Index of the last node at which the nodes so far (all of each radius, ≥ 16) are covered."""

@@ -274,22 +274,24 @@ def read_cloud(path, options: ReaderOptions | Mapping | None = None, **kw) -> Po
     meta = {**meta, "source": str(path), "frame": frame, "units": "mm"}
     meta.setdefault("invalid_dropped", 0)
     _check_index_unique(path, cols)
-    why = beyond_any_machine(xyz)
+    why = beyond_any_machine(xyz) if meta.get("format") != "text" else None  # text: by its line, read_text
     if why:
         row, text = why
         idx = cols.get("index") if hasattr(cols, "get") else None
-        raise InputError(f"{path}: point {int(idx[row]) if idx is not None else row} (index): {text}")
+        raise InputError(f"{path}: the point with index {int(idx[row]) if idx is not None else row}: {text}")
     try:
         return PointCloud(xyz, cols, meta)
     except ValueError as e:
         raise InputError(f"{path}: {e}") from None
 
 
-#: the largest coordinate a measurement holds (mm): 10⁹ mm = 1000 km, room for a geodetic frame's
-#: easting and northing. A corrupt 1e300 overflowed the pose fit's squares — "RuntimeWarning:
-#: overflow" lines, then the surface blamed ("1 point at r up to inf mm lies outside the conic's
-#: domain") with no word of the file's line (a review)
-MAX_COORDINATE_MM = 1e9
+#: the largest coordinate a measurement holds (mm): 10¹² mm = 10⁶ km — room for a projected frame's
+#: northing (UTM: up to 10⁷ m) and an Earth-centred frame (6.4·10⁶ m), a LAS file's coordinates
+#: (10⁹ mm refused a real UTM cloud: a review), and far below where the pose fit's squares overflow
+#: (~1e150). A corrupt 1e300 overflowed them — "RuntimeWarning: overflow" lines, then the surface
+#: blamed ("1 point at r up to inf mm lies outside the conic's domain") with no word of the file's
+#: line (a review)
+MAX_COORDINATE_MM = 1e12
 
 
 def beyond_any_machine(xyz) -> tuple[int, str] | None:

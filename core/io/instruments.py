@@ -446,8 +446,8 @@ class quiet:
     """SurfaceTopography's warnings, stray prints (a reader prints whole buffers) and its readers'
     log records kept off the terminal: trying each format on a truncated .opd, igor2's reader logged
     an error quoting the whole file — one line of 6.5 MB on stderr (a review). Records of other
-    loggers than PointsPro's are dropped by the root handlers (and logging's last resort) while a
-    file is read; PointsPro's own pass."""
+    loggers than PointsPro's, from the reading thread, are dropped by the root handlers (and
+    logging's last resort) while a file is read; PointsPro's own and other threads' pass."""
 
     def __enter__(self):
         import contextlib
@@ -461,6 +461,7 @@ class quiet:
         self._stack.enter_context(contextlib.redirect_stdout(io.StringIO()))
         self._stack.enter_context(contextlib.redirect_stderr(io.StringIO()))
         only = _OnlyPointsPro()  # its own: a nested quiet's exit must not remove the outer one's
+        # (and only this thread's records: another thread's — the window reads in a worker — pass)
         for handler in [*logging.getLogger().handlers, logging.lastResort]:
             if handler is not None:
                 handler.addFilter(only)
@@ -473,8 +474,16 @@ class quiet:
 
 
 class _OnlyPointsPro:
+    """Drops the records of other loggers than PointsPro's emitted by the thread that made it."""
+
+    def __init__(self):
+        import threading
+
+        self.thread = threading.get_ident()
+
     def filter(self, record) -> bool:
-        return record.name == "pointspro" or record.name.startswith("pointspro.")
+        return (record.thread != self.thread or record.name == "pointspro"
+                or record.name.startswith("pointspro."))
 
 
 def read_surface_topography(path: Path, opts=None, head: bytes | None = None):

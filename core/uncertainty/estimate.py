@@ -194,8 +194,9 @@ def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | Non
         # irregularity scattered 3× more than the samples (an independent review: B at its limit,
         # 20 nm of noise, 30 seeds: sd 0.044 µm against an interval's lower half of 0.05 µm, and
         # "does not conform" 6 times in 30 under the guarded rule). The interval reaches down to the
-        # lowest extrapolant's value with the samples' own lower spread, as its upper end reaches
-        # the measured value's: a decision then needs the whole range of p to agree
+        # lowest extrapolant's value less the truth's lower spread (the samples' upper one: the
+        # interval is reflected, above), as its upper end reaches the measured value's: a decision
+        # then needs the whole range of p to agree
         lo = min(lo, lowest - (hi_p - value))
     if kind != "linear":  # ≥ 0 by definition (RMS, PV, irregularity): so is the interval
         lo = max(lo, 0.0)
@@ -203,7 +204,8 @@ def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | Non
     U95 = 0.5 * (hi - lo)
     if kind == "extreme" and f0 > value:
         # an extreme value's noise bias is known only roughly (SIMEX's extrapolant; measured coverage
-        # 68–75 % for PV without this): the interval keeps the measured value's own upper end, so it
+        # 68–75 % for PV without this): the interval's upper end is at least the measured value plus
+        # the corrected interval's upper half (the reflected one: the samples' lower spread), so it
         # runs from the corrected value's lower end to the uncorrected one's upper end, and U95 is the
         # larger half — value ± U95 then holds the whole interval, as a decision rule needs
         hi = max(hi, f0 + (hi - value))

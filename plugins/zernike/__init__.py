@@ -219,7 +219,8 @@ class ZernikeStep(Step):
             "zernike.png": png_artifact(zernike_bars, labels, coef * 1e6,
                                         removed=[lab for lab, r in zip(labels, rows) if r["removed"]],
                                         title=f"Zernike coefficients ({params.ordering}, "
-                                              f"{params.normalization})"),
+                                              f"{params.normalization})",
+                                        normalization=params.normalization),
             "zernike_removed.png": png_artifact(before_after, x, y, v, after,
                                                 what="removing " + (", ".join(map(str, params.remove))
                                                                     or "nothing"), weights=w),
