@@ -75,13 +75,15 @@ def test_info_spacing_is_lateral(run_cli):
     assert d["spacing_mm"] < 0.01 * (ex["z"][1] - ex["z"][0])
 
 
-def test_info_says_when_coordinates_are_too_large_for_a_spacing(run_cli, tmp_path):
-    """Coordinates of ~1e300 mm: the spacing was printed as "inf mm"; now the line says why."""
+def test_info_refuses_coordinates_beyond_any_machine(run_cli, tmp_path):
+    """Coordinates of ~1e300 mm: the spacing was printed as "inf mm", then "spacing not computable";
+    every reader now refuses a coordinate beyond 10¹² mm as corrupt, naming its line
+    (docs/formats.md)."""
     p = tmp_path / "absurd.csv"
     p.write_text("x,y,z\n0,0,0\n1e300,0,1\n0,1e300,2\n-1e300,-1e300,3\n")
     code, out, err = run_cli("info", p)
-    assert code == 0, err
-    assert "inf mm" not in out and "spacing not computable" in out
+    assert code == 2 and "inf mm" not in out
+    assert "absurd.csv, line 3: x = 1e+300 mm lies beyond any measuring machine" in err
 
 
 def test_info_describes_a_map_grid(run_cli):
