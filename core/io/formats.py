@@ -296,7 +296,10 @@ MAX_COORDINATE_MM = 1e12
 
 def beyond_any_machine(xyz) -> tuple[int, str] | None:
     """(row, what) of the first point with a coordinate beyond ``MAX_COORDINATE_MM``, or None."""
-    big = np.abs(xyz) > MAX_COORDINATE_MM
+    xyz = np.asarray(xyz)
+    if not xyz.size or (float(xyz.max()) <= MAX_COORDINATE_MM and float(xyz.min()) >= -MAX_COORDINATE_MM):
+        return None  # two reductions, no temporaries (10⁶ points: ~2 ms)
+    big = np.abs(xyz) > MAX_COORDINATE_MM  # (a NaN, which the readers drop, is no coordinate here)
     if not big.any():
         return None
     row = int(np.flatnonzero(big.any(axis=1))[0])
