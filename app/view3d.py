@@ -169,6 +169,8 @@ class View3D(QtWidgets.QWidget):
                                                       "position_y": 0.1, "width": 0.07, "height": 0.8,
                                                       "title_font_size": 14, "label_font_size": 12,
                                                       "fmt": "%.3g"})
+            for bar in p.scalar_bars.values():  # the title clear of the top label ("1.71" touched
+                bar.SetVerticalTitleSeparation(8)  # "residual (µm)": a review)
             if not self._axes:
                 p.add_axes()
                 self._axes = True
