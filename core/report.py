@@ -157,12 +157,20 @@ def _fmt(v) -> str:
     if isinstance(v, float):
         return f"{v:.6g}"
     if isinstance(v, list) and len(v) > 12:  # the items are escaped by _fmt already
-        return f"[{len(v)} values: {', '.join(_fmt(x) for x in v[:6])}, …]"
+        return f"[{len(v)} values: {', '.join(_item(x) for x in v[:6])}, …]"
     if isinstance(v, list) and v and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-        return "[" + ", ".join(_fmt(x) for x in v) + "]"  # 6 digits, as a number alone (not 17)
+        return "[" + ", ".join(_item(x) for x in v) + "]"  # 6 digits, as a number alone (not 17)
     if isinstance(v, (list, dict)):
         return html.escape(json.dumps(v))
     return html.escape(str(v))
+
+
+def _item(x) -> str:
+    """An item of a list: a whole number without separators — rows [447, 801, 2338], not the
+    "2,338" that a comma-separated list cannot tell from two numbers."""
+    if isinstance(x, int) and not isinstance(x, bool):
+        return str(x)
+    return _fmt(x)
 
 
 def _records(v: list) -> str:

@@ -83,3 +83,10 @@ def test_the_nominal_surface_states_its_units():
     assert shown["k"] == -0.98 and shown["aperture"] == 1300
     assert surface_for_people({"type": "plane", "c": 0.0})["c"] == "0 mm⁻¹ (flat)"
     assert surface_for_people({"type": "even_asphere", "R": 100.0})["R"] == "100 mm"  # given as R
+
+
+def test_counts_have_separators_and_rows_in_a_list_do_not():
+    """"points in 4680" beside "4,680" in the window; but a list of rows keeps its numbers whole —
+    [447, 2,338] cannot be told from three numbers."""
+    page = table_html({"points": 4680, "rows": [447, 2338, 4073], "small": 999})
+    assert ">4,680<" in page and "[447, 2338, 4073]" in page and ">999<" in page
