@@ -747,6 +747,14 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
         # reader and Gwyddion's flip); undone here. Dim0Min/Dim1Min are not applied: the first
         # pixel is at the origin, as for the other maps
         h, valid = h[:, ::-1], valid[:, ::-1]
+    elif fmt == "di":
+        # Bruker/Veeco Nanoscope .di: the first stored line is the bottom of the scan (y = 0; Bruker:
+        # "Frame Up" starts at the bottom), which Gwyddion's nanoscope.c turns upside down for its
+        # y-down image rows, as for Igor and Nanosurf above. SurfaceTopography 1.27 flips dimension 1
+        # (np.fliplr, to look like Gwyddion), which put line 0 at y max: a y mirror (an independent
+        # review: the file's int16 lines parsed by hand correlate 1.000000 with our rows reversed,
+        # 0.39 in order, on SurfaceTopography's di-1.di and di-3.di); undone here
+        h, valid = h[:, ::-1], valid[:, ::-1]
     # SurfaceTopography's arrays are (x, y): index [i, j] is column i, row j
     xyz, chans = _to_cloud(X_mm.T, Y_mm.T, h.T * to_mm, valid.T, path)
     return xyz, chans, {"instrument_format": fmt, "instrument_reader": reader.name(),

@@ -221,16 +221,24 @@ def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | Non
     return e
 
 
-def simex_lowest(f0: float, mean1: float, levels: dict) -> float:
-    """The lowest f(−1) of the SIMEX extrapolants with p in [1, 2] (``simex_power``'s family): the
-    corrected value had the form been the one that removes the most bias."""
+def _simex_fits(f0: float, mean1: float, levels: dict) -> list[tuple[float, float, float]]:
+    """(p, a = f(−1), sse) of f(λ) = a + b·(1 + λ)^(p/2) fitted by least squares through the measured
+    value (λ = 0), the samples' mean (λ = 1) and their means at the extra noise levels, for p in
+    1, 1.05 … 2 (noise bias ∝ σ … σ²)."""
     lam = np.array([0.0, 1.0] + [float(k) for k in levels])
     fv = np.array([f0, mean1] + [float(np.nanmean(v)) for v in levels.values()])
     out = []
     for p in np.linspace(1.0, 2.0, 21):
         A = np.column_stack([np.ones_like(lam), (1.0 + lam) ** (p / 2)])
-        out.append(float(np.linalg.lstsq(A, fv, rcond=None)[0][0]))
-    return min(out)
+        coef, *_ = np.linalg.lstsq(A, fv, rcond=None)
+        out.append((float(p), float(coef[0]), float(np.sum((A @ coef - fv) ** 2))))
+    return out
+
+
+def simex_lowest(f0: float, mean1: float, levels: dict) -> float:
+    """The lowest f(−1) of the SIMEX extrapolants with p in [1, 2] (``simex_power``'s family): the
+    corrected value had the form been the one that removes the most bias."""
+    return min(a for _, a, _ in _simex_fits(f0, mean1, levels))
 
 
 def simex_power(f0: float, mean1: float, levels: dict) -> tuple[float, float, float]:
@@ -238,20 +246,9 @@ def simex_power(f0: float, mean1: float, levels: dict) -> tuple[float, float, fl
     measured value (λ = 0) and the samples' means at the extra noise levels, p in [1, 2] (noise bias
     ∝ σ … σ²) chosen by least squares; returns a = f(−1), p and the standard uncertainty of a over
     p in [1, 2] (a rectangular distribution of the extrapolant's unknown form, GUM 4.3.7)."""
-    lam = [0.0, 1.0] + [float(k) for k in levels]
-    fv = [f0, mean1] + [float(np.nanmean(v)) for v in levels.values()]
-    lam, fv = np.array(lam), np.array(fv)
-    best = None
-    ends = []
-    for p in np.linspace(1.0, 2.0, 21):
-        A = np.column_stack([np.ones_like(lam), (1.0 + lam) ** (p / 2)])
-        coef, *_ = np.linalg.lstsq(A, fv, rcond=None)
-        sse = float(np.sum((A @ coef - fv) ** 2))
-        if best is None or sse < best[0]:
-            best = (sse, float(coef[0]), float(p))
-        if p in (1.0, 2.0):
-            ends.append(float(coef[0]))
-    return best[1], best[2], abs(ends[0] - ends[1]) / (2.0 * math.sqrt(3.0))
+    fits = _simex_fits(f0, mean1, levels)
+    p, a, _ = min(fits, key=lambda t: t[2])  # the first of equal fits, as before
+    return a, p, abs(fits[0][1] - fits[-1][1]) / (2.0 * math.sqrt(3.0))
 
 
 def budget(placed: np.ndarray, Z: np.ndarray, names: list[str], se: float = 0.0) -> dict:
