@@ -58,3 +58,17 @@ def test_a_nanoscope_files_first_line_is_at_y_zero():
     dy = float(c.meta["pixel_mm"][1])
     np.testing.assert_allclose(c.y[row == 0], 0.0, atol=1e-15)  # the first stored line at y = 0
     np.testing.assert_allclose(c.y, row * dy, rtol=1e-12, atol=1e-15)  # y up: line q at q·Δy
+
+
+def test_a_truncated_nanoscope_file_is_named_as_one(tmp_path):
+    """Its reader answers only "maybe" to a Nanoscope header, so a cut .di read "unknown file type
+    '.di'" although the reader knew it was short (a review)."""
+    import pytest
+
+    from pointspro.core.errors import InputError
+
+    cut = tmp_path / "cut.di"
+    data = DI.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    with pytest.raises(InputError, match="a damaged or truncated Bruker/Veeco/DI Nanoscope file"):
+        read_cloud(cut)

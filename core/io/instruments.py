@@ -429,12 +429,19 @@ def st_extension_names(suffix: str) -> str:
     return " or ".join(dict.fromkeys(names))
 
 
+#: heads that name a format whose SurfaceTopography reader answers only "maybe" to them: a Bruker
+#: Nanoscope file begins with its "\*File list" header (a truncated .di read "unknown file type"
+#: where its reader knew it was short: a review)
+_OWN_MAGIC = {"di": b"\\*File list"}
+
+
 def _magic_readers(head: bytes):
     """SurfaceTopography readers whose magic bytes match the file's head."""
     with quiet():
         from SurfaceTopography.IO import MagicMatch, readers
 
-        return [r for r in readers if r.can_read(head[:512]) == MagicMatch.YES]
+        return [r for r in readers if r.can_read(head[:512]) == MagicMatch.YES
+                or head.startswith(_OWN_MAGIC.get(r.format(), b"\0never"))]
 
 
 def st_magic_names(head: bytes) -> list[str]:
