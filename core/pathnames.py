@@ -1,4 +1,5 @@
-"""Paths as the user named them, resolved without failing on a loop of symbolic links."""
+"""Paths as the user named them: resolved without failing on a loop of symbolic links, and why one is
+no regular file to read (core/io/formats.py read_cloud, core/recipe.py load_recipe)."""
 from __future__ import annotations
 
 import os
