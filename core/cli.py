@@ -478,9 +478,16 @@ def _batch(args, recipe_path: Path, pool, run: _BatchRun) -> int:
             session.close()
 
     entries = [results.get(str(p)) or entry(str(p), "not run") for p in inputs]
-    write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
-                  scheduler=args.scheduler, seconds=time.perf_counter() - t0, interrupted=interrupted,
-                  figures=args.figures, overrides=list(args.overrides))
+    try:
+        write_summary(out, recipe_path, entries, workers=1 if runner.__name__ == "run_sequential" else workers,
+                      scheduler=args.scheduler, seconds=time.perf_counter() - t0, interrupted=interrupted,
+                      figures=args.figures, overrides=list(args.overrides))
+    except PointsProError as e:
+        if not interrupted:
+            raise
+        # an interrupted batch stays an interrupted one (130, its closing line) when summary.json
+        # cannot be written either (a full disk): the summary's line said 2 before
+        print(f"pointspro: {e}", file=sys.stderr)
     if not args.quiet or interrupted:
         print(table(entries), file=sys.stdout if not interrupted else sys.stderr)
     return _batch_exit_code(entries, interrupted)

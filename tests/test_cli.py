@@ -440,3 +440,26 @@ def test_a_full_disk_is_one_line_naming_the_file_not_an_internal_error(tmp_path)
                      res.stderr), res.stderr
     assert not (tmp_path / "o" / "asphere_cmm").exists()  # no half-written folder
     assert [p.name for p in (tmp_path / "o").iterdir()] == []  # nor a temporary one
+
+
+def test_an_interrupted_batch_whose_summary_cannot_be_written_still_exits_130(run_cli, tmp_path,
+                                                                               monkeypatch):
+    """An interruption and a full disk at once: summary.json's error turned the exit status into 2
+    (a usage error) — the batch was interrupted, and says both (a review's leftover)."""
+    import pointspro.core.cli as cli
+    import pointspro.core.summary as summary
+    from pointspro.core.errors import PointsProError
+
+    def interrupted(runner, report, out, stems):
+        return True  # as when Ctrl-C stopped the inputs' run
+
+    def full(out_dir, *a, **k):
+        raise PointsProError(f"{out_dir / 'summary.json'}: cannot be written (File too large); 0 of 1 "
+                             "input(s) have their folder complete")
+
+    monkeypatch.setattr(cli, "_drain", interrupted)
+    monkeypatch.setattr(summary, "write_summary", full)
+    code, out, err = run_cli("--batch", RECIPE, DATA, "--out", tmp_path / "o", "--workers", "1", "--quiet")
+    assert code == 130, err
+    assert "summary.json: cannot be written (File too large)" in err
+    assert "pointspro: interrupted — 0 of 1 inputs complete" in err
