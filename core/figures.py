@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .units import format_length
+from .units import format_length, superscript
 
 DIVERGING = "RdBu_r"
 
@@ -94,7 +94,6 @@ def save_png(fig, path: Path) -> None:
     fig.savefig(path, format="png", dpi=100, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
 
 
-_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 
 def decade_label(v, _pos=None) -> str:
@@ -104,7 +103,7 @@ def decade_label(v, _pos=None) -> str:
         return ""
     e = np.log10(v)
     k = int(round(e))
-    return "10" + str(k).translate(_SUPERSCRIPT) if abs(e - k) < 1e-9 else ""
+    return "10" + superscript(k) if abs(e - k) < 1e-9 else ""
 
 
 def short_log_label(v) -> str:
@@ -118,7 +117,7 @@ def short_log_label(v) -> str:
     m = v / 10.0 ** k
     if round(m, 2) >= 10:
         m, k = m / 10, k + 1
-    return f"{m:.3g}×10" + str(k).translate(_SUPERSCRIPT)
+    return f"{m:.3g}×10" + superscript(k)
 
 
 def _plain_text_formatter(inner):

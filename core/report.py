@@ -114,7 +114,9 @@ def _coefficient_unit(n) -> str:
         return ""
     if p > -1:
         return ""
-    return " mm" + str(p).replace("-", "⁻").translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    from .units import superscript
+
+    return " mm" + superscript(p)
 
 
 def _fmt_keyed(key, v) -> str:

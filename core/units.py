@@ -46,6 +46,14 @@ def display_unit(v_mm) -> str:
     return unit if unit in ("mm", "µm", "nm") else ("mm" if unit == "m" else "nm")
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def superscript(n) -> str:
+    """A whole number as superscript digits: −3 → "⁻³" (exponents in labels: 10⁻⁶, mm⁻³)."""
+    return str(n).translate(_SUPERSCRIPT)
+
+
 def format_length(v_mm: float, digits: int = 3) -> str:
     """``v_mm`` (mm) with ``digits`` significant digits in its own unit: 4.39e-5 → '43.9 nm'."""
     v = float(v_mm)

@@ -181,13 +181,14 @@ def estimate(name: str, kind: str, f0: float, F: np.ndarray, Z: np.ndarray | Non
         below = True
     lo_p, hi_p = _quantiles(placed)
     w = K95 * se
-    lo, hi = value - math.hypot(value - lo_p, w), value + math.hypot(hi_p - value, w)
+    below_half, above_half = value - lo_p, hi_p - value
     if kind == "extreme":
         # reflected (the basic bootstrap interval): an extreme value's noise is skewed — a long tail
         # up (Gumbel) — and a measured value out in that tail stands far above the truth, so the
         # samples' upper spread is the truth's lower one. Placed as the samples lie, the lower half
         # was the short one (a review: B at its limit read "does not conform" 6 times in 30)
-        lo, hi = value - math.hypot(hi_p - value, w), value + math.hypot(value - lo_p, w)
+        below_half, above_half = above_half, below_half
+    lo, hi = value - math.hypot(below_half, w), value + math.hypot(above_half, w)
     if kind == "extreme" and parts and lowest < value:
         # the extrapolant's form is unknown (p in [1, 2]): the least-squares p is chosen from a few
         # noisy means and swings between the ends from one measurement to the next — the corrected
