@@ -733,14 +733,13 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
     elif no_lateral is not None and ch.physical_sizes is not None:  # Igor: default x/y scaling
         X_mm, Y_mm, pixel = _pixel_grid(t.nb_grid_pts, opts.pixel_size_um[0] * 1e-3,
                                         opts.pixel_size_um[1] * 1e-3)
-    if fmt == "ibw":
-        # an Igor wave states its own coordinates, x = sfB₀ + i·sfA₀, y = sfB₁ + j·sfA₁ (dimension 0 the
+    if fmt in ("ibw", "ezd", "di"):  # files that state their own y, which SurfaceTopography reverses
+        # Igor .ibw: an Igor wave states its own coordinates, x = sfB₀ + i·sfA₀, y = sfB₁ + j·sfA₁ (dimension 0 the
         # rows, 1 the columns); SurfaceTopography 1.27 gives dimension 1 reversed, which put the wave's
         # y = 0 line at the top of our y-up frame: a mirror (y-odd Zernike terms, a correction's side,
         # flipped). Gwyddion's igorfile.c flips the wave vertically for its y-down image rows — the
         # same picture as the wave's own y up (checked pixel by pixel on spot_1-1000nm.ibw)
-        h, valid = h[:, ::-1], valid[:, ::-1]
-    elif fmt == "ezd":
+        # —
         # Nanosurf .nid/.ezd: stored line q lies at the file's own y = Dim1Min + q·Dim1Range/Lines
         # (the slow axis, y up), whatever its "Scan direction": lines are stored by position, not
         # by time. On st_nid-1.nid ("Up", CurLine=255) the feedback's settling transient is in
@@ -753,8 +752,7 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
         # y mirror (checked pixel by pixel on st_nid-1.nid; no .ezd file was at hand, it shares the
         # reader and Gwyddion's flip); undone here. Dim0Min/Dim1Min are not applied: the first
         # pixel is at the origin, as for the other maps
-        h, valid = h[:, ::-1], valid[:, ::-1]
-    elif fmt == "di":
+        # —
         # Bruker/Veeco Nanoscope .di: the first stored line is the bottom of the scan (y = 0; Bruker:
         # "Frame Up" starts at the bottom), which Gwyddion's nanoscope.c turns upside down for its
         # y-down image rows, as for Igor and Nanosurf above. SurfaceTopography 1.27 flips dimension 1
