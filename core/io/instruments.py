@@ -454,19 +454,37 @@ class quiet:
     log records kept off the terminal: trying each format on a truncated .opd, igor2's reader logged
     an error quoting the whole file — one line of 6.5 MB on stderr (a review). Records of other
     loggers than PointsPro's, from the reading thread, are dropped by the root handlers (and
-    logging's last resort) while a file is read; PointsPro's own and other threads' pass."""
+    logging's last resort) while a file is read; PointsPro's own and other threads' pass.
+
+    sys.stdout, sys.stderr and the warnings' filters belong to the process, not to a thread: the
+    first of overlapping blocks (the window reads in a worker thread while another reads a hint)
+    silences them, the last one out restores them. Each block restoring what it found left
+    sys.stdout a StringIO for good when two threads' blocks overlapped out of order (a review);
+    hence the one lock and count, on the class, for the one process-wide resource."""
+
+    _lock = None  # threading.Lock, made on first use (the module imports no threading eagerly)
+    _depth = 0
+    _shared = None  # the ExitStack holding the redirections while any block is open
 
     def __enter__(self):
         import contextlib
         import io
         import logging
+        import threading
         import warnings
 
+        if quiet._lock is None:
+            quiet._lock = threading.Lock()
+        with quiet._lock:
+            if quiet._depth == 0:
+                shared = contextlib.ExitStack()
+                shared.enter_context(warnings.catch_warnings())
+                warnings.simplefilter("ignore")
+                shared.enter_context(contextlib.redirect_stdout(io.StringIO()))
+                shared.enter_context(contextlib.redirect_stderr(io.StringIO()))
+                quiet._shared = shared
+            quiet._depth += 1
         self._stack = contextlib.ExitStack()
-        self._stack.enter_context(warnings.catch_warnings())
-        warnings.simplefilter("ignore")
-        self._stack.enter_context(contextlib.redirect_stdout(io.StringIO()))
-        self._stack.enter_context(contextlib.redirect_stderr(io.StringIO()))
         only = _OnlyPointsPro()  # its own: a nested quiet's exit must not remove the outer one's
         # (and only this thread's records: another thread's — the window reads in a worker — pass)
         for handler in [*logging.getLogger().handlers, logging.lastResort]:
@@ -477,6 +495,11 @@ class quiet:
 
     def __exit__(self, *exc):
         self._stack.close()
+        with quiet._lock:
+            quiet._depth -= 1
+            if quiet._depth == 0:
+                shared, quiet._shared = quiet._shared, None
+                shared.close()
         return False
 
 
