@@ -108,7 +108,8 @@ def _frt_by_hand(path):
     nx, ny, bits = struct.unpack_from("<3I", blocks[0x66])
     scale = struct.unpack_from("<Id", blocks[0x6C])[1]
     lo, hi = struct.unpack_from("<2I", blocks[0x70])
-    raw = np.frombuffer(blocks[0x0B], "<u2").reshape(ny, nx)[::-1]  # row j = y index
+    raw = np.frombuffer(blocks[0x0B], "<u2").reshape(ny, nx)  # stored line j = y index (the first is
+    # the bottom of the picture: docs/formats.md)
     return bits, scale, lo, hi, raw
 
 
@@ -119,19 +120,19 @@ def _plane_rms(x, y, z):
 
 
 def test_frt_values_outside_the_valid_range_are_invalid(tmp_path):
-    """Before: the row at y = 0 (500 stored zeros → heights of exactly 0.0, next to rows of value 1
+    """Before: the last stored row, at y max (500 stored zeros → heights of exactly 0.0, next to rows of value 1
     that both readers mask) was read as valid: 173,544 points, RMS after tilt 4.396 µm where the
     surface gives 1.610 µm. The header's block 0x0070 says the valid stored values are 5 … 65529."""
     p = tmp_path / "frt-1.frt"
     p.write_bytes(lzma.decompress((DATA / "frt-1.frt.xz").read_bytes()))
     bits, scale, lo, hi, raw = _frt_by_hand(p)
     assert (bits, lo, hi) == (16, 5, 65529) and raw.shape == (500, 500)
-    assert (raw[0] == 0).all() and (raw == 0).sum() == 500  # the suspect row, y = 0
+    assert (raw[-1] == 0).all() and (raw == 0).sum() == 500  # the suspect row, y max
     ok = (raw >= lo) & (raw <= hi)
     assert ok.sum() == 173044 and (raw == 1).sum() == 76456
     c = read_cloud(p)
     assert c.n == ok.sum() and c.meta["invalid_dropped"] == 500 * 500 - ok.sum()
-    assert not (c["row"] == 0).any() and c.z.min() > 0
+    assert not (c["row"] == raw.shape[0] - 1).any() and c.z.min() > 0
     assert np.allclose(c.z, raw[c["row"], c["col"]] * scale * 1e3, rtol=1e-12, atol=0)  # m → mm
     assert c.z.mean() * 1e3 == pytest.approx(78.958308, rel=1e-7)  # µm
     j, i = np.nonzero(ok)  # the truth's own RMS after piston and tilt, with the file's pixel

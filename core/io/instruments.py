@@ -756,7 +756,12 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
     elif no_lateral is not None and ch.physical_sizes is not None:  # Igor: default x/y scaling
         X_mm, Y_mm, pixel = _pixel_grid(t.nb_grid_pts, opts.pixel_size_um[0] * 1e-3,
                                         opts.pixel_size_um[1] * 1e-3)
-    if fmt in ("ibw", "ezd", "di"):  # files that state their own y, which SurfaceTopography reverses
+    if fmt == "ps" and int(info.get("swap_xy", 0) or 0):
+        raise InputError(f"{path}: a Park Systems TIFF scanned with its axes swapped (header swap_xy "
+                         f"= {info.get('swap_xy')}): SurfaceTopography 1.27 reads its lines as x "
+                         "lines, Gwyddion turns them by 90°, and which is right is not established — "
+                         "not read rather than read turned; export the map as X3P or a text matrix")
+    if fmt in _FIRST_LINE_AT_Y0:  # SurfaceTopography reverses their lines; undone (docs/formats.md)
         # Igor .ibw: an Igor wave states its own coordinates, x = sfB₀ + i·sfA₀, y = sfB₁ + j·sfA₁ (dimension 0 the
         # rows, 1 the columns); SurfaceTopography 1.27 gives dimension 1 reversed, which put the wave's
         # y = 0 line at the top of our y-up frame: a mirror (y-odd Zernike terms, a correction's side,
@@ -782,6 +787,17 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
         # (np.fliplr, to look like Gwyddion), which put line 0 at y max: a y mirror (an independent
         # review: the file's int16 lines parsed by hand correlate 1.000000 with our rows reversed,
         # 0.39 in order, on SurfaceTopography's di-1.di and di-3.di); undone here
+        # —
+        # Park Systems TIFF, WSxM, FRT MicroProf, Molecular Imaging .mi, Wyko OPD, NT-MDT: their first
+        # stored line is the bottom of the image (the instrument's picture, y up): Gwyddion turns them
+        # upside down for its y-down rows (psia.c, wsxmfile.c, microprof.c, mifile.c, opdfile.c,
+        # nt-mdt.c), and SurfaceTopography 1.27 follows it — "the first stored row is the bottom line
+        # of the image; flip it to match the orientation of Gwyddion" (IO/FRT.py; the same in PS.py,
+        # MI.py, MDT.py, OPD.py; WSXM.py turns the map by 180°, x right again). Our y = j·Δy then put
+        # the first line at y max: the instrument's picture mirrored, y-odd terms of a freeform and a
+        # correction's side flipped. Checked against the raw lines decoded by hand (an independent
+        # review, 2026-11-28; tests/test_map_orientation.py): mi-1, opd-1, frt-1, example_ps.tiff,
+        # stp-1, top-1 correlate 1.000000 with our rows once undone. No NT-MDT file was at hand.
         h, valid = h[:, ::-1], valid[:, ::-1]
     # SurfaceTopography's arrays are (x, y): index [i, j] is column i, row j
     xyz, chans = _to_cloud(X_mm.T, Y_mm.T, h.T * to_mm, valid.T, path)
@@ -790,6 +806,12 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
                         "grid": [int(t.nb_grid_pts[0]), int(t.nb_grid_pts[1])],
                         "invalid_dropped": int(valid.size - valid.sum())}
 
+
+#: SurfaceTopography formats whose first stored line lies at y = 0 (the bottom of the instrument's
+#: picture, y up) and which SurfaceTopography 1.27 reverses to look like Gwyddion's y-down image rows;
+#: the reader undoes that (_topography_to_cloud). The others keep SurfaceTopography's row order:
+#: row j at y = j·Δy (docs/formats.md, Pixel convention).
+_FIRST_LINE_AT_Y0 = ("ibw", "ezd", "di", "ps", "wsxm", "frt", "mi", "opd", "mdt")
 
 #: NanoFocus .nms: the pixel size, two little-endian float64 (x, y) at this byte offset
 _NMS_PIXEL_OFFSET = 1376
