@@ -188,6 +188,11 @@ class Step:
     #: heights z (its ``channel`` parameter, where it has one, left at "auto"). Such a step belongs
     #: after the step that makes the residual; core.recipe.check_step_order refuses it before.
     reads_residual: ClassVar[bool] = False
+    #: the step moves the points and hands a residual it finds on untouched (probe_radius, dynamic,
+    #: volumetric): after the step that makes the residual, that residual is the points' before the
+    #: move. core.recipe.check_step_order refuses such a step unless the residual is made again after
+    #: it before anything uses or writes it (core.pipeline's stale-residual check, at run time, too).
+    moves_points: ClassVar[bool] = False
 
     def run(self, cloud: PointCloud, params: Params, ctx: Context) -> StepResult:  # pragma: no cover
         raise NotImplementedError

@@ -211,10 +211,10 @@ def test_true_and_false_are_not_numbers_in_step_parameters(tmp_path, entry, patt
 
 def test_true_and_false_still_fill_yes_no_parameters_and_other_fields_say_their_own(tmp_path):
     r = load_recipe(write(tmp_path / "r.yaml", _steps(
-        "register: {repair: false}", "bspline_map: {extrapolate: true}",
-        "manual_edit: {remove: [520, 3640]}", "probe_radius: {radius: 4, side: -1}",
-        "knn_denoise: {remove: auto}", "zernike: {remove: [piston, 4]}")))
+        "probe_radius: {radius: 4, side: -1}", "register: {repair: false}", "bspline_map: {extrapolate: true}",
+        "manual_edit: {remove: [520, 3640]}", "knn_denoise: {remove: auto}", "zernike: {remove: [piston, 4]}")))
     p = [s.params for s in r.steps]
+    p[0], p[1], p[2], p[3] = p[1], p[2], p[3], p[0]  # as before: register, bspline_map, manual_edit, probe_radius
     assert p[1].extrapolate is True and p[0].repair is False
     assert p[2].remove == [520, 3640] and p[3].radius == 4.0 and p[3].side == -1
     assert p[4].remove == "auto" and p[5].remove == ["piston", 4]

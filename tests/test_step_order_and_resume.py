@@ -59,16 +59,22 @@ def test_moving_the_points_after_the_residual_was_made_is_refused(run_cli, tmp_p
     true 0.99 µm), exit 0."""
     r = recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}")
     code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o", "--figures", "none", "--quiet")
-    assert code != 0
-    assert ("step 2 'probe_radius': this step moves the points, but their residual (the form error) "
-            "was made before the move and would no longer match them, and it would be written as the "
-            "form error — move 'probe_radius' before step 1 'misalignment', or make the residual again "
-            "right after it (misalignment, register)") in err
+    assert code == 2  # refused with the recipe, before any input (--check-only called it ready)
+    assert ("step 2 'probe_radius' moves the points, but the residual (the form error) is made before "
+            "it by step 1 'misalignment' and would no longer match them, and it would be written as the "
+            "form error — move 'probe_radius' before 'misalignment', or make the residual again right "
+            "after it (misalignment, register)") in err
+    assert run_cli("--batch", r, DATA, "--out", tmp_path / "oc", "--check-only")[0] == 2
     # a step after it using the stale residual is named
     r = recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}", "zernike: {terms: 4}",
                name="z.yaml")
     code, _, err = run_cli("--batch", r, DATA, "--out", tmp_path / "o3", "--figures", "none", "--quiet")
-    assert code != 0 and "and step 3 'zernike' would use it — move 'probe_radius' before step 1" in err
+    assert code == 2 and "and step 3 'zernike' would use it — move 'probe_radius' before 'misalignment'" in err
+    # a residual made again, but only after a step that uses the stale one: still refused
+    late = recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}", "zernike: {terms: 4}",
+                  "misalignment: {}", name="late.yaml")
+    code, _, err = run_cli("--batch", late, DATA, "--out", tmp_path / "o6", "--check-only")
+    assert code == 2 and "step 3 'zernike' would use it" in err
     # made again right after the move (a review: refused at first), or a residual column in the input
     # that misalignment replaces (a PointsPro cloud.csv read again): fine
     again = recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}", "misalignment: {}",

@@ -111,6 +111,7 @@ def _file_lines(cloud) -> dict:
 class DynamicStep(Step):
     id = "dynamic"
     title = "Dynamic error correction"
+    moves_points = True  # and hands a residual it finds on untouched (core/step.py)
     summary = "z = Gm·xd + xc: remove the measuring loop's lag from an on-machine scan (004 eq 13)."
     Params = DynamicParams
 

@@ -137,6 +137,7 @@ def _other_side_check(surface, centres, dof, params, e, ctx) -> str | None:
 class ProbeRadiusStep(Step):
     id = "probe_radius"
     title = "Probe-radius compensation"
+    moves_points = True  # and hands a residual it finds on untouched (core/step.py)
     summary = "Probe-ball centres → contact points by the exact offset-surface fit."
     Params = ProbeRadiusParams
     needs_surface = True  # the batch refuses a recipe without `surface:` before any input

@@ -44,6 +44,7 @@ class VolumetricParams(Params):
 class VolumetricStep(Step):
     id = "volumetric"
     title = "Volumetric error correction"
+    moves_points = True  # and hands a residual it finds on untouched (core/step.py)
     summary = "Apply the fiducial calibration: GP-predicted volumetric error, optional frame change."
     Params = VolumetricParams
 
