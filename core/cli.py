@@ -1013,13 +1013,7 @@ def cmd_steps(argv) -> int:
         if cls.summary:
             print(f"    {cls.summary}")
         for f in form_fields(cls.Params):
-            default = "required" if f.required else f"default {f.default!r}"
-            unit = f" [{f.unit}]" if f.unit else ""
-            bounds = f.bounds_text()
-            choices = f" one of {f.choices}" if f.choices else ""
-            print(f"    {f.key}{unit}: {f.widget}, {default}{', ' + bounds if bounds else ''}{choices}")
-            if f.help:
-                print(f"        {f.help}")
+            _print_field(f, "    ")
         print()
     unknown = [w for w in wanted if w not in reg]
     if unknown:
@@ -1027,6 +1021,27 @@ def cmd_steps(argv) -> int:
 
         raise RecipeError(f"unknown step(s) {', '.join(unknown)}; installed: {', '.join(reg.ids())}")
     return EXIT_OK
+
+
+def _print_field(f, indent: str, prefix: str = "") -> None:
+    """One parameter of `pointspro steps`: key [unit]: kind, default, bounds, choices; its help; a
+    mapping's own keys below it (misalignment's ``initial``: alpha_deg … — written nowhere before, a
+    review); a union as what it takes ("'auto' or a whole number", not "one of ['auto']")."""
+    default = "required" if f.required else f"default {f.default!r}"
+    unit = f" [{f.unit}]" if f.unit else ""
+    bounds = f.bounds_text()
+    if f.widget == "union":
+        number = "a whole number" if f.number == "int" else "a number"
+        kind = " or ".join([*(repr(c) for c in f.choices or []), number])
+        choices = ""
+    else:
+        kind = f.widget
+        choices = f" one of {f.choices}" if f.choices else ""
+    print(f"{indent}{prefix}{f.key}{unit}: {kind}, {default}{', ' + bounds if bounds else ''}{choices}")
+    if f.help:
+        print(f"{indent}    {f.help}")
+    for sub in getattr(f, "fields", None) or ():
+        _print_field(sub, indent + "    ", f"{prefix}{f.key}.")
 
 
 def _check_display(args) -> None:

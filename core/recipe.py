@@ -73,14 +73,20 @@ def _merged_unions(errors: list[dict]) -> list[dict]:
     return out
 
 
-def format_validation_error(e: ValidationError, prefix: str = "") -> str:
-    """One line naming each offending key: "key 'diameter': Input should be greater than 0 (got -5)"."""
+def format_validation_error(e: ValidationError, prefix: str = "", model=None, tag: str | None = None) -> str:
+    """One line naming each offending key: "key 'diameter': Input should be greater than 0 (got -5)".
+    ``model``: the parameters' class — an unknown key then names the keys its mapping takes, the
+    closest first ("key 'initial.alpha': unknown key; did you mean 'alpha_deg'? (initial takes
+    alpha_deg, beta_deg, dx, dy, dz)": a review found the nested keys written nowhere). ``tag``: a
+    tagged union's tag at the head of every location (a surface's type), left out of the key named."""
     parts = []
     for err in _merged_unions(e.errors()):
         names = [str(x) for x in err["loc"] if not str(x).startswith("function-")]
+        if tag is not None and names[:1] == [tag]:
+            names = names[1:]
         msg = err["msg"].removeprefix("Value error, ")  # a validator's own words, without pydantic's tag
         if err["type"] == "extra_forbidden":
-            msg = "unknown key"
+            msg = "unknown key" + _known_keys(model, names)
         elif err["type"] == "missing":
             msg = "required key is missing"
         elif err["type"] in ("union_tag_not_found", "union_tag_invalid"):  # a surface's `type`
@@ -103,6 +109,54 @@ def format_validation_error(e: ValidationError, prefix: str = "") -> str:
         loc = ".".join(names)
         parts.append(f"key '{loc}': {msg}{shown}" if loc else f"{msg}{shown}")
     return prefix + "; ".join(parts)
+
+
+def surface_model(kind):
+    """The pydantic class of a surface ``type`` (core/surfaces/spec.py), or None."""
+    import typing
+
+    from .surfaces.spec import SurfaceSpec
+
+    union = typing.get_args(SurfaceSpec)[0]
+    for cls in typing.get_args(union):
+        if kind in typing.get_args(cls.model_fields["type"].annotation):
+            return cls
+    return None
+
+
+def _known_keys(model, names: list[str]) -> str:
+    """"; did you mean 'window'? (knn_denoise takes method, window, …)" for an unknown key at
+    ``names`` under the pydantic ``model`` (its nested mappings followed down), or ''."""
+    import difflib
+    import typing
+
+    from pydantic import BaseModel
+
+    def sub_model(annotation):
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            return annotation
+        for arg in typing.get_args(annotation):
+            found = sub_model(arg)
+            if found is not None:
+                return found
+        return None
+
+    if model is None or not names:
+        return ""
+    for name in names[:-1]:
+        field = getattr(model, "model_fields", {}).get(name)
+        model = sub_model(field.annotation) if field is not None else None
+        if model is None:
+            return ""
+    keys = [k for k in model.model_fields if k not in ("schema_version", "type")]
+    if not keys:
+        return ""
+    close = difflib.get_close_matches(names[-1], keys, n=1, cutoff=0.6)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    owner = f"{'.'.join(names[:-1])} takes" if len(names) > 1 else (
+        f"{(typing.get_args(model.model_fields['type'].annotation) or ('this type',))[0]} takes"
+        if "type" in model.model_fields else "the step takes")
+    return f"{hint} ({owner} {', '.join(keys)})"
 
 
 #: a number followed by a word: a unit written into a value ("15 mm", "0.5um")
@@ -331,7 +385,8 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
             names = names[1:] if names[:1] == [surface.get("type")] else names  # the union's tag
             ln = key_line(surface, names)
             loc = f"{where}, line {ln}" if ln else at("surface")
-            raise RecipeError(format_validation_error(e, f"{loc}: surface: ")) from None
+            raise RecipeError(format_validation_error(e, f"{loc}: surface: ", surface_model(surface.get("type")),
+                                                      tag=surface.get("type"))) from None
 
     reader_options = _parse_input_block(data, at, where)
 
@@ -497,7 +552,7 @@ def _parse_step(entry, i: int, steps_at: str, where: str, registry: Registry) ->
         # name the line of the first offending key when we know it
         ln = key_line(entry[step_id] if isinstance(entry, dict) else None, error_keys(e.errors()[0]))
         loc2 = f"{where}, line {ln}" if ln else loc
-        raise RecipeError(format_validation_error(e, f"{loc2}: step {i} '{step_id}': ")) from None
+        raise RecipeError(format_validation_error(e, f"{loc2}: step {i} '{step_id}': ", cls.Params)) from None
     except (ValueError, TypeError) as e:
         raise RecipeError(f"{loc}: step {i} '{step_id}': {e}") from None
     return RecipeStep(step_id, params, cls, line, enabled)

@@ -329,8 +329,8 @@ def test_a_bad_surface_in_a_measurement_model_is_one_line(run_cli, tmp_path):
                                    "scan: {type: raster, radius: 20.0}\n")
     code, _, err = run_cli("simulate", m, "--out", tmp_path / "s.csv")
     assert code == 2 and "internal error" not in err
-    assert err.strip().splitlines() == [f"pointspro: {m}, line 2: surface: key 'even_asphere': "
-                                        "R must not be 0 (use c: 0 for a flat)"]
+    assert err.strip().splitlines() == [f"pointspro: {m}, line 2: surface: R must not be 0 "
+                                        "(use c: 0 for a flat)"]
 
 
 @pytest.mark.parametrize("edit, pattern", [

@@ -122,14 +122,16 @@ def load_model(path) -> ModelSpec:
         raise RecipeError(f"{path}{at}: key '{key}': {msg}") from None
     # the surface is checked now, as a recipe's is (a review: `R: 0` was an internal error of explain
     # and a pydantic dump from simulate)
-    from ..recipe import format_validation_error
+    from ..recipe import format_validation_error, surface_model
     from ..surfaces.spec import parse_surface_spec
 
     try:
         parse_surface_spec(model.surface)
     except ValidationError as e:
         line = data.key_lines.get("surface")
-        raise RecipeError(format_validation_error(e, f"{path}{f', line {line}' if line else ''}: surface: ")) from None
+        kind = model.surface.get("type") if isinstance(model.surface, dict) else None
+        raise RecipeError(format_validation_error(e, f"{path}{f', line {line}' if line else ''}: surface: ",
+                                                  surface_model(kind), tag=kind)) from None
     return model
 
 

@@ -1,0 +1,52 @@
+"""A newcomer's review (2026-11-28): what `pointspro steps` and the recipe's errors tell a user who
+has only the repository."""
+import pytest
+
+from pointspro.core.errors import RecipeError
+from pointspro.core.recipe import load_recipe
+
+GOOD_SURFACE = "surface: {type: even_asphere, R: 3000, k: -0.98, aperture: 1300}\n"
+
+
+def _recipe(tmp_path, steps: str, surface: str = GOOD_SURFACE):
+    p = tmp_path / "r.yaml"
+    p.write_text("pointspro: 1\n" + surface + "steps:\n" + steps, encoding="utf-8")
+    return p
+
+
+def test_steps_lists_a_mappings_own_keys_and_a_union_as_what_it_takes(run_cli):
+    code, out, _ = run_cli("steps", "misalignment", "transform", "knn_denoise")
+    assert code == 0
+    lines = out.splitlines()
+    # misalignment's `initial` and transform's `pose`: their keys were written nowhere
+    for key, unit in (("initial.alpha_deg", "deg"), ("initial.dz", "mm"), ("pose.beta_deg", "deg"),
+                      ("pose.dx", "mm")):
+        assert any(ln.strip().startswith(f"{key} [{unit}]: float") for ln in lines), key
+    # `remove` takes 'auto' or a count — "one of ['auto']" read as "only auto"
+    remove = next(ln for ln in lines if ln.strip().startswith("remove:"))
+    assert "'auto' or a whole number" in remove and "one of" not in remove
+
+
+def test_an_unknown_key_names_the_closest_and_the_keys_its_mapping_takes(tmp_path):
+    with pytest.raises(RecipeError) as e:
+        load_recipe(_recipe(tmp_path, "  - misalignment: {initial: {alpha: 0.1}}\n"))
+    assert str(e.value).endswith("step 1 'misalignment': key 'initial.alpha': unknown key; did you mean "
+                                 "'alpha_deg'? (initial takes alpha_deg, beta_deg, dx, dy, dz)")
+    with pytest.raises(RecipeError) as e:
+        load_recipe(_recipe(tmp_path, "  - knn_denoise: {windw: 3}\n"))
+    assert "key 'windw': unknown key; did you mean 'window'? (the step takes method, window," in str(e.value)
+    with pytest.raises(RecipeError) as e:  # nothing close: the keys alone
+        load_recipe(_recipe(tmp_path, "  - aperture: {zzzz: 3}\n"))
+    assert "key 'zzzz': unknown key (the step takes " in str(e.value) and "did you mean" not in str(e.value)
+
+
+def test_a_surface_error_names_the_key_as_written_not_the_type(tmp_path):
+    with pytest.raises(RecipeError) as e:
+        load_recipe(_recipe(tmp_path, "  - misalignment: {}\n",
+                            "surface: {type: even_asphere, R: 3000, kk: -0.98}\n"))
+    assert str(e.value).endswith("line 2: surface: key 'kk': unknown key; did you mean 'k'? "
+                                 "(even_asphere takes aperture, c, R, k, A)")
+    with pytest.raises(RecipeError) as e:  # "key 'even_asphere': give exactly one of c and R"
+        load_recipe(_recipe(tmp_path, "  - misalignment: {}\n",
+                            "surface: {type: even_asphere, c: 3.33e-4, R: 3000}\n"))
+    assert str(e.value).endswith("line 2: surface: give exactly one of c (1/mm) and R (mm)")
