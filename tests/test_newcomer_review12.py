@@ -50,3 +50,20 @@ def test_a_surface_error_names_the_key_as_written_not_the_type(tmp_path):
         load_recipe(_recipe(tmp_path, "  - misalignment: {}\n",
                             "surface: {type: even_asphere, c: 3.33e-4, R: 3000}\n"))
     assert str(e.value).endswith("line 2: surface: give exactly one of c (1/mm) and R (mm)")
+
+
+def test_the_map_takes_the_clear_aperture_the_recipe_applied(run_cli, tmp_path):
+    """The example's recipe cuts the part to 1290 mm; its map said 1300 mm (the surface's), while
+    `correction` took the recipe's — one clear aperture now."""
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[1] / "resources" / "example"
+    code, _, err = run_cli("--batch", example / "recipe.yaml", example / "asphere_cmm.csv", "--out",
+                           tmp_path / "o", "--figures", "none", "--quiet")
+    assert code == 0, err
+    import json
+
+    report = json.loads((tmp_path / "o" / "asphere_cmm" / "report.json").read_text(encoding="utf-8"))
+    by_id = {s["id"]: s for s in report["steps"]}
+    assert by_id["aperture"]["points_out"] < by_id["aperture"]["points_in"]  # it cut the rim
+    assert by_id["bspline_map"]["report"]["diameter"] == 1290.0

@@ -120,3 +120,19 @@ def _max_r2(x, y, c) -> float:
             dx += dy
             best = max(best, float(dx.max()))
     return best
+
+
+def applied_aperture_step(cloud) -> dict | None:
+    """The last circular or annular `aperture` step in the cloud's provenance that gave a diameter:
+    {"diameter", "inner_diameter", "centre"} (mm) — the clear aperture the recipe kept, which the
+    correction must cover (the surface's own aperture may be larger than the measured zone); None
+    when the last aperture step was a polygon or took the surface's diameter, or there is none."""
+    for entry in reversed(cloud.provenance):
+        if entry.get("id") == "aperture":
+            p = entry.get("params") or {}
+            if p.get("shape", "circle") in ("circle", "annulus") and p.get("diameter"):
+                inner = float(p.get("inner_diameter") or 0.0) if p.get("shape") == "annulus" else 0.0
+                return {"diameter": float(p["diameter"]), "inner_diameter": inner,
+                        "centre": (float(p.get("center_x") or 0.0), float(p.get("center_y") or 0.0))}
+            return None
+    return None

@@ -39,7 +39,8 @@ class BSplineMapParams(PupilCentreParams):
     smoothing: float = param(1e-3, ge=0, le=1e6, help="penalty on the coefficients' second "
                              "differences, relative to the data (dimensionless; 0 = none)")
     diameter: float | None = param(None, unit="mm", gt=0,
-                                   help="clear-aperture diameter of the map; empty: the surface's "
+                                   help="clear-aperture diameter of the map; empty: the outer diameter of "
+                                        "the last circular `aperture` step applied, else the surface's "
                                         "aperture, else the measured region only")
     extrapolate: bool = param(False, help="also fill nodes of the aperture outside the measured "
                               "region (continued smoothly by the penalty)")
@@ -91,12 +92,23 @@ class BSplineMapStep(Step):
                             "first, or map z)")
         v = cloud.z if channel == "z" else cloud[channel]
         x, y = cloud.x, cloud.y
+        # the clear aperture: given, else the last circular `aperture` step the recipe applied (as
+        # `correction` takes it: the example's map said 1300 mm over a part its recipe cut to 1290 —
+        # a newcomer's review), else the surface's
+        from pointspro.core.metrics.pupil import applied_aperture_step
+
+        ap = applied_aperture_step(cloud)
         diameter = params.diameter
+        given = params.given_centre
+        if diameter is None and ap is not None:
+            diameter = ap["diameter"]
+            if given is None and ap["centre"] != (0.0, 0.0):
+                given = ap["centre"]
         if diameter is None and ctx.surface is not None:
             diameter = getattr(ctx.surface, "aperture", None)
         # the aperture's and the profiles' centre: given, else the surface's axis, else the measured
         # region's bounding-box centre (never a file's corner origin)
-        center = pupil_of(x, y, ctx.surface, params.given_centre).center
+        center = pupil_of(x, y, ctx.surface, given).center
         # the spline covers the points' own box (fit_bspline's default): the aperture's box only
         # when the map is to be extrapolated over the whole aperture, where the penalty's
         # continuation fills it. Over the aperture's box, a 100 mm patch of a 1300 mm part had its

@@ -302,6 +302,8 @@ class CorrectionStep(Step):
                 outputs.append("freeform")
             outputs.append("polishing")
         # the clear aperture
+        from pointspro.core.metrics.pupil import applied_aperture_step
+
         ap = applied_aperture_step(cloud)
         diameter = params.diameter
         if diameter is None and ap is not None:  # the clear aperture the recipe applied, else the surface's
@@ -702,25 +704,3 @@ def _surface_yaml(surface, info, comments, about=None) -> str:
             comments[0], comments[1], *([about] if about else [])]
     body = dump_yaml({"surface": spec_of(surface)}, sort_keys=False, default_flow_style=None)
     return "".join(f"# {h}\n" for h in head) + body
-
-
-def applied_aperture_step(cloud) -> dict | None:
-    """The last circular or annular `aperture` step in the cloud's provenance that gave a diameter:
-    {"diameter", "inner_diameter", "centre"} (mm) — the clear aperture the recipe kept, which the
-    correction must cover (the surface's own aperture may be larger than the measured zone); None
-    when the last aperture step was a polygon or took the surface's diameter, or there is none."""
-    for entry in reversed(cloud.provenance):
-        if entry.get("id") == "aperture":
-            p = entry.get("params") or {}
-            if p.get("shape", "circle") in ("circle", "annulus") and p.get("diameter"):
-                inner = float(p.get("inner_diameter") or 0.0) if p.get("shape") == "annulus" else 0.0
-                return {"diameter": float(p["diameter"]), "inner_diameter": inner,
-                        "centre": (float(p.get("center_x") or 0.0), float(p.get("center_y") or 0.0))}
-            return None
-    return None
-
-
-def applied_aperture(cloud) -> float | None:
-    """The outer diameter (mm) of the last circular or annular `aperture` step (applied_aperture_step)."""
-    ap = applied_aperture_step(cloud)
-    return None if ap is None else ap["diameter"]
