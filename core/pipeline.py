@@ -208,6 +208,12 @@ def check_sanity(cloud_in: PointCloud, cloud_out: PointCloud) -> None:
     rms = float(np.sqrt(np.mean((r - centre) ** 2)))
     span = float(np.ptp(cloud_in.z))
     if rms > max(span, 1e-6):
+        if made_by is None:  # no step made it: the input carried it (a cloud.csv, the Python API)
+            raise StepError(f"sanity check: the residual's RMS ({format_length(rms)}) exceeds the input's "
+                            f"whole height range ({format_length(span)}), and no step of this run made "
+                            "that residual: the input carries it — are its heights z the points' "
+                            "heights? (the residual is z − sag; a map of form error alone belongs in z, "
+                            "with no residual column)")
         raise StepError(f"sanity check: the residual's RMS ({format_length(rms)}) exceeds the input's "
                         f"whole height range ({format_length(span)}) — a fit diverged; check the "
                         "surface, the pose's DOF and the Zernike pupil in report.json")

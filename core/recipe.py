@@ -412,6 +412,7 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
     steps = []
     for i, entry in enumerate(raw_steps, start=1):
         steps.append(_parse_step(entry, i, at("steps"), where, registry))
+    _check_design_dof(steps, surface, where)
 
     # the shop's blocks (docs/uncertainty.md): validated here, before any file is read
     uncertainty = tolerance = None
@@ -430,6 +431,27 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
         # a tolerance on a quantity these steps and this surface do not compute: one line, now
         tolerance.check_computable(steps, surface, at("tolerance"))
     return Recipe(steps, surface, resolved_inputs, base, reader_options, uncertainty, tolerance)
+
+
+def _check_design_dof(steps, surface, where: str) -> None:
+    """A pose fit asked to fit the nominal's own parameters (``dof`` with radius, conic or A_n:
+    misalignment, probe_radius) on a nominal other than an even asphere is refused with the recipe:
+    it failed each input at run time (core/geometry/posed_fit.py) while --check-only called the
+    recipe ready (a review)."""
+    if not isinstance(surface, dict) or surface.get("type") in (None, "even_asphere"):
+        return
+    from .geometry.posed_fit import POSE_DOF
+
+    for k, s in enumerate(steps, start=1):
+        dof = getattr(s.params, "dof", None)
+        if not s.enabled or s.id not in ("misalignment", "probe_radius") or not dof:
+            continue
+        design = [n for n in dof if n not in POSE_DOF]
+        if design:
+            loc = f"{where}, line {s.line}" if s.line else where
+            raise RecipeError(f"{loc}: step {k} '{s.id}': key 'dof': fitting {', '.join(design)} needs an "
+                              f"even_asphere nominal (this recipe's surface is {surface.get('type')}); "
+                              "fit the pose alone (alpha, beta, dx, dy, dz)")
 
 
 def check_step_order(steps, where: str = "recipe") -> None:

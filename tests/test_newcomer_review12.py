@@ -67,3 +67,29 @@ def test_the_map_takes_the_clear_aperture_the_recipe_applied(run_cli, tmp_path):
     by_id = {s["id"]: s for s in report["steps"]}
     assert by_id["aperture"]["points_out"] < by_id["aperture"]["points_in"]  # it cut the rim
     assert by_id["bspline_map"]["report"]["diameter"] == 1290.0
+
+
+def test_a_residual_the_input_carried_is_not_blamed_on_a_fit():
+    """The Python API with a residual and flat z: "a fit diverged" named a fit that never ran."""
+    import numpy as np
+
+    import pointspro.core as pp
+    from pointspro.core.errors import PointsProError
+
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-10, 10, (2, 2000))
+    cloud = pp.PointCloud.from_numpy(np.c_[x, y, np.zeros_like(x)], residual=5e-4 * (x / 10) ** 2)
+    with pytest.raises(PointsProError, match="no step of this run made that residual: the input carries it"):
+        pp.step("zernike", terms=4)(cloud)
+
+
+def test_fitting_the_nominals_radius_on_a_q_con_is_refused_with_the_recipe(tmp_path):
+    """It passed --check-only and failed each input at run time."""
+    qcon = "surface: {type: qcon, R: 3000, k: -0.98, norm_radius: 650, a: [1.0e-4], aperture: 1300}\n"
+    with pytest.raises(RecipeError) as e:
+        load_recipe(_recipe(tmp_path, "  - misalignment: {dof: [alpha, beta, dx, dy, dz, radius]}\n", qcon))
+    assert str(e.value).endswith("line 4: step 1 'misalignment': key 'dof': fitting radius needs an "
+                                 "even_asphere nominal (this recipe's surface is qcon); fit the pose "
+                                 "alone (alpha, beta, dx, dy, dz)")
+    load_recipe(_recipe(tmp_path, "  - misalignment: {dof: [alpha, beta, dx, dy, dz]}\n", qcon))  # the pose: fine
+    load_recipe(_recipe(tmp_path, "  - misalignment: {dof: [alpha, beta, dx, dy, dz, radius]}\n"))  # even asphere

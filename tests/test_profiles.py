@@ -15,7 +15,7 @@ from pointspro.plugins.misalignment import MisalignmentStep
 from pointspro.plugins.probe_radius import ProbeRadiusStep
 
 ASPHERE = EvenAsphere(1 / 50.0, -0.8, {4: 2e-7, 6: -1e-10}, 40)  # R 50 mm across 40 mm
-CONCAVE = EvenAsphere(-1 / 80.0, -1.2, {4: -1e-7}, 50)
+CONVEX = EvenAsphere(-1 / 80.0, -1.2, {4: -1e-7}, 50)  # c < 0: convex seen from +z (docs/surfaces.md)
 STEEP = EvenAsphere(1 / 10.0, 0.0, {}, 12.8)  # a sphere R 10 mm to 39.8° slope at r = 6.4 mm
 
 
@@ -140,7 +140,7 @@ def test_profile_angle_option_is_validated(tmp_path):
 # --- probe_radius: the 2-D offset curve -----------------------------------------------------------
 
 @pytest.mark.parametrize("surface,half,rho,side", [
-    (ASPHERE, 20.0, 0.002, 1), (ASPHERE, 20.0, 2.0, 1), (CONCAVE, 25.0, 2.0, 1),
+    (ASPHERE, 20.0, 0.002, 1), (ASPHERE, 20.0, 2.0, 1), (CONVEX, 25.0, 2.0, 1),
     (STEEP, 6.4, 0.002, 1), (STEEP, 6.4, 2.0, 1), (STEEP, 6.4, 2.0, -1),
 ])
 def test_probe_radius_on_a_profile_is_exact(surface, half, rho, side):
@@ -198,7 +198,7 @@ def recovered(surface, q, angle=0.0, **mis):
     return run(MisalignmentStep, pr.cloud.xyz, surface, channels=dict(pr.cloud.channels), **mis)
 
 
-@pytest.mark.parametrize("surface,half", [(ASPHERE, 20.0), (CONCAVE, 20.0),
+@pytest.mark.parametrize("surface,half", [(ASPHERE, 20.0), (CONVEX, 20.0),
                                           (EvenAsphere(1 / 50.0, -2.0, {4: 5e-7}, 40), 20.0)])
 def test_goal_form_error_recovered_at_each_contact_point(surface, half):
     """Issue 19's goal: R 50 mm across 40 mm, 2 µm tip, tilted and decentred, 50 nm form error, 5 nm
