@@ -93,3 +93,22 @@ def test_fitting_the_nominals_radius_on_a_q_con_is_refused_with_the_recipe(tmp_p
                                  "alone (alpha, beta, dx, dy, dz)")
     load_recipe(_recipe(tmp_path, "  - misalignment: {dof: [alpha, beta, dx, dy, dz]}\n", qcon))  # the pose: fine
     load_recipe(_recipe(tmp_path, "  - misalignment: {dof: [alpha, beta, dx, dy, dz, radius]}\n"))  # even asphere
+
+
+def test_hampel_reports_no_separation_it_cannot_measure():
+    """hampel scores no point: its "separation" was 0/1e-300 = 0.0 (docs/report.md)."""
+    import numpy as np
+
+    import pointspro.core as pp
+
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(-50, 50, (2, 20000))
+    r = rng.normal(0, 2e-5, x.size)
+    r[:10] += 2e-3  # ten spikes of 2 µm on 20 nm of noise
+    cloud = pp.PointCloud.from_numpy(np.c_[x, y, r], residual=r)
+    res = pp.step("knn_denoise", method="hampel", window=3.0)(cloud)
+    rep = res.report["steps"][-1]["report"]
+    assert rep["removed"] >= 10 and "separation" not in rep
+    res = pp.step("knn_denoise", window=3.0)(cloud)  # robust scores its points: separation above 1
+    rep = res.report["steps"][-1]["report"]
+    assert rep["separation"] > 1

@@ -408,8 +408,9 @@ def _denoised(cloud, removal: Removal, method: str, channel: str) -> StepResult:
         threshold_um=None if threshold is None else float(threshold) * 1e3,
         omega_max_kept_um=float(om_kept.max() * 1e3) if om_kept.size else None,
         rounds=removal.rounds)
-    if removed_pos.size and om_kept.size:
-        # how far the removed points stand out: smallest removed ω over the largest kept one
+    if removed_pos.size and om_kept.size and np.max(np.abs(omega_removed)) > 0:
+        # how far the removed points stand out: smallest removed ω over the largest kept one (none
+        # for hampel, which scores no point: its 0/0 read "separation 0.0")
         report["separation"] = float(omega_removed.min() / max(om_kept.max(), 1e-300))
     out = cloud.select(removal.keep).replace(channels={"omega": om_kept})
     arts = {"omega_map.png": _omega_map(cloud.x, cloud.y, removal.keep, om_kept, removed_pos, omega_removed,

@@ -1,4 +1,4 @@
-"""The noise measure ω of paper 002 §5 (eq 18, as reconstructed in shared/papers/README.md).
+"""The noise measure ω of paper 002 §5 (eq 18, as reconstructed in docs/references.md, paper 002).
 
     1. interpolate the residual D(x, y) onto a regular grid of spacing h (the paper: cubic, 1 mm);
     2. for a measured point P the neighbours are all grid nodes in the 2a × 2a square centred on P;

@@ -54,7 +54,7 @@ class MisalignmentParams(Params):
 
 class MisalignmentStep(Step):
     id = "misalignment"
-    title = "Misalignment (pose fit)"  # which degrees of freedom: the report's `dof`
+    title = "Misalignment (pose fit)"  # which degrees of freedom: the report's `parameters`
     makes_residual = True
     summary = "Fit and remove tilt and decenter; residual = z − sag in the part frame."
     Params = MisalignmentParams
