@@ -582,13 +582,15 @@ def load_batch_recipe(path, overrides=()) -> Recipe:
     itself is (core.recipe.parse_recipe): a bad value is the same RecipeError, naming the key, with
     the overrides said. An override naming no step, an ambiguous step id or an unknown key is a
     RecipeError naming the override."""
-    from .recipe import check_step_order, load_recipe, parse_recipe
+    from .recipe import check_recipe_whole, load_recipe, parse_recipe
     from .yamlio import load_yaml
 
     if not overrides:
         return load_recipe(path)
     path = Path(path)
-    load_recipe(path)  # the file as written first: its own errors name its lines, as without --set
+    # the file as written first: its own errors name its lines, as without --set; the checks across
+    # steps after the overrides, which may mend them (`--set 3.enabled=true` for a step the order needs)
+    load_recipe(path, whole=False)
     data = load_yaml(path.read_text(encoding="utf-8"), str(path))
     seen = {}
     for text in overrides:
@@ -599,7 +601,7 @@ def load_batch_recipe(path, overrides=()) -> Recipe:
         seen.setdefault(target, text)
     try:
         recipe = parse_recipe(data, str(path), base=path)
-        check_step_order(recipe.steps, str(path))
+        check_recipe_whole(recipe, str(path))
         return recipe
     except RecipeError as e:
         shown = " ".join(f"--set {o}" for o in overrides)

@@ -338,7 +338,10 @@ def _plain(o):
     return o
 
 
-def load_recipe(path, registry: Registry | None = None) -> Recipe:
+def load_recipe(path, registry: Registry | None = None, whole: bool = True) -> Recipe:
+    """The recipe file, validated; ``whole``: also the checks across its steps and its surface
+    (check_recipe_whole) — left to the caller that applies ``--set`` overrides first, so that an
+    override can mend what the file as written breaks (a review)."""
     from .pathnames import why_not_a_file
 
     path = Path(path)
@@ -349,8 +352,16 @@ def load_recipe(path, registry: Registry | None = None) -> Recipe:
     recipe = parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
     # a recipe file is what a batch runs: its order is checked as it is read (a session's project
     # may hold a recipe mid-edit; run_pipeline checks before running any)
-    check_step_order(recipe.steps, str(path))
+    if whole:
+        check_recipe_whole(recipe, str(path))
     return recipe
+
+
+def check_recipe_whole(recipe: Recipe, where: str) -> None:
+    """The checks across a recipe's steps and its nominal: the steps' order (check_step_order) and a
+    pose fit's design DOF against the surface type (_check_design_dof)."""
+    check_step_order(recipe.steps, where)
+    _check_design_dof(recipe.steps, recipe.surface_spec, where)
 
 
 def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
@@ -412,7 +423,6 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
     steps = []
     for i, entry in enumerate(raw_steps, start=1):
         steps.append(_parse_step(entry, i, at("steps"), where, registry))
-    _check_design_dof(steps, surface, where)
 
     # the shop's blocks (docs/uncertainty.md): validated here, before any file is read
     uncertainty = tolerance = None
@@ -483,16 +493,15 @@ def check_step_order(steps, where: str = "recipe") -> None:
 
 def _check_mover(live, pos: int, where: str) -> None:
     """A step that moves the points (Step.moves_points) after the step that made the residual: the
-    next step that makes or uses the residual must make it again — else the form error used or
-    written is the points' before the move (a review: probe_radius after misalignment, summary RMS
-    27.8 µm for a true 0.99 µm; refused at run time by core.pipeline, which failed every input of a
-    night batch that --check-only had called ready)."""
+    step right after it must make the residual again — else the form error used, carried or written
+    is the points' before the move (a review: probe_radius after misalignment, summary RMS 27.8 µm
+    for a true 0.99 µm). The same rule as core.pipeline's at run time, which failed every input of a
+    night batch that --check-only had called ready."""
     k, s = live[pos]
     made = [(j, t) for j, t in live[:pos] if getattr(t.step_cls, "makes_residual", False)]
     if not made:
         return
-    nxt = next(((j, t) for j, t in live[pos + 1:] if getattr(t.step_cls, "makes_residual", False)
-                or getattr(t.step_cls, "reads_residual", False)), None)
+    nxt = live[pos + 1] if pos + 1 < len(live) else None
     if nxt is not None and getattr(nxt[1].step_cls, "makes_residual", False):
         return
     j, t = made[-1]

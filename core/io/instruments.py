@@ -37,6 +37,7 @@ more (not for formats that store plain numbers without a scale, nor for x y z te
 """
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -462,7 +463,7 @@ class quiet:
     sys.stdout a StringIO for good when two threads' blocks overlapped out of order (a review);
     hence the one lock and count, on the class, for the one process-wide resource."""
 
-    _lock = None  # threading.Lock, made on first use (the module imports no threading eagerly)
+    _lock = threading.Lock()
     _depth = 0
     _shared = None  # the ExitStack holding the redirections while any block is open
 
@@ -470,11 +471,8 @@ class quiet:
         import contextlib
         import io
         import logging
-        import threading
         import warnings
 
-        if quiet._lock is None:
-            quiet._lock = threading.Lock()
         with quiet._lock:
             if quiet._depth == 0:
                 shared = contextlib.ExitStack()

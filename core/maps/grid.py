@@ -387,10 +387,11 @@ def node_axis(lo: float, hi: float, spacing: float) -> np.ndarray:
 
 
 def grid_map(spline: TensorBSpline, spacing: float, px, py, *, diameter: float | None = None,
-             center=(0.0, 0.0), extrapolate: bool = False) -> MapGrid:
-    """Sample the spline at nodes (multiples of ``spacing``) inside the aperture circle (when given)
-    and, unless ``extrapolate``, inside the measured region of points (px, py): coverage_mask's cells
-    of half a knot, and inside the points' hull around each node (inside_the_points; module doc)."""
+             center=(0.0, 0.0), extrapolate: bool = False, inner_diameter: float = 0.0) -> MapGrid:
+    """Sample the spline at nodes (multiples of ``spacing``) inside the aperture circle (when given;
+    outside its hole of ``inner_diameter``, an annular clear aperture) and, unless ``extrapolate``,
+    inside the measured region of points (px, py): coverage_mask's cells of half a knot, and inside
+    the points' hull around each node (inside_the_points; module doc)."""
     px = np.asarray(px, dtype=np.float64)
     py = np.asarray(py, dtype=np.float64)
     if diameter is not None:
@@ -416,7 +417,10 @@ def grid_map(spline: TensorBSpline, spacing: float, px, py, *, diameter: float |
     z = spline.grid(xs, ys)
     keep = np.ones(z.shape, dtype=bool)
     if diameter is not None:
-        keep &= ((xs[None, :] - center[0]) ** 2 + (ys[:, None] - center[1]) ** 2) <= (diameter / 2) ** 2
+        rr = (xs[None, :] - center[0]) ** 2 + (ys[:, None] - center[1]) ** 2
+        keep &= rr <= (diameter / 2) ** 2
+        if inner_diameter > 0:  # the annulus's hole: no map there (a review: 393 nodes of a 400 mm hole)
+            keep &= rr >= (inner_diameter / 2) ** 2
     if not extrapolate:
         keep &= coverage_mask(px, py, xs, ys, spline.h / 2.0)
         bx0, bx1, by0, by1 = spline.bounds

@@ -122,12 +122,22 @@ def _max_r2(x, y, c) -> float:
     return best
 
 
+#: steps that carry the points into another frame (the part frame, a calibrated one, any pose):
+#: an `aperture` step before one of them cut about a centre in the frame before
+FRAME_CHANGING_STEPS = ("misalignment", "register", "transform", "volumetric")
+
+
 def applied_aperture_step(cloud) -> dict | None:
     """The last circular or annular `aperture` step in the cloud's provenance that gave a diameter:
     {"diameter", "inner_diameter", "centre"} (mm) — the clear aperture the recipe kept, which the
     correction must cover (the surface's own aperture may be larger than the measured zone); None
-    when the last aperture step was a polygon or took the surface's diameter, or there is none."""
+    when the last aperture step was a polygon or took the surface's diameter, or there is none, or a
+    step that changes the frame ran after it (FRAME_CHANGING_STEPS: its centre is in the frame
+    before — a review: an aperture about x = 30 mm in the measuring frame, then misalignment, cut the
+    map 30 mm off the part)."""
     for entry in reversed(cloud.provenance):
+        if entry.get("id") in FRAME_CHANGING_STEPS:
+            return None
         if entry.get("id") == "aperture":
             p = entry.get("params") or {}
             if p.get("shape", "circle") in ("circle", "annulus") and p.get("diameter"):

@@ -67,6 +67,6 @@ def dof_for_surface(surface, dof: list[str], explicit: bool) -> tuple[list[str],
 #: the pose fit's outlier exclusion (core/geometry/outliers.py), shared by misalignment and probe_radius
 EXCLUDE_HELP = ("robust σ (1.4826·MAD of the residual) beyond which a point is left out of the pose fit — "
                 "it stays in the cloud with its residual at the pose the other points give (the example's "
-                "five outliers moved its fitted dy by 92 µm, tilt and decentre trading along the fit's "
-                "valley); empty: every point, plain least squares "
+                "five outliers left its fitted dy 92 µm off the truth, tilt and decentre trading along the "
+                "fit's valley); empty: every point, plain least squares "
                 "(paper 002)")

@@ -100,9 +100,10 @@ class BSplineMapStep(Step):
         ap = applied_aperture_step(cloud)
         diameter = params.diameter
         given = params.given_centre
+        inner = 0.0
         if diameter is None and ap is not None:
-            diameter = ap["diameter"]
-            if given is None and ap["centre"] != (0.0, 0.0):
+            diameter, inner = ap["diameter"], ap["inner_diameter"]
+            if given is None:  # where the aperture step cut (its default (0, 0) is the nominal's axis)
                 given = ap["centre"]
         if diameter is None and ctx.surface is not None:
             diameter = getattr(ctx.surface, "aperture", None)
@@ -138,7 +139,7 @@ class BSplineMapStep(Step):
         spacing = params.spacing if params.spacing is not None else nice_spacing(spline.h / 2)
         try:
             grid = grid_map(spline, spacing, x, y, diameter=diameter, center=center,
-                            extrapolate=params.extrapolate)
+                            extrapolate=params.extrapolate, inner_diameter=inner)
         except ValueError as e:
             raise StepError(str(e)) from None
         ctx.progress.update(0.9, "map")
@@ -156,6 +157,7 @@ class BSplineMapStep(Step):
             "channel": channel, "knot_spacing": spline.h, "intervals": list(spline.intervals),
             "smoothing": params.smoothing, "spacing": spacing, "grid": [len(grid.xs), len(grid.ys)],
             "nodes": int(zv.size), "diameter": diameter, "centre_mm": [float(center[0]), float(center[1])],
+            **({"inner_diameter": inner} if inner else {}),
             "fit_residual_rms_um": float(np.sqrt(fit_res @ fit_res / len(fit_res)) * 1e3),
             "map_rms_um": float(np.std(zv) * 1e3), "map_pv_um": float(np.ptp(zv) * 1e3),
             "empty_cell_fraction": cells, "warnings": warnings,

@@ -1,0 +1,71 @@
+"""A review of the twelfth session's changes: the order check at load matches the run's, `--set`
+can mend what the file breaks, and the map's clear aperture from an `aperture` step is taken only in
+the frame that step cut in."""
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "resources" / "example"
+SURFACE = ("surface: {type: even_asphere, c: 3.3333333333333335e-4, k: -0.98, A: {4: 7.0e-13, 6: 1.0e-19}, "
+           "aperture: 1300}\n")
+
+
+def _recipe(tmp_path, *steps, name="r.yaml", surface=SURFACE):
+    p = tmp_path / name
+    p.write_text("pointspro: 1\n" + surface + "steps:\n" + "".join(f"  - {s}\n" for s in steps), encoding="utf-8")
+    return p
+
+
+def _bspline(out: Path) -> dict:
+    report = json.loads((out / "asphere_cmm" / "report.json").read_text(encoding="utf-8"))
+    return next(s for s in report["steps"] if s["id"] == "bspline_map")["report"]
+
+
+def test_a_step_between_the_mover_and_the_new_residual_is_refused_with_the_recipe(run_cli, tmp_path):
+    """The run refuses unless the step right after the move makes the residual again; the check at
+    load asked only for the next step that makes or reads it, so --check-only said ready."""
+    r = _recipe(tmp_path, "misalignment: {}", "probe_radius: {radius: 4.0, side: 1}",
+                "aperture: {diameter: 1290}", "misalignment: {}")
+    code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--check-only")
+    assert code == 2 and "step 2 'probe_radius' moves the points" in err and "step 3 'aperture' would use it" in err
+
+
+def test_set_may_mend_what_the_file_as_written_breaks(run_cli, tmp_path):
+    r = tmp_path / "r.yaml"
+    r.write_text("pointspro: 1\n" + SURFACE + "steps:\n  - misalignment: {}\n  - probe_radius: {radius: 4.0, side: 1}\n"
+                 "  - misalignment: {}\n    enabled: false\n  - zernike: {terms: 4}\n", encoding="utf-8")
+    code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--check-only")
+    assert code == 2 and "moves the points" in err
+    code, out, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--check-only",
+                             "--set", "3.enabled=true")
+    assert code == 0, err
+
+
+def test_an_aperture_cut_before_the_pose_fit_does_not_set_the_maps_aperture(run_cli, tmp_path):
+    """Its centre is in the measuring frame; the map is in the part frame: the surface's aperture about
+    the axis, as before (a 30 mm off-axis aperture cut the map 30 mm off the part)."""
+    r = _recipe(tmp_path, "probe_radius: {radius: 4.0, side: 1}", "aperture: {diameter: 1200, center_x: 30}",
+                "misalignment: {}", "bspline_map: {spacing: 20.0}")
+    code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--figures", "none",
+                           "--quiet")
+    assert code == 0, err
+    rep = _bspline(tmp_path / "o")
+    assert rep["diameter"] == 1300.0 and rep["centre_mm"] == [0.0, 0.0]
+
+
+def test_an_annular_aperture_leaves_no_map_in_its_hole(run_cli, tmp_path):
+    r = _recipe(tmp_path, "manual_edit: {remove: [520, 3640]}", "probe_radius: {radius: 4.0, side: 1}",
+                "misalignment: {}", "knn_denoise: {window: 15.0, remove: auto}",
+                "aperture: {shape: annulus, diameter: 1290, inner_diameter: 400}", "bspline_map: {spacing: 10.0}")
+    code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--figures", "none",
+                           "--quiet")
+    assert code == 0, err
+    rep = _bspline(tmp_path / "o")
+    assert rep["diameter"] == 1290.0 and rep["inner_diameter"] == 400.0
+    with open(tmp_path / "o" / "asphere_cmm" / "map.csv", encoding="utf-8") as f:
+        rows = [r for r in csv.reader(ln for ln in f if not ln.startswith("#"))]
+    xy = np.array([[float(v) for v in row[:2]] for row in rows[1:]])
+    r_nodes = np.hypot(xy[:, 0], xy[:, 1])
+    assert len(r_nodes) == rep["nodes"] and r_nodes.min() >= 200.0 - 1e-9 and r_nodes.max() <= 645.0 + 1e-9
