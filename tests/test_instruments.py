@@ -81,8 +81,10 @@ def write_datx(path, z_nm, px_m, py_m, no_data=np.nan):
 
 
 def test_zygo_datx_written_with_h5py(tmp_path):
-    z = heights_um() * 1e3  # nm, rows along y
-    z[BAD] = 1.7e308
+    """Zygo stores rows in the picture's order, the first at the top (docs/formats.md): written
+    turned upside down, the map reads back with row r at y = r·Δy."""
+    z = heights_um()[::-1] * 1e3  # nm, the first stored row the top of the picture
+    z[NY - 1 - BAD[0], BAD[1]] = 1.7e308
     write_datx(tmp_path / "m.datx", z, DX * 1e-3, DY * 1e-3, no_data=1.7e308)
     c = read_cloud(tmp_path / "m.datx")
     _check(c, heights_um(), 1e-9)
@@ -121,7 +123,9 @@ def test_metropro_dat_written_from_the_specification(tmp_path):
     r, col = c["row"], c["col"]
     assert c.n == NX * NY - 1
     assert np.allclose(c.x, col * DX, atol=1e-12) and np.allclose(c.y, r * DX, atol=1e-12)
-    assert np.allclose(c.z, quant[r, col] * 1e3, atol=1e-12)
+    # the first stored row is the top of MetroPro's picture: at y max, `row` counting from the bottom
+    assert np.allclose(c.z, quant[NY - 1 - r, col] * 1e3, atol=1e-12)
+    assert np.allclose(c.z[c.y == c.y.max()], quant[0][np.isfinite(z[0])] * 1e3, atol=1e-12)
 
 
 def test_text_dat_still_reads_as_text(tmp_path):

@@ -145,6 +145,31 @@ def test_the_first_stored_line_lies_at_y_zero(tmp_path, name, lines, x_reversed)
     assert mirrored < 0.995, (as_stored, mirrored)
 
 
+def test_a_zygo_maps_first_stored_row_is_the_top_of_its_picture():
+    """MetroPro: "(0,0) is in the upper left corner of the video monitor" (MetroPro Reference Guide);
+    prysm turns .dat and .datx so that y increases upward. The first stored row lies at y max."""
+    b = (DATA / "metropro-1.dat").read_bytes()
+    header = struct.unpack_from(">I", b, 6)[0]
+    ac_w, ac_h, ac_n = struct.unpack_from(">3H", b, 52)
+    w, h = struct.unpack_from(">2H", b, 68)
+    raw = np.frombuffer(b, ">i4", count=w * h, offset=header + 2 * ac_n * ac_w * ac_h).reshape(h, w)
+    raw = np.where(raw >= 2147483640, np.nan, raw.astype(float))
+    z = _gridded(DATA / "metropro-1.dat")
+    # a map that is mostly tilt correlates 0.995 either way up: the form (a plane removed) decides
+    yy, xx = np.mgrid[0:h, 0:w]
+
+    def less_plane(a):
+        m = np.isfinite(a)
+        design = np.column_stack([np.ones(m.sum()), xx[m], yy[m]])
+        out = np.full(a.shape, np.nan)
+        out[m] = a[m] - design @ np.linalg.lstsq(design, a[m], rcond=None)[0]
+        return out
+
+    top_first = abs(_corr(less_plane(raw[::-1]), less_plane(z)))
+    as_stored = abs(_corr(less_plane(raw), less_plane(z)))
+    assert top_first > 0.999999 and as_stored < 0.99, (top_first, as_stored)
+
+
 def test_a_park_file_with_swapped_axes_is_refused_by_name(tmp_path):
     """swap_xy ≠ 0 (the fast axis along y): SurfaceTopography 1.27 reads its lines as x lines and
     Gwyddion turns them by 90°; not read rather than read turned."""

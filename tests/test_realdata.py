@@ -26,9 +26,10 @@ MAPS = [
     ("gwyddion-export-english.txt", (3, 4), "m"),
     ("sdf-1.sdf", (7, 4), "µm"),
 ]
-#: maps whose first stored line is the bottom of the picture (y = 0), which SurfaceTopography 1.27
-#: reverses to look like Gwyddion's y-down rows: our rows are its rows reversed (docs/formats.md)
-LINES_REVERSED_BY_ST = {"opd-1.opd", "mi-1.mi"}
+#: maps whose rows PointsPro reverses from SurfaceTopography's (Gwyddion's y-down order): y up the
+#: instrument's picture — OPD and MI store the bottom line first (SurfaceTopography reverses them),
+#: MetroPro the top one (docs/formats.md, Pixel convention)
+LINES_REVERSED_BY_ST = {"opd-1.opd", "mi-1.mi", "metropro-1.dat"}
 
 
 def st_read(name):

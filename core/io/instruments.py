@@ -759,7 +759,8 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
                          f"= {info.get('swap_xy')}): SurfaceTopography 1.27 reads its lines as x "
                          "lines, Gwyddion turns them by 90°, and which is right is not established — "
                          "not read rather than read turned; export the map as X3P or a text matrix")
-    if fmt in _FIRST_LINE_AT_Y0:  # SurfaceTopography reverses their lines; undone (docs/formats.md)
+    if fmt in _FIRST_LINE_AT_Y0 or fmt in _FIRST_LINE_AT_TOP:  # y up the instrument's picture:
+        # SurfaceTopography's rows are Gwyddion's (row 0 at the top), reversed (docs/formats.md)
         # Igor .ibw: an Igor wave states its own coordinates, x = sfB₀ + i·sfA₀, y = sfB₁ + j·sfA₁ (dimension 0 the
         # rows, 1 the columns); SurfaceTopography 1.27 gives dimension 1 reversed, which put the wave's
         # y = 0 line at the top of our y-up frame: a mirror (y-odd Zernike terms, a correction's side,
@@ -807,9 +808,19 @@ def _topography_to_cloud(path: Path, reader, opts, head: bytes):
 
 #: SurfaceTopography formats whose first stored line lies at y = 0 (the bottom of the instrument's
 #: picture, y up) and which SurfaceTopography 1.27 reverses to look like Gwyddion's y-down image rows;
-#: the reader undoes that (_topography_to_cloud). The others keep SurfaceTopography's row order:
-#: row j at y = j·Δy (docs/formats.md, Pixel convention).
+#: the reader undoes that (_topography_to_cloud).
 _FIRST_LINE_AT_Y0 = ("ibw", "ezd", "di", "ps", "wsxm", "frt", "mi", "opd", "mdt")
+#: formats whose first stored line is the TOP of the instrument's picture, established: Zygo's
+#: (MetroPro .dat, here through SurfaceTopography only for files the own reader passes over, and
+#: .datx) — "(0,0) is in the upper left corner of the video monitor" (MetroPro Reference Guide, as
+#: quoted by SOLEIL's Superflat reader), and prysm (prysm/io.py) turns both so that y increases
+#: upward; Gwyddion reads them in that order for its y-down rows. JPK, whichever way its lines are
+#: stored: SurfaceTopography and Gwyddion's jpkscan.c put an unreflected file's first line at the
+#: bottom and a reflected one's at the top (GridReflect), in Gwyddion's y-down rows (checked on
+#: AFMReader's sample_0.jpk, an independent review, 2026-11-28). SurfaceTopography hands these in
+#: Gwyddion's row order (row 0 the top of the picture): reversed here, so that y is up the
+#: instrument's picture as for the formats above.
+_FIRST_LINE_AT_TOP = ("metropro", "datx", "jpk")
 
 #: NanoFocus .nms: the pixel size, two little-endian float64 (x, y) at this byte offset
 _NMS_PIXEL_OFFSET = 1376

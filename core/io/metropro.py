@@ -95,6 +95,10 @@ def read_metropro(path: Path, opts=None):
     valid = (data < _INVALID) & np.isfinite(z) & (np.abs(h) < 1e30)
     sx = (lateral * cn_w) / cn_w  # physical size / points, as SurfaceTopography's pixel_size
     sy = (lateral * cn_h) / cn_h
+    # y up MetroPro's picture: its first stored row is the top of the video monitor ("(0,0) is in
+    # the upper left corner"), so stored row r lies at y = (rows − 1 − r)·Δy and `row` counts from
+    # the bottom (docs/formats.md, Pixel convention; core/io/instruments.py _FIRST_LINE_AT_TOP)
+    z, valid = z[::-1], valid[::-1]
     rows, cols = np.nonzero(valid)
     if rows.size == 0:
         from ..errors import InputError
