@@ -53,7 +53,10 @@ def test_digital_surf_and_sdf_from_surfalize(tmp_path, suffix):
 
         z = heights_um().copy()
         z[BAD] = np.nan
-        Surface(z, DX * 1e3, DY * 1e3).save(tmp_path / f"m{suffix}")  # µm heights, µm steps
+        # a .sur's first stored row is the top of MountainsMap's picture (docs/formats.md): written
+        # upside down, it reads back with row r at y = r·Δy; ISO 25178-71's .sdf keeps its order
+        stored = z[::-1] if suffix == ".sur" else z
+        Surface(stored, DX * 1e3, DY * 1e3).save(tmp_path / f"m{suffix}")  # µm heights, µm steps
     c = read_cloud(tmp_path / f"m{suffix}")
     # .sur stores 32-bit integers over the range (~1e-9 µm steps), .sdf decimals
     _check(c, heights_um(), 1e-6)

@@ -25,11 +25,12 @@ MAPS = [
     ("matrix-3.txt", (256, 256), "m"),
     ("gwyddion-export-english.txt", (3, 4), "m"),
     ("sdf-1.sdf", (7, 4), "µm"),
+    ("tmd-1.tmd", (300, 300), "mm"),
 ]
 #: maps whose rows PointsPro reverses from SurfaceTopography's (Gwyddion's y-down order): y up the
 #: instrument's picture — OPD and MI store the bottom line first (SurfaceTopography reverses them),
-#: MetroPro the top one (docs/formats.md, Pixel convention)
-LINES_REVERSED_BY_ST = {"opd-1.opd", "mi-1.mi", "metropro-1.dat"}
+#: MetroPro, SUR and TMD the top one (tmd-1.tmd, a dime, reads right only so; docs/formats.md)
+LINES_REVERSED_BY_ST = {"opd-1.opd", "mi-1.mi", "metropro-1.dat", "sur-2.sur", "tmd-1.tmd"}
 
 
 def st_read(name):

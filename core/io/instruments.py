@@ -817,10 +817,15 @@ _FIRST_LINE_AT_Y0 = ("ibw", "ezd", "di", "ps", "wsxm", "frt", "mi", "opd", "mdt"
 #: upward; Gwyddion reads them in that order for its y-down rows. JPK, whichever way its lines are
 #: stored: SurfaceTopography and Gwyddion's jpkscan.c put an unreflected file's first line at the
 #: bottom and a reflected one's at the top (GridReflect), in Gwyddion's y-down rows (checked on
-#: AFMReader's sample_0.jpk, an independent review, 2026-11-28). SurfaceTopography hands these in
-#: Gwyddion's row order (row 0 the top of the picture): reversed here, so that y is up the
-#: instrument's picture as for the formats above.
-_FIRST_LINE_AT_TOP = ("metropro", "datx", "jpk")
+#: AFMReader's sample_0.jpk, an independent review, 2026-11-28). Digital Surf MountainsMap .mnt: the
+#: file's own JPEG preview, drawn by MountainsMap, matches the stored rows only with row 0 at the
+#: top (a scratch's rise, a low spot, a masked corner: SurfaceTopography's mnt-1, mnt-2); .sur,
+#: the same vendor's older format with the same row order and an explicit upside-down flag (which
+#: SurfaceTopography honours), by that evidence, indirect. TrueMap .tmd: the lettering of a dime
+#: (TrueMap v6's own file, tmd-1) reads right only with row 0 at the top (an independent review,
+#: 2026-11-28). SurfaceTopography hands these in Gwyddion's row order (row 0 the top of the picture):
+#: reversed here, so that y is up the instrument's picture as for the formats above.
+_FIRST_LINE_AT_TOP = ("metropro", "datx", "jpk", "mnt", "sur", "tmd")
 
 #: NanoFocus .nms: the pixel size, two little-endian float64 (x, y) at this byte offset
 _NMS_PIXEL_OFFSET = 1376
