@@ -349,7 +349,7 @@ def load_recipe(path, registry: Registry | None = None, whole: bool = True) -> R
     if why is not None:
         raise RecipeError(f"{path}: {why}")
     text = read_utf8(path, "recipe", RecipeError)
-    recipe = parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path)
+    recipe = parse_recipe(load_yaml(text, str(path)), str(path), registry, base=path, design_dof=whole)
     # a recipe file is what a batch runs: its order is checked as it is read (a session's project
     # may hold a recipe mid-edit; run_pipeline checks before running any)
     if whole:
@@ -365,7 +365,11 @@ def check_recipe_whole(recipe: Recipe, where: str) -> None:
 
 
 def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
-                 base: Path | None = None) -> Recipe:
+                 base: Path | None = None, design_dof: bool = True) -> Recipe:
+    """A recipe mapping, validated: its keys, steps, parameters and blocks, and (``design_dof``) a
+    pose fit's design DOF against the surface type — the window, the Python API and projects read
+    recipes here (a review: a Q-con with `dof: […, radius]` was accepted there and failed each run);
+    the order of the steps is the caller's to check (a recipe may be held mid-edit)."""
     registry = registry or Registry()
     if not isinstance(data, dict):
         raise RecipeError(f"{where}: a recipe is a mapping with `pointspro: 1` and `steps:`")
@@ -440,6 +444,8 @@ def parse_recipe(data, where: str = "recipe", registry: Registry | None = None,
         tolerance = parse_tolerance(data["tolerance"], at("tolerance"), where)
         # a tolerance on a quantity these steps and this surface do not compute: one line, now
         tolerance.check_computable(steps, surface, at("tolerance"))
+    if design_dof:
+        _check_design_dof(steps, surface, where)
     return Recipe(steps, surface, resolved_inputs, base, reader_options, uncertainty, tolerance)
 
 

@@ -43,16 +43,26 @@ def test_set_may_mend_what_the_file_as_written_breaks(run_cli, tmp_path):
     assert code == 0, err
 
 
-def test_an_aperture_cut_before_the_pose_fit_does_not_set_the_maps_aperture(run_cli, tmp_path):
-    """Its centre is in the measuring frame; the map is in the part frame: the surface's aperture about
-    the axis, as before (a 30 mm off-axis aperture cut the map 30 mm off the part)."""
+def test_an_aperture_cut_before_the_pose_fit_stands_about_the_nominals_axis(run_cli, tmp_path):
+    """Its centre is in the measuring frame, the map in the part frame, where the pose fit has put the
+    part on the nominal's axis: the diameter about the axis (a 30 mm off-axis centre had cut the map
+    30 mm off the part; then the surface's 1300 mm was taken, and `correction` refused a recipe that
+    ran before — two reviews)."""
     r = _recipe(tmp_path, "probe_radius: {radius: 4.0, side: 1}", "aperture: {diameter: 1200, center_x: 30}",
                 "misalignment: {}", "bspline_map: {spacing: 20.0}")
     code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--figures", "none",
                            "--quiet")
     assert code == 0, err
     rep = _bspline(tmp_path / "o")
-    assert rep["diameter"] == 1300.0 and rep["centre_mm"] == [0.0, 0.0]
+    assert rep["diameter"] == 1200.0 and rep["centre_mm"] == [0.0, 0.0]
+    r = _recipe(tmp_path, "manual_edit: {remove: [520, 3640]}", "probe_radius: {radius: 4.0, side: 1}",
+                "aperture: {diameter: 1000}", "misalignment: {}", "correction: {}", name="c.yaml")
+    code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "c", "--figures", "none",
+                           "--quiet")
+    assert code == 0, err
+    report = json.loads((tmp_path / "c" / "asphere_cmm" / "report.json").read_text(encoding="utf-8"))
+    corr = next(s for s in report["steps"] if s["id"] == "correction")["report"]
+    assert corr["diameter_mm"] == 1000.0
 
 
 def test_an_annular_aperture_leaves_no_map_in_its_hole(run_cli, tmp_path):
@@ -69,3 +79,31 @@ def test_an_annular_aperture_leaves_no_map_in_its_hole(run_cli, tmp_path):
     xy = np.array([[float(v) for v in row[:2]] for row in rows[1:]])
     r_nodes = np.hypot(xy[:, 0], xy[:, 1])
     assert len(r_nodes) == rep["nodes"] and r_nodes.min() >= 200.0 - 1e-9 and r_nodes.max() <= 645.0 + 1e-9
+
+
+def test_the_hole_is_taken_only_where_the_aperture_cut_it(run_cli, tmp_path):
+    """A map given its own centre does not carry the annulus's hole there (as correction does not)."""
+    r = _recipe(tmp_path, "manual_edit: {remove: [520, 3640]}", "probe_radius: {radius: 4.0, side: 1}",
+                "misalignment: {}", "aperture: {shape: annulus, diameter: 1290, inner_diameter: 400}",
+                "bspline_map: {spacing: 10.0, centre: [150, 0]}")
+    code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--figures", "none",
+                           "--quiet")
+    assert code == 0, err
+    rep = _bspline(tmp_path / "o")
+    assert rep["centre_mm"] == [150.0, 0.0] and "inner_diameter" not in rep
+
+
+def test_the_python_api_and_the_window_refuse_design_dof_on_a_q_con_as_they_read_it():
+    import pytest
+
+    import pointspro.core as pp
+    from pointspro.core.errors import RecipeError
+    from pointspro.core.session.model import Session
+
+    recipe = {"pointspro": 1, "surface": {"type": "qcon", "R": 3000, "k": -0.98, "norm_radius": 650,
+                                          "a": [1e-4], "aperture": 1300},
+              "steps": [{"misalignment": {"dof": ["alpha", "beta", "dx", "dy", "dz", "radius"]}}]}
+    with pytest.raises(RecipeError, match="fitting radius needs an even_asphere nominal"):
+        pp.load(recipe)
+    with pytest.raises(RecipeError, match="fitting radius needs an even_asphere nominal"):
+        Session().set_recipe(recipe)

@@ -211,8 +211,11 @@ def write_datx_units(path, z, height_unit=b"Fringes", lateral=(b"Pixels", b"Pixe
 
 
 def test_datx_in_pixels_and_fringes_needs_named_options(tmp_path):
+    """Read by the own h5py path; its first stored row is the top of the picture, as through
+    SurfaceTopography's (written upside down, row r reads back at y = r·Δy)."""
     fr = heights_um() / 0.3164  # fringes of λ = 632.8 nm (λ/2 of height each)
     fr[BAD] = np.nan
+    fr = fr[::-1]
     p = tmp_path / "fr.datx"
     write_datx_units(p, fr)
     with pytest.raises(InputError, match=r"fr.datx: Zygo DATX heights in Fringes; give the reader "
@@ -225,12 +228,17 @@ def test_datx_in_pixels_and_fringes_needs_named_options(tmp_path):
     _check(c, heights_um(), 1e-9)
     # heights in nm but pixels without a size: SurfaceTopography would take them for metres
     q = tmp_path / "nm.datx"
-    write_datx_units(q, heights_um() * 1e3, b"NanoMeters")
+    write_datx_units(q, heights_um()[::-1] * 1e3, b"NanoMeters")
     with pytest.raises(InputError, match=r"nm.datx: .*give the reader option pixel_size_um"):
         read_cloud(q)
     c = read_cloud(q, pixel_size_um=[DX * 1e3, DY * 1e3])
     assert np.allclose(c.z * 1e3, heights_um()[c["row"], c["col"]], atol=1e-9)
     assert np.allclose(c.x, c["col"] * DX, atol=1e-12)
+    # the same picture in metres and nm (SurfaceTopography's path) reads the same way up
+    write_datx(tmp_path / "m.datx", heights_um()[::-1] * 1e3, DX * 1e-3, DY * 1e-3)
+    a = read_cloud(tmp_path / "m.datx")
+    assert a.meta["instrument_reader"] != c.meta["instrument_reader"]
+    assert np.array_equal(a["row"], c["row"]) and np.allclose(a.z, c.z, atol=1e-12)
 
 
 def test_options_on_a_calibrated_file_are_refused_by_name(tmp_path):

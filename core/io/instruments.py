@@ -1040,6 +1040,9 @@ def _read_datx_own(path: Path, opts):
     elif None in pix:
         raise InputError(f"{path}: Zygo DATX lateral converter in pixels without a size; give the "
                          "reader option pixel_size_um (µm)")
+    # the first stored row is the top of Zygo's picture: y up it, as for every .datx (_FIRST_LINE_AT_TOP;
+    # a review: this path kept the stored order, the same picture mirrored by its units)
+    z, valid = z[::-1], valid[::-1]
     xyz, ch, m = _grid_cloud(z * scale, pix[0], pix[1], path, valid=valid)
     return xyz, ch, {"instrument_format": "datx", "instrument_reader": "Zygo DATX (own, h5py)",
                      "instrument_unit": unit, **m}

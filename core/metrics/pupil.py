@@ -129,20 +129,24 @@ FRAME_CHANGING_STEPS = ("misalignment", "register", "transform", "volumetric")
 
 def applied_aperture_step(cloud) -> dict | None:
     """The last circular or annular `aperture` step in the cloud's provenance that gave a diameter:
-    {"diameter", "inner_diameter", "centre"} (mm) — the clear aperture the recipe kept, which the
-    correction must cover (the surface's own aperture may be larger than the measured zone); None
-    when the last aperture step was a polygon or took the surface's diameter, or there is none, or a
-    step that changes the frame ran after it (FRAME_CHANGING_STEPS: its centre is in the frame
-    before — a review: an aperture about x = 30 mm in the measuring frame, then misalignment, cut the
-    map 30 mm off the part)."""
+    {"diameter", "inner_diameter", "centre", "moved"} (mm) — the clear aperture the recipe kept,
+    which the correction must cover (the surface's own aperture may be larger than the measured
+    zone); None when the last aperture step was a polygon or took the surface's diameter, or there is
+    none. ``moved``: a step that changes the frame ran after it (FRAME_CHANGING_STEPS) — its centre
+    was in the frame before (a review: an aperture about x = 30 mm in the measuring frame, then
+    misalignment, cut the map 30 mm off the part); the pose fit brings the part onto the nominal's
+    axis, so the diameter and the hole stand about the axis, and ``centre`` is (0, 0)."""
+    moved = False
     for entry in reversed(cloud.provenance):
         if entry.get("id") in FRAME_CHANGING_STEPS:
-            return None
+            moved = True
         if entry.get("id") == "aperture":
             p = entry.get("params") or {}
             if p.get("shape", "circle") in ("circle", "annulus") and p.get("diameter"):
                 inner = float(p.get("inner_diameter") or 0.0) if p.get("shape") == "annulus" else 0.0
-                return {"diameter": float(p["diameter"]), "inner_diameter": inner,
-                        "centre": (float(p.get("center_x") or 0.0), float(p.get("center_y") or 0.0))}
+                centre = (0.0, 0.0) if moved else (float(p.get("center_x") or 0.0),
+                                                   float(p.get("center_y") or 0.0))
+                return {"diameter": float(p["diameter"]), "inner_diameter": inner, "centre": centre,
+                        "moved": moved}
             return None
     return None

@@ -102,14 +102,17 @@ class BSplineMapStep(Step):
         given = params.given_centre
         inner = 0.0
         if diameter is None and ap is not None:
-            diameter, inner = ap["diameter"], ap["inner_diameter"]
-            if given is None:  # where the aperture step cut (its default (0, 0) is the nominal's axis)
-                given = ap["centre"]
+            diameter = ap["diameter"]
+            if given is None and not ap["moved"]:  # where the aperture step cut (its default (0, 0) is
+                given = ap["centre"]                # the nominal's axis); after a pose fit the axis
         if diameter is None and ctx.surface is not None:
             diameter = getattr(ctx.surface, "aperture", None)
         # the aperture's and the profiles' centre: given, else the surface's axis, else the measured
         # region's bounding-box centre (never a file's corner origin)
         center = pupil_of(x, y, ctx.surface, given).center
+        if (ap is not None and diameter == ap["diameter"] and ap["inner_diameter"] > 0
+                and np.hypot(center[0] - ap["centre"][0], center[1] - ap["centre"][1]) <= 1e-9 * diameter):
+            inner = ap["inner_diameter"]  # the annulus's hole, where it was cut (as correction takes it)
         # the spline covers the points' own box (fit_bspline's default): the aperture's box only
         # when the map is to be extrapolated over the whole aperture, where the penalty's
         # continuation fills it. Over the aperture's box, a 100 mm patch of a 1300 mm part had its

@@ -315,7 +315,7 @@ class CorrectionStep(Step):
                             "surface's aperture")
         given = params.given_centre
         from_aperture = False
-        if given is None and ap is not None and (ap["centre"] != (0.0, 0.0) or is_flat(nominal)):
+        if given is None and ap is not None and not ap["moved"] and (ap["centre"] != (0.0, 0.0) or is_flat(nominal)):
             # the zone the recipe's `aperture` kept is about its centre, as its diameter is the
             # clear aperture (a review: an off-centre aperture's diameter taken about the axis, and
             # the step refused "no data from r = 0")
