@@ -483,10 +483,21 @@ def check_step_order(steps, where: str = "recipe") -> None:
             _check_mover(live, pos, where)
         if not getattr(s.step_cls, "reads_residual", False):
             continue
-        if any(getattr(t.step_cls, "makes_residual", False) for _, t in live[:pos]):
+        # the steps since the last that dropped the residual (transform: it referred to the old frame;
+        # a review: misalignment, transform, zernike passed --check-only and zernike worked on z)
+        since = next((i + 1 for i in range(pos - 1, -1, -1)
+                      if getattr(live[i][1].step_cls, "drops_residual", False)), 0)
+        if any(getattr(t.step_cls, "makes_residual", False) for _, t in live[since:pos]):
             continue  # a residual is there already (a second misalignment later refines it)
         if getattr(s.params, "channel", "auto") == "z":
             continue  # heights asked for by name: a map that is already form error
+        if since > 0:
+            j, t = live[since - 1]
+            loc = f"{where}, line {s.line}" if s.line else where
+            raise RecipeError(f"{loc}: step {k} '{s.id}' works on the form error (the residual), which "
+                              f"step {j} '{t.id}' drops (it referred to the frame before): it would take "
+                              f"the heights z for it — make the residual again after '{t.id}' "
+                              "(misalignment, register)")
         maker = next(((j, t) for j, t in live[pos + 1:] if getattr(t.step_cls, "makes_residual", False)),
                      None)
         if maker is not None:

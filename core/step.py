@@ -193,6 +193,9 @@ class Step:
     #: move. core.recipe.check_step_order refuses such a step unless the residual is made again after
     #: it before anything uses or writes it (core.pipeline's stale-residual check, at run time, too).
     moves_points: ClassVar[bool] = False
+    #: the step drops a residual it finds (transform: it referred to the old frame); a step that reads
+    #: the residual after it reads the heights z unless the residual is made again (check_step_order)
+    drops_residual: ClassVar[bool] = False
 
     def run(self, cloud: PointCloud, params: Params, ctx: Context) -> StepResult:  # pragma: no cover
         raise NotImplementedError

@@ -107,3 +107,13 @@ def test_the_python_api_and_the_window_refuse_design_dof_on_a_q_con_as_they_read
         pp.load(recipe)
     with pytest.raises(RecipeError, match="fitting radius needs an even_asphere nominal"):
         Session().set_recipe(recipe)
+
+
+def test_a_step_reading_the_residual_after_a_transform_dropped_it_is_refused(run_cli, tmp_path):
+    r = _recipe(tmp_path, "misalignment: {}", "transform: {pose: {dz: 1.0}}", "zernike: {terms: 4}")
+    code, _, err = run_cli("--batch", r, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o", "--check-only")
+    assert code == 2 and ("step 3 'zernike' works on the form error (the residual), which step 2 'transform' "
+                          "drops") in err
+    ok = _recipe(tmp_path, "misalignment: {}", "transform: {pose: {dz: 1.0}}", "misalignment: {}",
+                 "zernike: {terms: 4}", name="ok.yaml")
+    assert run_cli("--batch", ok, EXAMPLE / "asphere_cmm.csv", "--out", tmp_path / "o2", "--check-only")[0] == 0

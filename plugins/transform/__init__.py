@@ -66,6 +66,7 @@ class TransformParams(Params):
 class TransformStep(Step):
     id = "transform"
     title = "Transform"
+    drops_residual = True  # it referred to the old frame (core/step.py)
     summary = "Apply a pose or an affine matrix."
     Params = TransformParams
 
