@@ -172,7 +172,8 @@ class KnnDenoiseStep(Step):
         if 2 * params.window >= max(np.ptp(x), np.ptp(y)):
             raise StepError(f"the 2a × 2a window ({2 * params.window:g} mm) covers the whole cloud "
                             f"({np.ptp(x):.4g} × {np.ptp(y):.4g} mm): fewer points than the window holds")
-        if params.method in ("paper", "robust") and params.window < _pitch_bound(x, y, _sampled(n)):
+        if params.method in ("paper", "robust") and params.window < _pitch_bound(x, y, _sampled(n)) \
+                and params.window < _subset_pitch_bound(x, y, _sampled(n)):
             from scipy.spatial import cKDTree
 
             pts = np.column_stack([x, y])
@@ -191,6 +192,24 @@ class KnnDenoiseStep(Step):
 def _sampled(n: int) -> np.ndarray:
     """The points whose nearest-neighbour distance gives the sampling spacing (~20,000 of them)."""
     return np.arange(0, n, max(1, n // 20000))
+
+
+def _subset_pitch_bound(x, y, idx, every: int = 4) -> float:
+    """Another upper bound of the sampling spacing, for files whose order gives none (scattered,
+    shuffled): the points ``idx``' distance to their second-nearest among every ``every``-th point is
+    at least their nearest-neighbour distance among all (the first may be the point itself), so the
+    median of those is at least the median spacing. A window above it passes the spacing check with
+    a k-d tree of a quarter of the points (10⁶ shuffled points: 0.04 instead of 0.15 s); below it the
+    exact spacing is computed as before — the same decision either way."""
+    from scipy.spatial import cKDTree
+
+    n = len(x)
+    if n < 4 * every:
+        return np.inf
+    sub = np.column_stack([x[::every], y[::every]])
+    dist, _ = cKDTree(sub, balanced_tree=False, compact_nodes=False).query(
+        np.column_stack([x[idx], y[idx]]), k=2, workers=-1)
+    return float(np.median(dist[:, 1]))
 
 
 def _pitch_bound(x, y, idx) -> float:
