@@ -72,6 +72,13 @@ def check_output_folder(out: Path) -> None:
         raise RecipeError(f"{out}: output folder is not writable")
 
 
+#: the longest file name the usual file systems take (ext4, XFS, APFS, NTFS: 255 bytes or units)
+NAME_MAX = 255
+#: what an output folder's temporary name adds to the input's stem: "." + ".xxxxxxxx" + ".partial"
+_LONGEST_STEM_EXTRA = len(".") + len(".0123abcd") + len(".partial")
+_LONGEST_STEM = NAME_MAX - _LONGEST_STEM_EXTRA
+
+
 def output_stems(inputs: list[Path]) -> list[str]:
     stems = [p.stem for p in inputs]
     seen: dict[str, Path] = {}
@@ -80,6 +87,13 @@ def output_stems(inputs: list[Path]) -> list[str]:
             # "..csv" has the stem ".": its outputs would replace the output folder itself (a review)
             raise RecipeError(f"{p}: its name gives no output folder name ('{s}/' is a path, not a "
                               "folder of its own); rename the input")
+        if len(s.encode("utf-8", "surrogateescape")) > _LONGEST_STEM:
+            # the folder is written as ".<name>.<8 hex>.partial" first (core/io/atomic.py): a 240-byte
+            # name ran the whole pipeline and then failed "File name too long" (a review)
+            raise RecipeError(f"{p}: its name is {len(s.encode('utf-8', 'surrogateescape'))} bytes long; "
+                              f"its output folder is written under a temporary name {_LONGEST_STEM_EXTRA} "
+                              f"bytes longer, beyond the {NAME_MAX}-byte limit of a file name — rename the "
+                              f"input (at most {_LONGEST_STEM} bytes before the extension)")
         if s in seen:
             raise RecipeError(f"{seen[s]} and {p} would both write {s}/ in the output folder; "
                               "rename one or run them separately")
@@ -276,7 +290,7 @@ def check_replaceable(folder: Path, inputs, of, extra: bool = True) -> None:
         raise RecipeError(f"{folder / why[1].name}: is not one of the files of the earlier output in "
                           f"{folder}, which is replaced as a whole with the output of {of} — move it or "
                           "choose another output folder")
-    raise RecipeError(f"{folder}: exists and is not a PointsPro output folder (no report.json); it would "
+    raise RecipeError(f"{folder}: exists and is not a PointsPro output folder (no report.json that PointsPro wrote); it would "
                       f"be replaced with the output of {of} — move it or choose another output folder")
 
 

@@ -951,7 +951,7 @@ def _check_explain_out(out: Path, inputs: list[Path]) -> None:
         raise RecipeError(f"--out {out}: exists and is not a folder; explain writes a folder there — "
                           "choose another --out")
     if why is not None:
-        raise RecipeError(f"--out {out}: exists and is not an explain output folder (no explain.json); "
+        raise RecipeError(f"--out {out}: exists and is not an explain output folder (no explain.json that PointsPro wrote); "
                           "explain would replace it — move it or choose another --out")
 
 

@@ -340,6 +340,14 @@ def _run_pipeline(cloud, recipe, *, progress, log, surface, upto, allowed_dirs, 
             raise
         except Exception as e:  # a bug in the step or under it: this input fails alone
             raise InternalError(internal_message(where, e)) from e
+        except KeyboardInterrupt:  # Ctrl-C (a sequential batch, the window): the run stops
+            raise
+        except BaseException as e:  # noqa: BLE001 — sys.exit() or a bare BaseException in a step
+            # (a third-party one): this input fails alone; a SystemExit reached the batch's own
+            # handler and ended it with exit 0, no summary and a half-written folder (a review)
+            what = f"called sys.exit({e.code!r})" if isinstance(e, SystemExit) else \
+                f"raised {type(e).__name__}" + (f": {e}" if str(e) else "")
+            raise InternalError(f"{where}: internal error: the step {what} — please report") from None
         seconds = time.perf_counter() - t0
         previous = where
         if not isinstance(out, StepResult) or not isinstance(out.cloud, PointCloud):

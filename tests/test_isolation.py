@@ -161,3 +161,86 @@ def test_repeated_steps_keep_their_artifacts_apart(tmp_path, run_cli):
         assert (folder / a).is_file()
     png = sorted(n for n in firsts if n.endswith(".png"))[0]
     assert (folder / f"2_{png}").read_bytes() != (folder / f"3_{png}").read_bytes()
+
+
+EXITS = '''
+from pointspro.core.step import Params, Step, StepResult
+
+
+class ExitsParams(Params):
+    pass
+
+
+class ExitsStep(Step):
+    id = "exits"
+    title = "A third party's step that leaves by the back door"
+    summary = "sys.exit(0) on inputs named 'exit…', a bare BaseException on 'base…'"
+    Params = ExitsParams
+
+    def run(self, cloud, params, ctx):
+        import os
+
+        source = os.path.basename(str(cloud.meta.get("source", "")))
+        if "exit" in source:
+            raise SystemExit(0)
+        if "base" in source:
+            raise BaseException("a bare one")
+        return StepResult(cloud.replace(), {"ok": True})
+'''
+
+
+@pytest.mark.parametrize("mode", [["--workers", "1"], ["--workers", "2"]], ids=["sequential", "processes"])
+def test_a_step_calling_sys_exit_or_raising_a_bare_base_exception_fails_its_input_alone(
+        tmp_path, monkeypatch, run_cli, mode):
+    """A review: sys.exit(0) in a step ended the whole batch with exit 0, no summary.json and a
+    half-written folder; a bare BaseException ended it with a traceback."""
+    _install_step(tmp_path, monkeypatch, "exits_step", "exits", "ExitsStep", EXITS)
+    recipe = write(tmp_path / "r.yaml", "pointspro: 1\nsteps:\n  - exits: {}\n")
+    src = (EXAMPLE / "asphere_cmm.csv").read_text(encoding="utf-8")
+    files = [write(tmp_path / name, src) for name in ("good1.csv", "exit2.csv", "base3.csv", "good4.csv")]
+    code, _, err = run_cli("--batch", recipe, *files, "--out", tmp_path / "o", "--quiet", "--figures", "none",
+                           *mode)
+    assert code == 1, err
+    assert f"{files[1]}: step 1 'exits': internal error: the step called sys.exit(0) — please report" in err
+    assert f"{files[2]}: step 1 'exits': internal error: the step raised BaseException: a bare one" in err
+    assert "Traceback" not in err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
+    assert [e["status"] for e in s["inputs"]] == ["ok", "failed", "failed", "ok"]
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["good1", "good4", "summary.json"]
+
+
+def test_a_folder_with_a_report_json_that_pointspro_did_not_write_is_not_replaced(tmp_path, run_cli):
+    """A review: a user's folder holding a file named report.json (any text, `{}`, `[]`) was taken for
+    an earlier output and replaced, notes and subfolders with it."""
+    data = write(tmp_path / "a.csv", (EXAMPLE / "asphere_cmm.csv").read_text(encoding="utf-8"))
+    recipe = EXAMPLE / "recipe.yaml"
+    for text in ("not json at all", "{}", "[]", '{"files": ["notes.txt"]}'):
+        out = tmp_path / "o"
+        import shutil
+
+        shutil.rmtree(out, ignore_errors=True)
+        (out / "a" / "sub").mkdir(parents=True)
+        (out / "a" / "notes.txt").write_text("mine", encoding="utf-8")
+        (out / "a" / "report.json").write_text(text, encoding="utf-8")
+        code, _, err = run_cli("--batch", recipe, data, "--out", out, "--figures", "none", "--quiet")
+        assert code == 2 and "is not a PointsPro output folder" in err, (text, err)
+        assert (out / "a" / "notes.txt").read_text(encoding="utf-8") == "mine"
+    # an earlier output of ours is still replaced
+    shutil.rmtree(tmp_path / "o")
+    assert run_cli("--batch", recipe, data, "--out", tmp_path / "o", "--figures", "none", "--quiet")[0] == 0
+    assert run_cli("--batch", recipe, data, "--out", tmp_path / "o", "--figures", "none", "--quiet")[0] == 0
+
+
+def test_an_input_whose_output_folder_name_cannot_be_written_is_refused_before_any(tmp_path, run_cli):
+    """A 240-byte name ran the whole pipeline, then failed "File name too long" on the temporary
+    folder ".<name>.<8 hex>.partial" (a review)."""
+    src = (EXAMPLE / "asphere_cmm.csv").read_text(encoding="utf-8")
+    long_one = write(tmp_path / ("y" * 240 + ".csv"), src)
+    fine = write(tmp_path / ("z" * 237 + ".csv"), src)
+    code, _, err = run_cli("--batch", EXAMPLE / "recipe.yaml", long_one, "--out", tmp_path / "o", "--figures",
+                           "none", "--quiet")
+    assert code == 2 and "its name is 240 bytes long" in err and "at most 237 bytes" in err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+    code, _, err = run_cli("--batch", EXAMPLE / "recipe.yaml", fine, "--out", tmp_path / "o2", "--figures",
+                           "none", "--quiet")
+    assert code == 0, err

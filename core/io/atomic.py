@@ -88,11 +88,31 @@ def why_not_replace(target: Path, marker: str, inputs=()) -> tuple[str, Path | N
         return "file", None
     if target.is_dir() and not (target / marker).is_file() and any(target.iterdir()):
         return "foreign", None
+    if target.is_dir() and (target / marker).is_file() and not _is_ours(target / marker):
+        return "foreign", None  # a file of that name that is no output of ours (a review: a user's
+        # folder holding "report.json" with any text in it was replaced, notes and all)
     if target.is_dir():
         extra = _not_written_by_it(target, marker)
         if extra:
             return "extra", Path(extra)
     return None
+
+
+#: keys a marker written by PointsPro always holds (report.json: core/report.py; explain.json:
+#: core/explain/workflow.py), by the marker's name
+_MARKER_KEYS = {"report.json": ("pointspro", "steps"), "explain.json": ("verdict", "gap_before")}
+
+
+def _is_ours(marker: Path) -> bool:
+    """Whether the marker file is one PointsPro wrote: JSON, an object, with the keys it always
+    writes (_MARKER_KEYS)."""
+    import json
+
+    try:
+        data = json.loads(marker.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and all(k in data for k in _MARKER_KEYS.get(marker.name, ()))
 
 
 def _not_written_by_it(folder: Path, marker: str) -> str | None:
