@@ -179,7 +179,9 @@ class KnnDenoiseStep(Step):
             pts = np.column_stack([x, y])
             # an unbalanced tree builds ~3× faster at 10⁶ points; the nearest neighbours are exact
             tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
-            dist, _ = tree.query(pts[_sampled(n)], k=2, workers=-1)
+            from pointspro.core.parallel import threaded_query
+
+            dist, _ = threaded_query(tree, pts[_sampled(n)], k=2, workers=-1)
             pitch = float(np.median(dist[:, 1]))
             if params.window < pitch:
                 raise StepError(f"window a = {params.window:g} mm is smaller than the sampling spacing "
@@ -207,8 +209,10 @@ def _subset_pitch_bound(x, y, idx, every: int = 4) -> float:
     if n < 4 * every:
         return np.inf
     sub = np.column_stack([x[::every], y[::every]])
-    dist, _ = cKDTree(sub, balanced_tree=False, compact_nodes=False).query(
-        np.column_stack([x[idx], y[idx]]), k=2, workers=-1)
+    from pointspro.core.parallel import threaded_query
+
+    dist, _ = threaded_query(cKDTree(sub, balanced_tree=False, compact_nodes=False),
+                             np.column_stack([x[idx], y[idx]]), k=2, workers=-1)
     return float(np.median(dist[:, 1]))
 
 

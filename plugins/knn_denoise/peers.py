@@ -38,7 +38,9 @@ def hampel(x, y, d, k: int = 25, n_sigma: float = 8.0) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     pts = np.column_stack([x, y])
-    _, idx = cKDTree(pts).query(pts, k=k + 1, workers=-1)
+    from pointspro.core.parallel import threaded_query
+
+    _, idx = threaded_query(cKDTree(pts), pts, k=k + 1, workers=-1)
     nb = np.asarray(d)[idx[:, 1:]]
     med = np.median(nb, axis=1)
     mad = 1.4826 * np.median(np.abs(nb - med[:, None]), axis=1)

@@ -91,16 +91,19 @@ def _knn(tree, xy: np.ndarray, k: int, workers: int) -> np.ndarray:
     3.3 → 2.4 s CPU), and the points with fewer than k neighbours inside the bound (edges, sparse
     parts of a star pattern) are asked again without it. The same neighbours: within the bound the
     k nearest are the k nearest."""
+    from pointspro.core.parallel import interrupts_deferred
+
     n = len(xy)
-    if n < 4 * _SAMPLE or k < 2:
-        _, idx = tree.query(xy, k=k, workers=workers)
-        return idx.reshape(n, k)
-    d_sub, _ = tree.query(xy[:: n // _SAMPLE], k=k, workers=workers)
-    bound = 1.1 * float(np.quantile(d_sub[:, -1], 0.95))
-    d, idx = tree.query(xy, k=k, workers=workers, distance_upper_bound=bound)
-    again = np.flatnonzero(~np.isfinite(d[:, -1]))
-    if again.size:
-        idx[again] = tree.query(xy[again], k=k, workers=workers)[1]
+    with interrupts_deferred():  # the queries' threads must not outlive an interrupted join
+        if n < 4 * _SAMPLE or k < 2:
+            _, idx = tree.query(xy, k=k, workers=workers)
+            return idx.reshape(n, k)
+        d_sub, _ = tree.query(xy[:: n // _SAMPLE], k=k, workers=workers)
+        bound = 1.1 * float(np.quantile(d_sub[:, -1], 0.95))
+        d, idx = tree.query(xy, k=k, workers=workers, distance_upper_bound=bound)
+        again = np.flatnonzero(~np.isfinite(d[:, -1]))
+        if again.size:
+            idx[again] = tree.query(xy[again], k=k, workers=workers)[1]
     return idx
 
 

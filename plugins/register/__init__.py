@@ -416,7 +416,7 @@ def _icp(p, tp, tn, T0, dmax, iterations, extent, workers=None, check=None) -> _
     the same bits on every run, whatever the thread count."""
     from scipy.spatial import cKDTree
 
-    from pointspro.core.parallel import single_threaded_blas, thread_count
+    from pointspro.core.parallel import single_threaded_blas, thread_count, threaded_query
 
     workers = max(1, int(workers or thread_count()))
     tree = cKDTree(tp, balanced_tree=False)
@@ -425,7 +425,7 @@ def _icp(p, tp, tn, T0, dmax, iterations, extent, workers=None, check=None) -> _
 
     def match(T):
         x = _apply(T, p)
-        dist, idx = tree.query(x, k=1, distance_upper_bound=dmax, workers=workers)
+        dist, idx = threaded_query(tree, x, k=1, distance_upper_bound=dmax, workers=workers)
         ok = idx < len(tp)  # none within dmax: idx = len(tp), dist = inf
         k = int(np.count_nonzero(ok))
         dk = dist[ok]
