@@ -129,41 +129,42 @@ def in_chunks(fn, n: int, size: int, threads: int | None = None) -> list:
 
 
 class interrupts_deferred:
-    """Context: a Ctrl-C (SIGINT) or SIGTERM that arrives inside it takes effect as it closes — its
-    handler (Python's KeyboardInterrupt, the batch's SIGTERM one) runs then, not in the middle.
+    """Context: SIGINT and SIGTERM that arrive inside it take effect as it closes, with the handler
+    they would have met (Python's KeyboardInterrupt, the batch's SIGTERM one, the default action).
+    Main thread only (where Python runs signal handlers); a signal ignored (nohup) stays ignored.
 
-    For scipy's cKDTree.query(workers=…), which starts Python threads running C code and joins them:
-    a KeyboardInterrupt raised in the join left those threads reading the query's arrays as they
-    were freed — a sequential batch interrupted at the wrong moment ended in a segmentation fault
-    after writing its summary (2 runs in ~36, an independent review; faulthandler showed a thread
-    with no Python frame of its own, as cKDTree's are). Off the main thread (the window's worker),
-    and for signals ignored or at their default, nothing changes."""
-
-    _SIGNALS = ("SIGINT", "SIGTERM")
+    - core/workerpool.py: a worker is spawned by starting a fresh interpreter and then writing its
+      start-up data into a pipe; a Ctrl-C or SIGTERM between the two left the child reading a pipe
+      its parent had closed, and its traceback ("EOFError: Ran out of input") on the terminal (a
+      review: 1 run in 8 with SIGTERM 0.3 s after the start). Deferred, the parent finishes the write
+      (milliseconds), then the signal acts, and the worker is stopped with the others.
+    - scipy's cKDTree.query(workers=…) (``threaded_query``) starts Python threads running C code and
+      joins them: a KeyboardInterrupt raised in the join left those threads reading the query's
+      arrays as they were freed — a sequential batch interrupted at the wrong moment ended in a
+      segmentation fault after writing its summary (2 runs in ~36, an independent review;
+      faulthandler showed a thread with no Python frame of its own, as cKDTree's are)."""
 
     def __enter__(self):
         import signal
 
-        self._saved, self._got = {}, []
+        self._old = {}
+        self._got: list[int] = []
         if threading.current_thread() is not threading.main_thread():
             return self
-        for name in self._SIGNALS:
-            num = getattr(signal, name, None)
-            if num is None:
-                continue
-            handler = signal.getsignal(num)
-            if callable(handler):  # Python's or the batch's own: deferred; SIG_IGN/SIG_DFL left alone
-                self._saved[num] = handler
-                signal.signal(num, lambda signum, frame: self._got.append(signum))
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            old = signal.getsignal(sig)
+            if old not in (signal.SIG_IGN, None):
+                self._old[sig] = old
+                signal.signal(sig, lambda signum, frame: self._got.append(signum))
         return self
 
     def __exit__(self, *exc):
         import signal
 
-        for num, handler in self._saved.items():
-            signal.signal(num, handler)
-        if self._got and exc[0] is None:
-            self._saved[self._got[0]](self._got[0], None)  # raises as the signal would have
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        if self._got:
+            signal.raise_signal(self._got[0])  # now, with the handler it would have met
         return False
 
 

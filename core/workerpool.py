@@ -21,6 +21,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator
 
+from .parallel import interrupts_deferred
+
 
 def _worker_main(conn, initializer, initargs) -> None:
     """A worker: its initializer, then one task after the other until told to stop (None) or the
@@ -46,39 +48,6 @@ def _worker_main(conn, initializer, initargs) -> None:
             conn.send(reply)
         except Exception as e:  # noqa: BLE001 — e.g. an exception or result that does not pickle
             conn.send((False, RuntimeError(f"{type(e).__name__}: {e} (sending {fn.__name__}'s result)")))
-
-
-class _signals_deferred:
-    """Context: SIGINT and SIGTERM that arrive inside it take effect as it closes. A worker is spawned
-    by starting a fresh interpreter and then writing its start-up data into a pipe; a Ctrl-C or
-    SIGTERM between the two (the batch's first half second) left the child reading a pipe its parent
-    had closed, and its traceback ("EOFError: Ran out of input") on the terminal (a review: 1 run in 8
-    with SIGTERM 0.3 s after the start). Deferred, the parent finishes the write (milliseconds), then
-    the signal acts as it would have, and the worker is stopped with the others. Main thread only
-    (where Python runs signal handlers); a signal ignored (nohup) stays ignored."""
-
-    _SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __enter__(self):
-        import threading
-
-        self._old = {}
-        self._got: list[int] = []
-        if threading.current_thread() is not threading.main_thread():
-            return self
-        for sig in self._SIGNALS:
-            old = signal.getsignal(sig)
-            if old not in (signal.SIG_IGN, None):
-                self._old[sig] = old
-                signal.signal(sig, lambda signum, frame: self._got.append(signum))
-        return self
-
-    def __exit__(self, *exc):
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-        if self._got:
-            signal.raise_signal(self._got[0])  # now, with the handler it would have met
-        return False
 
 
 class _interrupt_blocked:
@@ -132,7 +101,7 @@ class WorkerPool:
         self._workers: list[_Worker] = []
         try:
             for _ in range(max(1, int(workers))):
-                with _signals_deferred():  # the worker is held (and stopped with the others) first
+                with interrupts_deferred():  # the worker is held (and stopped with the others) first
                     self._workers.append(self._spawn())
         except BaseException:
             self.terminate()
@@ -166,7 +135,7 @@ class WorkerPool:
     def _replace(self, w: _Worker) -> _Worker:
         """A fresh worker instead of ``w`` (which ended or is ended here)."""
         self._stop(w)
-        with _signals_deferred():
+        with interrupts_deferred():
             new = self._spawn()
             self._workers[self._workers.index(w)] = new
         return new

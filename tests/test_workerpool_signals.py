@@ -1,11 +1,11 @@
 """A signal that arrives while a pool worker is spawned acts once the worker is held
-(core/workerpool.py ``_signals_deferred``): the child then never reads a pipe its parent closed."""
+(core/parallel.py ``interrupts_deferred``, used by core/workerpool.py): the child then never reads a pipe its parent closed."""
 import os
 import signal
 
 import pytest
 
-from pointspro.core.workerpool import _signals_deferred
+from pointspro.core.parallel import interrupts_deferred as _signals_deferred
 
 
 def test_a_signal_inside_acts_as_the_context_closes_with_the_handler_it_would_have_met():
